@@ -1,0 +1,1 @@
+"""Co-simulation of a feed drive: scenario, master, components, monitor, recorder, CLI."""

@@ -1,0 +1,89 @@
+"""The ``cosim`` command line.
+
+Each subcommand lives in its own module, which exposes
+
+* ``add_arguments(parser: argparse.ArgumentParser) -> None``
+* ``main(args: argparse.Namespace) -> int`` (the exit status)
+
+Exit status: 0 success, 2 bad input (one line on stderr, no traceback), 1 simulation or build
+failure (one line on stderr).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from cosim.errors import InputError, SimulationError
+
+#: subcommand -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "run": ("cosim.run_cli", "run a co-simulation scenario (plant FMU + NC + sensors + monitor)"),
+    "build-fmu": ("cosim.build_cli", "build the built-in feed-drive plant FMU"),
+    "info": ("cosim.info_cli", "list an FMU's variables and check a scenario's mapping against them"),
+    "estimate": ("cosim.estimate_cli", "estimate R, L, K, Jt, ft, Cd from a recorded CSV"),
+    "monitor": ("cosim.monitor_cli", "run the monitor (validation, estimation, diagnosis) on a recorded CSV"),
+    "history": ("cosim.history_cli", "print and plot the parameter history of an axis"),
+    "campaign": ("cosim.campaign_cli", "run a Monte Carlo / sweep campaign of scenarios"),
+    "design": ("cosim.design_cli", "choose the rapid-move acceleration that minimises parameter variance"),
+}
+
+
+def _input_errors() -> tuple[type[BaseException], ...]:
+    from estimator.errors import EstimatorInputError, NotEnoughExcitation
+
+    return (InputError, EstimatorInputError, NotEnoughExcitation, FileNotFoundError, FileExistsError,
+            IsADirectoryError, NotADirectoryError, PermissionError)
+
+
+def _failure_errors() -> tuple[type[BaseException], ...]:
+    from fmu_build.errors import FMUBuildError
+
+    return (SimulationError, FMUBuildError)
+
+
+def build_parser() -> tuple[argparse.ArgumentParser, dict[str, object]]:
+    parser = argparse.ArgumentParser(prog="cosim", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    modules: dict[str, object] = {}
+    for name, (module_name, help_text) in COMMANDS.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name != module_name:
+                raise
+            continue  # subcommand not built yet
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        module.add_arguments(p)
+        modules[name] = module
+    return parser, modules
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser, modules = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(modules[args.command].main(args) or 0)
+    except _input_errors() as exc:
+        print(f"cosim {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except _failure_errors() as exc:
+        print(f"cosim {args.command}: failed: {_one_line(exc)}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"cosim {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in text:
+        text = f"{exc.filename}: {text}"
+    return " ".join(text.split())
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

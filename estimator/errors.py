@@ -1,0 +1,23 @@
+"""Errors of the estimator. Bad input subclasses ValueError."""
+
+
+class EstimatorInputError(ValueError):
+    """Arrays or options given to the estimator are unusable (shape, NaN, too few samples)."""
+
+
+class NotEnoughExcitation(ValueError):
+    """The regressor is rank-deficient or ill-conditioned.
+
+    Attributes
+    ----------
+    unidentifiable : list of str
+        Physical parameters the data cannot determine.
+    reason : str
+        What is missing (constant speed, no speed reversal, motion too short, ...).
+    """
+
+    def __init__(self, unidentifiable: list[str], reason: str, condition_number: float = float("inf")) -> None:
+        self.unidentifiable = list(unidentifiable)
+        self.reason = reason
+        self.condition_number = condition_number
+        super().__init__(f"not enough excitation to identify {', '.join(self.unidentifiable)}: {reason}")
