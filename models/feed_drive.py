@@ -36,15 +36,24 @@ def _sat(v: ca.SX, limit: ca.SX) -> ca.SX:
     return ca.fmin(ca.fmax(v, -limit), limit)
 
 
-def feed_drive() -> Model:
+def feed_drive(backlash: bool = False) -> Model:
     """Build the feed-drive model.
+
+    Parameters
+    ----------
+    backlash : bool
+        False (default): the paper's rigid drive chain, eq. 1 and 2. True: the variant
+        ``FeedDriveBacklash``, a plant the monitor's model does NOT describe (paper IV.B.3): the
+        inertia is split into a motor part ``(1 - load_fraction) Jt`` and a load part
+        ``load_fraction Jt`` coupled through a stiff, damped spring with a dead zone of width
+        ``backlash`` [rad, motor side]; friction acts on the load. Used to provoke a model mismatch.
 
     Returns
     -------
     Model
-        States ``i, w, theta, xi_w, xi_i``; inputs ``w_ref, Tl, u_in``; physical parameters
-        ``R, L, K, Jt, ft, Cd`` (and the optional offset ``T0``); outputs
-        ``u, u_ref, i, w, theta, x, i_ref``.
+        States ``i, w, theta, xi_w, xi_i`` (plus ``wl, thetal`` with backlash); inputs
+        ``w_ref, Tl, u_in``; physical parameters ``R, L, K, Jt, ft, Cd`` (and the optional offset
+        ``T0``); outputs ``i, w, theta, i_ref, u_ref, u, x``.
     """
     V = Variable
     bench = "chosen so that the paper's bench figures follow (70 rad/s, ~80 V, -15..20 A)"
@@ -103,6 +112,19 @@ def feed_drive() -> Model:
         V("u", "V", "armature (terminal) voltage", "algebraic", output=True),
         V("x", "m", "table position", "algebraic", output=True),
     ]
+    if backlash:
+        variables += [
+            V("wl", "rad/s", "load speed (motor side)", "state", 0.0),
+            V("thetal", "rad", "load angle (motor side)", "state", 0.0),
+            V("backlash", "rad", "dead-zone width of the drive chain (motor side)", "design", 0.02,
+              "~64 um at the table with a 20 mm pitch: a worn ball-screw nut", lower=0.0),
+            V("load_fraction", "1", "share of Jt on the load side of the backlash", "design", 0.6,
+              "table and screw dominate the reflected inertia", lower=0.0, upper=1.0),
+            V("k_s", "N.m/rad", "drive-chain stiffness in contact", "design", 2.0e4,
+              "first torsional mode ~ 100 Hz", lower=0.0, lower_strict=True),
+            V("c_s", "N.m.s/rad", "drive-chain damping in contact", "design", 10.0,
+              "damping ratio ~ 0.2 of the torsional mode", lower=0.0),
+        ]
     s = {v.name: v.sym for v in variables}
     closed = s["bypass"] < 0.5
 
@@ -115,12 +137,13 @@ def feed_drive() -> Model:
     v_i = s["Kp_i"] * e_i + s["xi_i"]
     u_ref = ca.if_else(closed, _sat(v_i, s["u_max"]), s["u_in"])
 
+    w_fric = s["wl"] if backlash else s["w"]
     algebraic = {
-        "sgn_w": ca.tanh(s["w"] / s["w_eps"]),
+        "sgn_w": ca.tanh(w_fric / s["w_eps"]),
         "i_ref": i_ref,
         "u_ref": u_ref,
         "u": _sat(s["Kc"] * s["u_ref"], s["u_max"]),
-        "x": s["theta"] / (2 * math.pi * s["belt_ratio"]) * s["pitch"],
+        "x": (s["thetal"] if backlash else s["theta"]) / (2 * math.pi * s["belt_ratio"]) * s["pitch"],
     }
     # back-calculation anti-windup, tracking time = integral time (Ki/Kp)
     explicit = {
@@ -128,13 +151,16 @@ def feed_drive() -> Model:
         "xi_w": ca.if_else(closed, s["Ki_w"] * e_w + s["Ki_w"] / s["Kp_w"] * (s["i_ref"] - v_w), 0),
         "xi_i": ca.if_else(closed, s["Ki_i"] * e_i + s["Ki_i"] / s["Kp_i"] * (s["u_ref"] - v_i), 0),
     }
-    der = {name: ca.SX.sym("der_" + name) for name in ("i", "w", "theta", "xi_w", "xi_i")}
+    der = {v.name: ca.SX.sym("der_" + v.name) for v in variables if v.kind == "state"}
+    electrical = Equation(
+        "electrical",
+        s["L"] * der["i"] + s["R"] * s["i"] + s["K"] * s["w"] - s["u"],
+        solves_for="i", output="u", normaliser=None, paper_ref="eq. 1, 4",
+    )
+    if backlash:
+        return _with_backlash(variables, s, der, electrical, explicit, algebraic)
     equations = [
-        Equation(
-            "electrical",
-            s["L"] * der["i"] + s["R"] * s["i"] + s["K"] * s["w"] - s["u"],
-            solves_for="i", output="u", normaliser=None, paper_ref="eq. 1, 4",
-        ),
+        electrical,
         Equation(
             "mechanical",
             s["Jt"] * der["w"] + s["ft"] * s["w"] + s["Cd"] * s["sgn_w"] + s["Tl"] + s["T0"]
@@ -149,5 +175,33 @@ def feed_drive() -> Model:
         explicit,
         algebraic,
         description="DC-motor feed drive with speed and current PI loops (Habbadi et al., SDEMPED'99)",
+        derivative_symbols=der,
+    )
+
+
+def _with_backlash(variables, s, der, electrical, explicit, algebraic) -> Model:
+    """Two-inertia drive chain with a dead zone (see ``feed_drive(backlash=True)``)."""
+    half_gap = s["backlash"] / 2
+    twist = s["theta"] - s["thetal"]
+    # dead zone: no torque while the twist is inside the gap; damping only in contact
+    spring = twist - ca.fmin(ca.fmax(twist, -half_gap), half_gap)
+    in_contact = ca.fabs(twist) > half_gap
+    t_chain = s["k_s"] * spring + ca.if_else(in_contact, s["c_s"] * (s["w"] - s["wl"]), 0)
+    j_motor = (1 - s["load_fraction"]) * s["Jt"]
+    j_load = s["load_fraction"] * s["Jt"]
+    equations = [
+        electrical,
+        Equation("mechanical", j_motor * der["w"] + t_chain - s["K"] * s["i"],
+                 solves_for="w", output="i", normaliser="K", paper_ref="eq. 2 (motor side)"),
+        Equation("load", j_load * der["wl"] + s["ft"] * s["wl"] + s["Cd"] * s["sgn_w"] + s["Tl"] + s["T0"]
+                 - t_chain, solves_for="wl", output="wl", normaliser=None, paper_ref="not in the paper"),
+    ]
+    return Model(
+        "FeedDriveBacklash",
+        variables,
+        equations,
+        {**explicit, "thetal": s["wl"]},
+        algebraic,
+        description="feed drive with backlash in the drive chain (a plant the monitor's model does not describe)",
         derivative_symbols=der,
     )
