@@ -14,3 +14,7 @@ class CompilerError(FMUBuildError):
         self.output = output
         first = next((ln for ln in output.splitlines() if "error" in ln.lower()), output.strip()[:300])
         super().__init__(f"C compilation with {compiler!r} failed: {first}")
+
+
+class FMUBuildInputError(ValueError):
+    """Bad input to the FMU build, such as a non-positive ``cs_substep``."""

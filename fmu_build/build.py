@@ -1,0 +1,124 @@
+"""Compile generated sources with the system C compiler, pack the FMU, and cache the built-in plant."""
+from __future__ import annotations
+
+import hashlib
+import os
+import shlex
+import subprocess
+import tempfile
+import zipfile
+from pathlib import Path
+
+import fmpy
+
+from fmu_build.codegen import DEFAULT_CS_SUBSTEP, Sources, generate
+from fmu_build.errors import CompilerError, FMUBuildError
+from models import Model, feed_drive
+
+#: Flags for the shared library. Hidden visibility exports only the fmi2 functions.
+CFLAGS = ("-O2", "-fPIC", "-shared", "-fvisibility=hidden")
+#: The FMI 2.0 standard headers, as shipped with fmpy.
+FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
+
+
+def compiler() -> list[str]:
+    """The C compiler command: ``$CC`` (may contain options) or ``cc``."""
+    return shlex.split(os.environ.get("CC") or "cc")
+
+
+def _compile(sources: Sources, workdir: Path) -> Path:
+    for name, text in sources.files.items():
+        (workdir / name).write_text(text)
+    library = workdir / f"{sources.model_name}{fmpy.sharedLibraryExtension}"
+    cc = compiler()
+    c_files = sorted(name for name in sources.files if name.endswith(".c"))
+    command = [*cc, *CFLAGS, f"-I{FMI_HEADERS}", f"-I{workdir}", "-o", str(library), *c_files, "-lm"]
+    try:
+        done = subprocess.run(command, cwd=workdir, capture_output=True, text=True)
+    except OSError as exc:
+        raise CompilerError(cc[0], command, f"error: cannot run {cc[0]!r}: {exc.strerror}") from None
+    if done.returncode != 0:
+        output = (done.stderr + done.stdout).strip() or f"error: exited with status {done.returncode}, no output"
+        raise CompilerError(cc[0], command, output)
+    return library
+
+
+def _pack(sources: Sources, library: Path, out: Path) -> None:
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("modelDescription.xml", sources.files["modelDescription.xml"])
+        z.write(library, f"binaries/{fmpy.platform}/{library.name}")
+
+
+def _build(sources: Sources, out: Path) -> Path:
+    """Compile and pack into ``out``, atomically (a reader never sees a half-written FMU)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out.parent, prefix=".fmu_build_") as tmp:
+        library = _compile(sources, Path(tmp))
+        packed = Path(tmp) / out.name
+        _pack(sources, library, packed)
+        os.replace(packed, out)
+    return out
+
+
+def build_fmu(model: Model | None = None, out: Path | str | None = None, *,
+              cs_substep: float = DEFAULT_CS_SUBSTEP) -> Path:
+    """Generate, compile and pack an FMI 2.0 FMU (Co-Simulation and Model Exchange).
+
+    Parameters
+    ----------
+    model : Model or None
+        The model; None is the feed drive ``models.feed_drive()``.
+    out : path or None
+        The ``.fmu`` file to write (replaced if it exists: callers guard user files); None is
+        ``<model name>.fmu`` in the working directory.
+    cs_substep : float
+        Default of the FMU's fixed parameter ``cs_substep`` [s], the Co-Simulation RK4 substep.
+
+    Returns
+    -------
+    pathlib.Path
+        The written FMU.
+
+    Raises
+    ------
+    CompilerError
+        The C compiler (``$CC`` or ``cc``) failed; the message names it and shows its error.
+    """
+    model = model or feed_drive()
+    return _build(generate(model, cs_substep), Path(out or f"{model.name}.fmu"))
+
+
+def cache_key(sources: Sources) -> str:
+    """Hash of the generated sources, the wrapper, the XML, the compiler command and its flags."""
+    text = "\0".join([sources.digest, *compiler(), *CFLAGS])
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def builtin_fmu(cache_dir: Path | str | None = None) -> Path:
+    """The built-in feed-drive plant FMU, built once and cached.
+
+    The cache is ``<cache_dir>/<hash>/FeedDrive.fmu`` with ``cache_dir`` defaulting to
+    ``$FEEDDRIVE_CACHE`` or ``~/.cache/feeddrive``. The hash covers everything the FMU is built
+    from, so any change of the model rebuilds it. Safe for parallel processes: each builds in a
+    private temporary directory and moves the result in place atomically.
+
+    Parameters
+    ----------
+    cache_dir : path or None
+        Cache root directory.
+
+    Returns
+    -------
+    pathlib.Path
+        Path of the cached ``FeedDrive.fmu``.
+    """
+    model = feed_drive()
+    sources = generate(model)
+    root = Path(cache_dir or os.environ.get("FEEDDRIVE_CACHE") or Path.home() / ".cache" / "feeddrive")
+    target = root / cache_key(sources) / f"{model.name}.fmu"
+    if target.is_file():
+        return target
+    try:
+        return _build(sources, target)
+    except OSError as exc:
+        raise FMUBuildError(f"cannot write the FMU cache {target.parent}: {exc.strerror}") from exc

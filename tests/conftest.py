@@ -1,0 +1,24 @@
+"""Shared fixtures. FMUs are built into pytest's temporary directory, never into ~/.cache."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from fmu_build import builtin_fmu
+
+
+@pytest.fixture(scope="session", autouse=True)
+def fmu_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """``$FEEDDRIVE_CACHE`` for the whole session, so code calling ``builtin_fmu()`` stays in tmp."""
+    cache = tmp_path_factory.mktemp("fmu_cache")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("FEEDDRIVE_CACHE", str(cache))
+        yield cache
+
+
+@pytest.fixture(scope="session")
+def feeddrive_fmu(fmu_cache_dir: Path) -> Path:
+    """The built-in feed-drive plant FMU (FMI 2.0, CS + ME), built once per test session."""
+    return builtin_fmu(fmu_cache_dir)
