@@ -94,7 +94,7 @@ def cache_key(sources: Sources) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-def builtin_fmu(cache_dir: Path | str | None = None) -> Path:
+def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False) -> Path:
     """The built-in feed-drive plant FMU, built once and cached.
 
     The cache is ``<cache_dir>/<hash>/FeedDrive.fmu`` with ``cache_dir`` defaulting to
@@ -106,13 +106,16 @@ def builtin_fmu(cache_dir: Path | str | None = None) -> Path:
     ----------
     cache_dir : path or None
         Cache root directory.
+    backlash : bool
+        Build the ``FeedDriveBacklash`` variant (``models.feed_drive(backlash=True)``), a plant
+        with backlash in the drive chain that the monitor's model does not describe.
 
     Returns
     -------
     pathlib.Path
         Path of the cached ``FeedDrive.fmu``.
     """
-    model = feed_drive()
+    model = feed_drive(backlash=backlash)
     sources = generate(model)
     root = Path(cache_dir or os.environ.get("FEEDDRIVE_CACHE") or Path.home() / ".cache" / "feeddrive")
     target = root / cache_key(sources) / f"{model.name}.fmu"
