@@ -1,0 +1,149 @@
+"""Wall time of the full co-simulation against running the plant FMU alone, measured in the same run.
+
+Three runs of the same length and communication step:
+
+* cosim     the full co-simulation of a scenario (NC -> plant FMU -> sensors -> monitor, recorder),
+            ``Master.run`` only (set-up, CSV and plots excluded);
+* fmpy      ``fmpy.simulate_fmu`` on the plant FMU alone (Co-Simulation, output_interval = step,
+            recording every step), the NC's recorded speed reference as its input table;
+* libcosim  libcosimpy on the plant FMU alone, constant speed reference (a second peer; its
+            per-step cost is a thread hand-off, so its input does not matter for the time).
+
+Prints seconds (best of ``--repeat``), microseconds per step and the ratio cosim / fmpy (target
+<= 1.5), also without the monitor (whose end-of-motion processing is a fixed cost per motion) and
+against fmpy without an input table (its floor). ``--profile`` prints the cProfile table of one
+co-simulation run.
+
+    python benchmarks/bench_cosim.py [--scenario examples/tool_change.yaml] [--repeat 3] [--profile]
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import os
+import pstats
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cosim.master import Master
+from cosim.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cosim_run(scenario) -> tuple[float, Master, dict]:
+    master = Master.from_scenario(scenario)
+    master.setup()
+    t = time.perf_counter()
+    rec = master.run()
+    wall = time.perf_counter() - t
+    master.terminate()
+    return wall, master, rec.signals()
+
+
+def fmpy_run(scenario, stop: float, signals: dict | None) -> float:
+    """simulate_fmu on the plant alone; ``signals``: the co-simulation's, whose NC outputs become the input
+    table (every FMU input gets a column, zeros when the NC does not drive it), or None for no input."""
+    from fmpy import read_model_description, simulate_fmu
+
+    h = scenario.step
+    table = None
+    if signals is not None:
+        inputs = [v.name for v in read_model_description(scenario.plant.fmu).modelVariables if v.causality == "input"]
+        n = len(signals["nc.speed_ref"])
+        table = np.zeros(n, dtype=[("time", float)] + [(name, float) for name in inputs])
+        table["time"] = h * np.arange(n)
+        for role in ("speed_ref", "load"):
+            entry = scenario.plant.map.get(role)
+            if entry is not None:  # the plant's input over [t_n, t_n+1] is the NC's output at t_n+1
+                table[entry.var] = entry.scale * np.r_[signals[f"nc.{role}"][1:], 0.0] + entry.offset
+    t = time.perf_counter()
+    simulate_fmu(scenario.plant.fmu, fmi_type="CoSimulation", stop_time=stop, step_size=h, output_interval=h,
+                 input=table, start_values=dict(scenario.plant.parameters))
+    return time.perf_counter() - t
+
+
+def libcosim_run(scenario, stop: float) -> float | None:
+    try:
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+        from libcosimpy.CosimObserver import CosimObserver
+        from libcosimpy.CosimSlave import CosimLocalSlave
+    except ImportError:
+        return None
+    from fmpy import read_model_description
+
+    log_output_level(CosimLogLevel.WARNING)
+    vr = {v.name: v.valueReference for v in read_model_description(scenario.plant.fmu).modelVariables}
+    step_ns = round(scenario.step * 1e9)
+    with tempfile.TemporaryDirectory() as tmp:
+        old = os.environ.get("TMPDIR")
+        os.environ["TMPDIR"] = tmp  # libcosim unpacks the FMU there
+        try:
+            execution = CosimExecution.from_step_size(step_size=step_ns)
+            index = execution.add_local_slave(CosimLocalSlave(fmu_path=scenario.plant.fmu, instance_name="plant"))
+            execution.add_observer(CosimObserver.create_last_value())
+            execution.real_initial_value(index, vr[scenario.plant.map["speed_ref"].var], 50.0)
+            t = time.perf_counter()
+            execution.simulate_until(target_time=round(stop / scenario.step) * step_ns)
+            wall = time.perf_counter() - t
+            del execution
+        finally:
+            if old is None:
+                os.environ.pop("TMPDIR", None)
+            else:
+                os.environ["TMPDIR"] = old
+    return wall
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", type=Path, default=ROOT / "examples" / "tool_change.yaml")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--profile", action="store_true")
+    args = parser.parse_args(argv)
+    scenario = load_scenario(args.scenario)
+    loop = scenario.model_copy(update={"monitor": None})
+    best: dict[str, float] = {}
+    for _ in range(args.repeat):
+        runs = {}
+        runs["cosim"], master, signals = cosim_run(scenario)
+        runs["loop"] = cosim_run(loop)[0]
+        runs["fmpy"] = fmpy_run(scenario, master.stop_time, signals)
+        runs["fmpy_floor"] = fmpy_run(scenario, master.stop_time, None)
+        best = {k: min(v, best.get(k, v)) for k, v in runs.items()}
+    lc = libcosim_run(scenario, master.stop_time)
+    n = master.n_steps
+    print(f"scenario {scenario.name}: {n} steps of {scenario.step:g} s ({master.stop_time:.4g} s simulated), "
+          f"best of {args.repeat}")
+    rows = [("cosim: full co-simulation (" + ", ".join(master.components) + ")", best["cosim"]),
+            ("cosim: without the monitor", best["loop"]),
+            ("fmpy simulate_fmu, plant alone, NC input table", best["fmpy"]),
+            ("fmpy simulate_fmu, plant alone, no input", best["fmpy_floor"])]
+    if lc is not None:
+        rows.append(("libcosimpy, plant alone, constant input", lc))
+    for label, wall in rows:
+        print(f"  {label:58s} {wall:7.3f} s {wall / n * 1e6:7.2f} us/step")
+    motions = master.reports().get("monitor", {}).get("motions", [])
+    if motions:
+        times = ", ".join(f"{m.get('processing_s', 0):.3f} s" for m in motions)
+        print(f"  monitor processing per motion: {times}")
+    print(f"  ratio full co-simulation / fmpy (input table) = {best['cosim'] / best['fmpy']:.2f}  (target <= 1.5)")
+    print(f"  ratio without monitor    / fmpy (input table) = {best['loop'] / best['fmpy']:.2f}")
+    print(f"  ratio full co-simulation / fmpy (no input)    = {best['cosim'] / best['fmpy_floor']:.2f}")
+    if lc is not None:
+        print(f"  ratio full co-simulation / libcosimpy        = {best['cosim'] / lc:.2f}")
+    if args.profile:
+        master = Master.from_scenario(scenario)
+        master.setup()
+        profile = cProfile.Profile()
+        profile.runcall(master.run)
+        master.terminate()
+        pstats.Stats(profile).sort_stats("tottime").print_stats(15)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,271 @@
+"""The plant FMU as a co-simulation component (FMI 2.0 Co-Simulation, or Model Exchange + CVode).
+
+Ports are the scenario's roles (``speed_ref``, ``load`` in; ``voltage``, ``voltage_ref``, ``current``,
+``speed``, ``position`` out, in SI units) converted through the role map (``scale * x + offset``),
+followed by the FMU's other Real outputs under their own names and units.
+
+Every FMI function of the instance returns through ONE choke point, ``_check``, installed as the
+ctypes ``errcheck`` of each status-returning function (so fmpy's own wrappers pass through it too):
+fmi2Discard, fmi2Error and fmi2Fatal raise :class:`cosim.errors.FMIError` (``FMUDiscard`` for
+fmi2Discard, which stops the run as well: the master has a fixed step and does not retry). The FMU's
+log messages go to the logger ``cosim.fmu.<name>``; the last one is kept for the error message.
+
+Per-step cost: the hot path calls the FMU's fmi2SetReal / fmi2DoStep / fmi2GetReal through ctypes
+with value-reference and value arrays allocated once in ``setup``.
+"""
+from __future__ import annotations
+
+import ctypes
+import logging
+import shutil
+from typing import Any, Sequence
+
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+from cosim.component import Component
+from cosim.errors import FMIError, ScenarioError, SimulationError
+from cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, PlantConfig
+
+STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
+_LOG_LEVEL = (logging.DEBUG, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
+
+
+class FMUDiscard(FMIError):
+    """The FMU returned fmi2Discard: it could not complete the call (e.g. a step). The run stops."""
+
+    def __init__(self, component: str, function: str, time: float, last_log: str = "") -> None:
+        super().__init__(component, function, "fmi2Discard", time, last_log)
+        log = f" ({last_log})" if last_log else ""
+        self.args = (f"{component}: {function} returned fmi2Discard at t={time:.6g} s: the FMU could not "
+                     f"complete it{log}; the run stops (fixed communication step, no retry)",)
+
+
+class _HeldInputs:
+    """fmpy's root function re-applies inputs; ours are set once per communication step."""
+
+    def apply(self, *args: Any, **kwargs: Any) -> None:
+        pass
+
+
+class FMUComponent(Component):
+    """An FMI 2.0 FMU as a component; ``config`` is a resolved :class:`cosim.scenario.PlantConfig`.
+
+    Events: ``set_parameter(name, value)`` sets a Real parameter of the FMU (fmi2SetReal; in Model
+    Exchange inside an event iteration).
+    """
+
+    def __init__(self, name: str, config: PlantConfig) -> None:
+        super().__init__(name, config)
+        self.log = logging.getLogger(f"cosim.fmu.{name}")
+        self.last_log = ""
+        self._fmu: Any = None
+        self._unzip: str | None = None
+        self._state = "new"  # new -> instantiated -> running -> failed / fatal -> terminated
+        self._k = 0
+
+    # -- the choke point ------------------------------------------------------------------------
+    def _check(self, status: int, func: Any, args: tuple) -> int:
+        if status > 1:
+            self._raise(func.__name__, status)
+        return status
+
+    def _raise(self, function: str, status: int) -> None:
+        t = self._t0 + self._k * self._h
+        self._state = "fatal" if status == 4 else "failed"
+        if status == 2:
+            exc: FMIError = FMUDiscard(self.name, function, t, self.last_log)
+        else:
+            exc = FMIError(self.name, function, STATUS[status] if status < 6 else f"status {status}", t,
+                           self.last_log)
+        self._failure = exc
+        raise exc
+
+    def _on_log(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+        text = (message or b"").decode("utf-8", "replace").strip()
+        self.last_log = " ".join(text.split())  # one line, for the error message
+        self.log.log(_LOG_LEVEL[status] if 0 <= status < 6 else logging.ERROR, "%s", text)
+
+    # -- set-up -----------------------------------------------------------------------------------
+    def setup(self, t0: float, h: float, n_steps: int) -> None:
+        cfg: PlantConfig = self.config
+        self._t0, self._h, self._failure = t0, h, None
+        md = read_model_description(cfg.fmu)
+        cs = cfg.interface == "cs"
+        self._unzip = extract(cfg.fmu)
+        cls = FMU2Slave if cs else FMU2Model
+        kind = md.coSimulation if cs else md.modelExchange
+        self._fmu = fmu = cls(guid=md.guid, unzipDirectory=self._unzip, modelIdentifier=kind.modelIdentifier,
+                              instanceName=self.name)
+        for fname in dir(cls):
+            if fname.startswith("fmi2"):
+                f = getattr(fmu.dll, fname)
+                if f.restype is ctypes.c_int:
+                    f.errcheck = self._check
+        self._callbacks = cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(self._on_log)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        from fmpy.logging import addLoggerProxy
+
+        addLoggerProxy(ctypes.byref(cb))  # formats the variadic message in C
+        try:
+            fmu.instantiate(callbacks=cb, loggingOn=True)  # some FMUs (pythonfmu) report errors only then
+        except Exception:  # fmpy raises a bare Exception when fmi2Instantiate returns NULL
+            raise FMIError(self.name, "fmi2Instantiate", "NULL", t0, self.last_log) from None
+        self._state = "instantiated"
+        variables = {v.name: v for v in md.modelVariables}
+        vr = {name: v.valueReference for name, v in variables.items()}
+        values = {**cfg.start, **cfg.parameters}
+        if values:
+            fmu.setReal([vr[n] for n in values], list(values.values()))
+        fmu.setupExperiment(startTime=t0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        self._vr = vr
+
+        roles = cfg.map
+        self.input_names = tuple(r for r in INPUT_ROLES if r in roles)
+        mapped = {e.var for e in roles.values()}
+        extras = [v for v in md.modelVariables if v.causality == "output" and v.type == "Real"
+                  and v.name not in mapped and v.name not in OUTPUT_ROLES + INPUT_ROLES]
+        out_roles = tuple(r for r in OUTPUT_ROLES if r in roles)
+        self.output_names = out_roles + tuple(v.name for v in extras)
+        self.output_units = tuple(ROLE_UNITS[r] for r in out_roles) + tuple(v.unit or "" for v in extras)
+        in_vars = [roles[r].var for r in self.input_names]
+        out_vars = [roles[r].var for r in out_roles] + [v.name for v in extras]
+        self._nu, self._ny = len(in_vars), len(out_vars)
+        self._uvr = (ctypes.c_uint * self._nu)(*[vr[n] for n in in_vars])
+        self._u = (ctypes.c_double * self._nu)(*[float(variables[n].start or 0.0) for n in in_vars])
+        self._yvr = (ctypes.c_uint * self._ny)(*[vr[n] for n in out_vars])
+        self._y = (ctypes.c_double * self._ny)()
+        self._in_lin = [(k, roles[r].scale, roles[r].offset) for k, r in enumerate(self.input_names)]
+        self._out_lin = [(roles[r].scale, roles[r].offset) for r in out_roles] + [(1.0, 0.0)] * len(extras)
+        if all(s == 1 and o == 0 for _, s, o in self._in_lin):
+            self.set_inputs = self._set_inputs_identity
+        if all(s == 1 and o == 0 for s, o in self._out_lin):
+            self.get_outputs = self._get_outputs_identity
+        self._c = fmu.component
+        self._set_real, self._get_real = fmu.dll.fmi2SetReal, fmu.dll.fmi2GetReal
+        if cs:
+            self._do_step = fmu.dll.fmi2DoStep
+        else:
+            self._start_me(md, t0)
+            self.step = self._step_me
+        self._get_real(self._c, self._yvr, self._ny, self._y)
+        self._state = "running"
+
+    # -- Co-Simulation: the hot path ------------------------------------------------------------------
+    def set_inputs(self, values: Sequence[float]) -> None:
+        u = self._u
+        for k, scale, offset in self._in_lin:
+            u[k] = scale * values[k] + offset
+
+    def _set_inputs_identity(self, values: Sequence[float]) -> None:
+        self._u[:] = values
+
+    def step(self, n: int) -> None:
+        c, h = self._c, self._h
+        self._set_real(c, self._uvr, self._nu, self._u)
+        self._do_step(c, self._t0 + n * h, h, 1)
+        self._k = n + 1
+        self._get_real(c, self._yvr, self._ny, self._y)
+
+    def get_outputs(self) -> list[float]:
+        return [s * y + o for (s, o), y in zip(self._out_lin, self._y)]
+
+    def _get_outputs_identity(self) -> list[float]:
+        return self._y[:]
+
+    # -- Model Exchange: CVode over each communication step --------------------------------------------
+    def _start_me(self, md: Any, t0: float) -> None:
+        from fmpy.sundials import CVodeSolver
+
+        class _CVode(CVodeSolver):
+            def f(self, t, y, ydot, user_data):  # noqa: ANN001 - ctypes callback
+                try:
+                    return super().f(t, y, ydot, user_data)
+                except FMIError:  # recorded by the choke point; -1 makes CVode stop
+                    return -1
+
+        fmu = self._fmu
+        self._next_event = self._event_iteration()
+        fmu.enterContinuousTimeMode()
+        self._completed_needed = md.modelExchange.needsCompletedIntegratorStep
+        self._solver = _CVode(nx=md.numberOfContinuousStates, nz=md.numberOfEventIndicators,
+                              get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
+                              get_dx=fmu.getDerivatives, get_z=fmu.getEventIndicators,
+                              get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
+                              input=_HeldInputs(), startTime=t0, maxStep=self._h,
+                              relativeTolerance=self.config.tolerance)
+
+    def _event_iteration(self) -> float | None:
+        """fmi2NewDiscreteStates until converged; returns the next time event or None."""
+        while True:
+            info = self._fmu.newDiscreteStates()
+            if info[1]:
+                raise SimulationError(f"{self.name}: the FMU requested termination at "
+                                      f"t={self._t0 + self._k * self._h:.6g} s")
+            if not info[0]:
+                return info[5] if info[4] else None
+
+    def _step_me(self, n: int) -> None:
+        fmu, solver = self._fmu, self._solver
+        t, t1 = self._t0 + n * self._h, self._t0 + (n + 1) * self._h
+        self._set_real(self._c, self._uvr, self._nu, self._u)
+        solver.reset(t)  # inputs are piecewise constant per step: restart at each discontinuity
+        while t < t1 - 1e-9 * self._h:
+            t_stop = t1 if self._next_event is None else min(t1, self._next_event)
+            try:
+                state_event, _, t = solver.step(t, t_stop)
+            except RuntimeError as exc:
+                if self._failure is not None:
+                    raise self._failure from None
+                raise SimulationError(f"{self.name}: {exc}") from None
+            fmu.setTime(t)
+            step_event = self._completed_needed and fmu.completedIntegratorStep()[0]
+            time_event = self._next_event is not None and t >= self._next_event - 1e-9 * self._h
+            if state_event or step_event or time_event:
+                fmu.enterEventMode()
+                self._next_event = self._event_iteration()
+                fmu.enterContinuousTimeMode()
+                solver.reset(t)
+        self._k = n + 1
+        self._get_real(self._c, self._yvr, self._ny, self._y)
+
+    # -- events, report, terminate ---------------------------------------------------------------------
+    def set_parameter(self, name: str, value: Any) -> None:
+        if name not in self._vr:
+            raise ScenarioError(f"{self.name}: the FMU has no variable {name!r}")
+        vr, val = [self._vr[name]], [float(value)]
+        if self.config.interface == "me":
+            self._fmu.enterEventMode()
+            self._fmu.setReal(vr, val)
+            self._next_event = self._event_iteration()
+            self._fmu.enterContinuousTimeMode()
+        else:
+            self._fmu.setReal(vr, val)
+
+    def report(self) -> dict:
+        cfg = self.config
+        return {"fmu": cfg.fmu, "sha256": cfg.sha256, "interface": cfg.interface,
+                "map": {r: e.model_dump() for r, e in cfg.map.items()}, "last_log": self.last_log}
+
+    def terminate(self) -> None:
+        fmu, state = self._fmu, self._state
+        self._state = "terminated"
+        try:
+            if state == "running":
+                fmu.terminate()
+            if state in ("instantiated", "running", "failed"):
+                fmu.freeInstance()
+            elif fmu is not None:
+                fmu.freeLibrary()
+        except Exception as exc:  # noqa: BLE001 - terminate must not raise (component contract)
+            self.log.warning("terminating the FMU failed: %s", exc)
+        finally:
+            self._fmu = None
+            if self._unzip:
+                shutil.rmtree(self._unzip, ignore_errors=True)
+                self._unzip = None

@@ -1,0 +1,321 @@
+"""Co-simulation master: fixed communication step, Gauss-Seidel order, timed events, recorder.
+
+Components run in order (NC -> plant -> sensors -> monitor -> user components); at step n each one
+reads the newest outputs of its sources from one flat list, the signal bus ``Y``: outputs at t_{n+1}
+of the components before it and at t_n of those after it (see cosim/component.py). Connections are
+compiled once into index getters on ``Y``; constants (a source given as a number) live at the end
+of ``Y``. Time is ``t0 + n h`` with an integer n.
+
+Default wiring of the standard components (by port name; a scenario's ``connections`` override it)::
+
+    plant.speed_ref, plant.load           <- nc
+    nc.position <- plant, nc.request <- monitor (0.0 without a monitor)
+    sensors.<role>                        <- plant.<role> (voltage_ref <- plant.voltage if unmapped)
+    monitor.<port>                        <- sensors, else nc (state, motion)
+"""
+from __future__ import annotations
+
+import math
+from operator import itemgetter
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+from tqdm import tqdm
+
+from cosim.component import Component, load_component_class
+from cosim.errors import InputError, ScenarioError, SimulationError
+from cosim.recorder import Recorder
+
+#: preferred source components of each standard component's inputs
+DEFAULT_SOURCES = {"plant": ("nc",), "nc": ("plant", "monitor"), "sensors": ("plant",), "monitor": ("sensors", "nc")}
+#: fallbacks when no source component has the port
+DEFAULT_FALLBACKS = {"sensors.voltage_ref": "plant.voltage", "nc.request": 0.0}
+#: steps between progress-bar updates and recorder flushes
+BLOCK = 1000
+#: margin added to the NC program's duration for the default stop time [s]
+SETTLING = 0.3
+#: largest accepted difference between the NC's start and the plant's initial position [m]
+START_TOLERANCE = 1e-6
+
+ErrorFactory = Callable[[tuple, str], InputError]
+
+
+def event_step(time: float, t0: float, h: float) -> int:
+    """Index n of the first grid point t0 + n h >= time (tolerance 1e-9 h, see cosim/component.py)."""
+    return max(0, math.ceil((time - t0) / h - 1e-9))
+
+
+def default_connections(ports: Mapping[str, tuple[Sequence[str], Sequence[str]]]) -> dict[str, str | float]:
+    """Default wiring of the standard components present in ``ports`` (name -> (inputs, outputs))."""
+    wiring: dict[str, str | float] = {}
+    for dst, sources in DEFAULT_SOURCES.items():
+        for port in ports.get(dst, ((), ()))[0]:
+            src = next((f"{s}.{port}" for s in sources if s in ports and port in ports[s][1]), None)
+            fallback = DEFAULT_FALLBACKS.get(f"{dst}.{port}")
+            if src is None and isinstance(fallback, str):
+                comp, _, p = fallback.partition(".")
+                src = fallback if comp in ports and p in ports[comp][1] else None
+            elif src is None:
+                src = fallback
+            if src is not None:
+                wiring[f"{dst}.{port}"] = src
+    return wiring
+
+
+def _scenario_error(path: tuple, message: str) -> ScenarioError:
+    from cosim.scenario import format_path
+
+    return ScenarioError(f"{format_path(path)}: {message}")
+
+
+class Master:
+    """Runs components over ``n_steps`` steps of ``step`` seconds.
+
+    Parameters
+    ----------
+    components : sequence of (name, Component)
+        In stepping order.
+    step : float
+        Communication step h [s].
+    n_steps : int
+        Number of steps; the run ends at t0 + n_steps h.
+    t0 : float
+        Start time [s].
+    connections : mapping
+        ``"component.input" -> "component.output"`` or a number; overrides the default wiring.
+    events : iterable of (time, "component.name", value)
+        Timed events (applied at the first grid point >= time, before that step's inputs).
+    record : "all" or sequence of "component.port"
+        Signals to record.
+    error : callable (key path, message) -> InputError, optional
+        Builds wiring errors (a scenario's ``error`` method names file and line).
+    """
+
+    def __init__(self, components: Sequence[tuple[str, Component]], *, step: float, n_steps: int,
+                 t0: float = 0.0, connections: Mapping[str, str | float] | None = None,
+                 events: Iterable[tuple[float, str, Any]] = (), record: str | Sequence[str] = "all",
+                 error: ErrorFactory | None = None) -> None:
+        self.components = dict(components)
+        if len(self.components) != len(components):
+            raise InputError("component names must be unique")
+        self.h, self.n_steps, self.t0 = float(step), int(n_steps), float(t0)
+        self.user_connections = dict(connections or {})
+        self.events = list(events)
+        self.record = record
+        self._error = error or _scenario_error
+        self.connections: dict[str, str | float] = {}
+        self.recorder: Recorder | None = None
+        self._ready = False
+        self._terminated: set[str] = set()
+
+    @classmethod
+    def from_scenario(cls, scenario: Any) -> "Master":
+        """The standard components of a :class:`cosim.scenario.Scenario`, plus its user components."""
+        from cosim.fmu_adapter import FMUComponent
+        from cosim.nc import NCComponent
+        from cosim.sensors import SensorsComponent
+
+        nc = NCComponent("nc", scenario.nc)
+        comps: list[tuple[str, Component]] = [("nc", nc), ("plant", FMUComponent("plant", scenario.plant)),
+                                              ("sensors", SensorsComponent("sensors", scenario.sensors))]
+        specs = [(("monitor", "class"), scenario.monitor)] if scenario.monitor is not None else []
+        specs += [(("components", k, "class"), spec) for k, spec in enumerate(scenario.components)]
+        for where, spec in specs:
+            try:
+                cls_ = load_component_class(spec.class_, where="class")
+            except ScenarioError as exc:
+                raise scenario.error(where, str(exc).removeprefix("class: ")) from None
+            try:
+                comps.append((spec.name, cls_(spec.name, spec.config)))
+            except (ValueError, TypeError) as exc:  # the component refuses its config
+                raise scenario.error(where[:-1] + ("config",), f"{spec.class_}: {exc}") from None
+        connections = dict(scenario.connections)
+        for spec in scenario.components:
+            connections.update({f"{spec.name}.{port}": src for port, src in spec.inputs.items()})
+        stop = scenario.stop_time if scenario.stop_time is not None else nc.duration() + SETTLING
+        return cls(comps, step=scenario.step, n_steps=event_step(stop, 0.0, scenario.step),
+                   connections=connections, events=[(e.time, e.target, e.value) for e in scenario.events],
+                   record=scenario.record, error=scenario.error)
+
+    @property
+    def stop_time(self) -> float:
+        return self.t0 + self.n_steps * self.h
+
+    # -- set-up -------------------------------------------------------------------------------------
+    def setup(self) -> None:
+        """Set up every component, compile the connections, events and recorder. Idempotent."""
+        if self._ready:
+            return
+        name = "?"
+        try:
+            for name, comp in self.components.items():
+                comp.setup(self.t0, self.h, self.n_steps)
+            self._compile()
+            self._check_start_position()
+        except BaseException as exc:
+            self.terminate()
+            if isinstance(exc, (InputError, SimulationError)) or not isinstance(exc, Exception):
+                raise
+            raise SimulationError(f"{name}: set-up failed: {type(exc).__name__}: {exc}") from exc
+        self._ready = True
+
+    def _check_start_position(self) -> None:
+        """The NC's program must start where the plant is (a mismatch would be a huge position step)."""
+        nc, plant = self.components.get("nc"), self.components.get("plant")
+        if nc is None or plant is None or self.connections.get("nc.position") != "plant.position":
+            return
+        x0 = plant.get_outputs()[list(plant.output_names).index("position")]
+        start = getattr(nc.config, "start", x0)
+        if abs(x0 - start) > START_TOLERANCE:
+            raise self._error(("nc", "start"), f"the NC program starts at {start:.6g} m but the plant at {x0:.6g} m; "
+                              "set nc.start, or the plant's initial position through plant.start (e.g. the motor "
+                              "angle theta [rad] of the built-in plant)")
+
+    def _compile(self) -> None:
+        ports = {n: (tuple(c.input_names), tuple(c.output_names)) for n, c in self.components.items()}
+        index: dict[str, int] = {}
+        names, units = [], []
+        for n, c in self.components.items():
+            u = tuple(c.output_units) or ("",) * len(c.output_names)
+            for port, unit in zip(c.output_names, u):
+                index[f"{n}.{port}"] = len(names)
+                names.append(f"{n}.{port}")
+                units.append(unit)
+        self.n_signals = len(names)
+        for dst in self.user_connections:
+            comp, _, port = dst.partition(".")
+            if port not in ports.get(comp, ((), ()))[0]:
+                raise self._error(("connections", dst), f"no input {dst!r}; inputs are: "
+                                  f"{', '.join(f'{n}.{p}' for n, (i, _) in ports.items() for p in i)}")
+        self.connections = default_connections(ports) | self.user_connections
+        constants: list[float] = []
+        self._getters: list[Callable] = []
+        for n, c in self.components.items():
+            idx = []
+            for port in c.input_names:
+                dst = f"{n}.{port}"
+                src = self.connections.get(dst)
+                if src is None:
+                    raise self._error(("connections",), f"input {dst!r} is not connected; add "
+                                      f"'{dst}: <component.output or number>' to connections")
+                if isinstance(src, str):
+                    if src not in index:
+                        raise self._error(("connections", dst), f"unknown source {src!r}; outputs are: "
+                                          f"{', '.join(names)}")
+                    idx.append(index[src])
+                else:
+                    idx.append(self.n_signals + len(constants))
+                    constants.append(float(src))
+            self._getters.append(_getter(idx))
+        self._constants = constants
+        if self.record == "all":
+            rec = list(range(self.n_signals))
+        else:
+            rec = []
+            for k, name in enumerate(self.record):
+                if name not in index:
+                    raise self._error(("record", k), f"unknown signal {name!r}; expected one of: {', '.join(names)}")
+                rec.append(index[name])
+        self._rec_get = _getter(rec)
+        self.recorder = Recorder([names[j] for j in rec], [units[j] for j in rec], self.n_steps + 1, self.t0, self.h)
+        order = list(self.components)
+        self._events = []
+        for k, (time, target, value) in enumerate(self.events):
+            comp, _, name = target.partition(".")
+            if comp not in self.components or not name:
+                raise self._error(("events", k, "target"), f"expected '<component>.<name>' with component one "
+                                  f"of {', '.join(order)}, got {target!r}")
+            self._events.append((event_step(time, self.t0, self.h), comp, name, value))
+        self._events.sort(key=lambda e: e[0])  # stable: same-step events keep their declaration order
+
+    # -- the run --------------------------------------------------------------------------------------
+    def run(self, *, progress: bool = False, signals_path: str | Path | None = None) -> Recorder:
+        """Run all steps; returns the recorder. Call ``reports()`` then ``terminate()`` afterwards.
+
+        On a failure the rows recorded so far are kept (and written to ``signals_path`` when given),
+        the components are terminated and the error propagates; errors that are neither input nor
+        simulation errors are wrapped in a SimulationError naming the component and the time.
+        """
+        self.setup()
+        comps = list(self.components.values())
+        Y = [0.0] * self.n_signals + self._constants
+        plan = []
+        a = 0
+        for c, getter in zip(comps, self._getters):
+            b = a + len(c.output_names)
+            plan.append((c, c.set_inputs, getter, c.step, c.get_outputs, a, b))
+            a = b
+        for c, _, _, _, get_outputs, a, b in plan:
+            Y[a:b] = get_outputs()
+        rec, recorder = self._rec_get, self.recorder
+        rows = [rec(Y)]
+        events = self._events
+        e = 0
+        next_event = events[0][0] if events else -1
+        n = -1
+        c = None
+        try:
+            with tqdm(total=self.n_steps, unit="s", unit_scale=self.h, disable=None if progress else True,
+                      leave=False, desc="co-simulation", bar_format="{desc}: {percentage:3.0f}%|{bar}| "
+                      "{n:.2f}/{total:.2f} s [{elapsed}<{remaining}, {rate_fmt}]") as bar:
+                for n0 in range(0, self.n_steps, BLOCK):
+                    for n in range(n0, min(n0 + BLOCK, self.n_steps)):
+                        while n == next_event:
+                            _, name, param, value = events[e]
+                            c = self.components[name]
+                            c.set_parameter(param, value)
+                            e += 1
+                            next_event = events[e][0] if e < len(events) else -1
+                        for c, set_inputs, getter, step, get_outputs, a, b in plan:
+                            set_inputs(getter(Y))
+                            step(n)
+                            Y[a:b] = get_outputs()
+                        rows.append(rec(Y))
+                    recorder.extend(rows)
+                    rows.clear()
+                    bar.update(n + 1 - n0)
+            recorder.extend(rows)  # the t0 row when there are no steps
+        except BaseException as exc:
+            recorder.extend(rows)
+            if signals_path is not None:
+                recorder.write_csv(signals_path)
+            self.terminate()
+            if isinstance(exc, (InputError, SimulationError)) or not isinstance(exc, Exception):
+                raise
+            name = next((k for k, v in self.components.items() if v is c), "?")
+            raise SimulationError(f"{name}: {type(exc).__name__}: {exc} (in step {max(n, 0)} from t="
+                                  f"{self.t0 + max(n, 0) * self.h:.6g} s)") from exc
+        if signals_path is not None:
+            recorder.write_csv(signals_path)
+        return recorder
+
+    def reports(self) -> dict[str, dict]:
+        """Each component's ``report()`` (call after the run)."""
+        return {n: c.report() for n, c in self.components.items()}
+
+    def __enter__(self) -> "Master":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.terminate()
+
+    def terminate(self) -> None:
+        """Terminate every component (once each; never raises)."""
+        for name, c in self.components.items():
+            if name in self._terminated:
+                continue
+            self._terminated.add(name)
+            try:
+                c.terminate()
+            except Exception:  # noqa: BLE001 - the contract says terminate must not raise; keep going
+                pass
+
+
+def _getter(idx: Sequence[int]) -> Callable[[list], tuple]:
+    """``Y -> tuple(Y[i] for i in idx)``, as fast as the number of indices allows."""
+    if len(idx) > 1:
+        return itemgetter(*idx)
+    if len(idx) == 1:
+        i = idx[0]
+        return lambda Y: (Y[i],)
+    return lambda Y: ()

@@ -1,0 +1,96 @@
+"""Run plots (matplotlib, Agg): per high-speed motion, the paper's profiles and current residue.
+
+For each high-speed motion (NC ``state == 1``, one ``motion`` index):
+
+* ``motion_<k>_profiles.png``: voltage, current and speed against time (paper Fig. 3 and 8);
+* ``motion_<k>_currents.png``: the two current measurements and their residue r = Im1 - Im2
+  (paper Fig. 9 and 10).
+
+A figure is drawn only when its signals were recorded.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+#: (label, unit, candidate signals in order of preference: measured first)
+PROFILES = (("voltage u", "V", ("sensors.u", "plant.voltage")),
+            ("current i", "A", ("sensors.Im2", "sensors.Im1", "plant.current")),
+            ("speed w", "rad/s", ("sensors.w_tach", "plant.speed")))
+
+
+def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
+    """``motion index -> sample indices`` of each high-speed motion (NC state 1), from nc.state/nc.motion."""
+    if "nc.state" not in signals or "nc.motion" not in signals:
+        return {}
+    state, motion = signals["nc.state"], signals["nc.motion"]
+    rapid = state == 1
+    return {int(k): np.flatnonzero(rapid & (motion == k)) for k in np.unique(motion[rapid])}
+
+
+def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str | Path,
+             title: str = "") -> list[Path]:
+    """Draw the figures of a run into ``out_dir`` (created); returns the files written.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Sample times [s].
+    signals : mapping name -> ndarray, shape (n,)
+        Recorded signals (``component.port``).
+    out_dir : path
+        Directory for the PNG files.
+    title : str
+        Prefix of the figure titles (the scenario name).
+    """
+    out_dir = Path(out_dir)
+    written: list[Path] = []
+    for k, idx in motions(signals).items():
+        if idx.size < 2:
+            continue
+        t = time[idx]
+        rows = [(label, unit, [s for s in names if s in signals]) for label, unit, names in PROFILES]
+        rows = [(label, unit, names[0], names[-1]) for label, unit, names in rows if names]
+        if rows:
+            fig, axes = plt.subplots(len(rows), 1, sharex=True, figsize=(8, 2.2 * len(rows) + 0.6))
+            for ax, (label, unit, measured, true) in zip(np.atleast_1d(axes), rows):
+                ax.plot(t, signals[measured][idx], lw=0.6, label=measured)
+                if true != measured:
+                    ax.plot(t, signals[true][idx], lw=0.9, label=true)
+                ax.set_ylabel(f"{label} [{unit}]")
+                ax.grid(alpha=0.3)
+                ax.legend(loc="upper right", fontsize=7)
+            np.atleast_1d(axes)[-1].set_xlabel("time [s]")
+            fig.suptitle(f"{title} high-speed motion {k}: voltage, current and speed")
+            written.append(_save(fig, out_dir / f"motion_{k}_profiles.png"))
+        if "sensors.Im1" in signals and "sensors.Im2" in signals:
+            im1, im2 = signals["sensors.Im1"][idx], signals["sensors.Im2"][idx]
+            fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+            ax1.plot(t, im1, lw=0.6, label="Im1")
+            ax1.plot(t, im2, lw=0.6, label="Im2")
+            ax1.set_ylabel("current [A]")
+            ax1.legend(loc="upper right", fontsize=7)
+            ax2.plot(t, im1 - im2, lw=0.6, color="C3")
+            ax2.axhline(float(np.mean(im1 - im2)), color="k", lw=0.8, ls="--", label="mean")
+            ax2.set_ylabel("residue Im1 - Im2 [A]")
+            ax2.set_xlabel("time [s]")
+            ax2.legend(loc="upper right", fontsize=7)
+            for ax in (ax1, ax2):
+                ax.grid(alpha=0.3)
+            fig.suptitle(f"{title} high-speed motion {k}: redundant current sensors")
+            written.append(_save(fig, out_dir / f"motion_{k}_currents.png"))
+    return written
+
+
+def _save(fig: plt.Figure, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

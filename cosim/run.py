@@ -1,0 +1,169 @@
+"""One co-simulation run of a scenario, with everything it writes to its output directory.
+
+Files in ``out_dir``::
+
+    scenario.resolved.yaml   the scenario with every default filled, the FMU's absolute path and
+                             sha256, the stop time and the complete connections (loadable again)
+    signals.csv              time and every recorded signal, units in the header (partial on failure)
+    report.json              run metadata, each component's report(), the monitor's motions
+    plots/*.png              per high-speed motion: profiles and current residue (cosim.plots),
+                             and the figures of components that draw their own (the monitor)
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import platform
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from cosim.errors import InputError
+from cosim.master import Master
+from cosim.scenario import Scenario, load_scenario
+
+OUTPUTS = ("signals.csv", "scenario.resolved.yaml", "report.json")
+
+
+class OutputExistsError(InputError):
+    """The output directory is not empty and overwriting was not asked for."""
+
+
+@dataclass
+class RunResult:
+    """What a run produced.
+
+    Attributes
+    ----------
+    out_dir : Path
+    time : ndarray, shape (n,)
+        Sample times [s].
+    signals : dict name -> ndarray, shape (n,)
+        Recorded signals (``component.port``).
+    units : dict name -> str
+    report : dict
+        The content of report.json.
+    paths : dict
+        ``signals``, ``resolved``, ``report`` -> Path, and ``plots`` -> list of Path.
+    """
+
+    out_dir: Path
+    time: np.ndarray
+    signals: dict[str, np.ndarray]
+    units: dict[str, str]
+    report: dict
+    paths: dict[str, Any] = field(default_factory=dict)
+
+
+def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: bool = False,
+                 overwrite: bool = False, plots: bool = True) -> RunResult:
+    """Run a scenario and write its output directory.
+
+    Parameters
+    ----------
+    scenario : Scenario or path
+        A loaded scenario or the path of a scenario file.
+    out_dir : path
+        Output directory; created if needed. Must be empty unless ``overwrite``.
+    progress : bool
+        Show a tqdm progress bar (only on a terminal).
+    overwrite : bool
+        Replace the files of an earlier run in a non-empty ``out_dir``.
+    plots : bool
+        Draw plots/*.png.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    OutputExistsError
+        ``out_dir`` is not empty and ``overwrite`` is False.
+    cosim.errors.ScenarioError, cosim.errors.SimulationError
+        Bad scenario; a failure during the run (report.json then has ``status: failed`` and
+        signals.csv the rows recorded before it).
+    """
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    out_dir = Path(out_dir)
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not overwrite:
+        raise OutputExistsError(f"output directory {out_dir} is not empty; choose another one or allow "
+                                "overwriting (--overwrite)")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for old in [out_dir / n for n in OUTPUTS] + sorted((out_dir / "plots").glob("*.png")):
+        old.unlink(missing_ok=True)
+    paths: dict[str, Any] = {"signals": out_dir / "signals.csv", "resolved": out_dir / "scenario.resolved.yaml",
+                             "report": out_dir / "report.json", "plots": []}
+    report: dict[str, Any] = {"scenario": scenario.name, "axis": scenario.axis, "source": scenario.source,
+                              "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                              "status": "running", "versions": _versions(),
+                              "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,
+                                        "interface": scenario.plant.interface}}
+    master = Master.from_scenario(scenario)
+    wall = _time.perf_counter()
+    try:
+        master.setup()
+        resolved = scenario.to_dict() | {"stop_time": float(f"{master.stop_time:.12g}"),  # drop n*h rounding
+                                         "connections": master.connections}
+        paths["resolved"].write_text(yaml.safe_dump(resolved, sort_keys=False), encoding="utf-8")
+        report |= {"step_s": master.h, "stop_time_s": master.stop_time, "steps": master.n_steps}
+        recorder = master.run(progress=progress, signals_path=paths["signals"])
+        report["components"] = master.reports()
+        report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
+        signals = recorder.signals()
+        if plots:
+            from cosim.plots import plot_run
+
+            paths["plots"] = plot_run(recorder.time, signals, out_dir / "plots", title=scenario.name)
+            for comp in master.components.values():  # components that draw their own figures (the monitor)
+                if callable(getattr(comp, "write_plots", None)):
+                    paths["plots"] += comp.write_plots(out_dir / "plots")
+    except BaseException as exc:
+        rec = master.recorder
+        report |= {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
+                   "wall_time_s": round(_time.perf_counter() - wall, 3),
+                   "recorded_until_s": float(rec.time[-1]) if rec is not None and rec.n else None}
+        paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
+        raise
+    finally:
+        master.terminate()
+    report["status"] = "ok"
+    monitor = report["components"].get("monitor")
+    if isinstance(monitor, dict) and "motions" in monitor:
+        report["motions"] = monitor["motions"]
+    report["files"] = {k: ([os.path.relpath(p, out_dir) for p in v] if k == "plots" else v.name)
+                       for k, v in paths.items()}
+    paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
+    return RunResult(out_dir, recorder.time, signals, dict(zip(recorder.names, recorder.units)), report, paths)
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for pkg in ("feeddrive-monitor", "fmpy", "numpy", "casadi"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    if hasattr(obj, "model_dump"):
+        return obj.model_dump(mode="json")
+    if hasattr(obj, "to_dict"):
+        return obj.to_dict()
+    raise TypeError(f"report.json: cannot serialise {type(obj).__name__}")

@@ -1,0 +1,59 @@
+"""``cosim run SCENARIO.yaml [--out DIR] [--overwrite] [--no-progress]``: one co-simulation run.
+
+Writes signals.csv, scenario.resolved.yaml, report.json and plots/ into the output directory
+(default ``runs/<name>-<YYYYmmdd-HHMMSS>``) and prints a short summary.
+Exit status: 0 success, 2 bad input, 1 simulation failure (see cosim/cli.py).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import logging
+import sys
+from pathlib import Path
+
+from cosim.run import run_scenario
+from cosim.scenario import load_scenario
+
+
+class _ReportedElsewhere(logging.Filter):
+    """FMU error messages end up in the one-line failure message: do not print them twice."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not (record.name.startswith("cosim.fmu.") and record.levelno >= logging.ERROR)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scenario", type=Path, help="scenario YAML file")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output directory (default: runs/<name>-<YYYYmmdd-HHMMSS>)")
+    parser.add_argument("--overwrite", action="store_true", help="replace the files of a non-empty output directory")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def main(args: argparse.Namespace) -> int:
+    handler = logging.StreamHandler(sys.stderr)
+    handler.addFilter(_ReportedElsewhere())
+    handler.setFormatter(logging.Formatter("cosim run: %(name)s: %(levelname)s: %(message)s"))
+    logging.basicConfig(level=logging.WARNING, handlers=[handler])
+    scenario = load_scenario(args.scenario)
+    out = args.out or Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}"
+    result = run_scenario(scenario, out, progress=not args.no_progress, overwrite=args.overwrite)
+    print(summary(result))
+    return 0
+
+
+def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
+    """A few lines: simulated time and speed, final position against the NC's target, motions, files."""
+    r, s = result.report, result.signals
+    lines = [f"{r['scenario']}: {r['stop_time_s']:.4g} s simulated in {r['wall_time_s']:.3g} s "
+             f"({r['steps']} steps of {r['step_s']:.3g} s) -> {result.out_dir}"]
+    if "plant.position" in s and "nc.x_ref" in s:
+        lines.append(f"  position: {s['plant.position'][-1]:.6f} m (NC target {s['nc.x_ref'][-1]:.6f} m)")
+    for k, m in enumerate(r.get("motions") or [], 1):
+        if isinstance(m, dict):
+            params = m.get("parameters") or {}
+            text = " ".join(f"{p}={v['value']:.4g}" for p, v in params.items() if isinstance(v, dict) and "value" in v)
+            lines.append(f"  motion {k}: {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
+    lines.append(f"  files: signals.csv, scenario.resolved.yaml, report.json, {len(result.paths['plots'])} plots")
+    return "\n".join(lines)

@@ -1,0 +1,486 @@
+"""Scenario files: YAML -> typed, frozen objects, parsed and checked once.
+
+A scenario names the plant FMU and how its variables map onto the master's roles, the NC program,
+the sensors, the monitor, optional user components, the connections between ports, timed events
+and what to record. Every error is a :class:`cosim.errors.ScenarioError` whose message starts with
+``file:line: key.path:`` and says what was expected.
+
+Roles (the plant's ports, always in SI units)::
+
+    inputs   speed_ref [rad/s]  load [N.m]
+    outputs  voltage [V]  voltage_ref [V] (optional)  current [A]  speed [rad/s]  position [m]
+
+A map entry ``{var, scale, offset}`` converts between a role and an FMU variable: for an input
+role the FMU receives ``scale * x + offset``; for an output role the master reads
+``scale * y + offset``. The built-in plant has a default map, and its ``pitch`` and ``belt_ratio``
+parameters, when given, are also the defaults of the NC's and the encoder's drive chain.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import types
+import typing
+import warnings
+import zipfile
+from pathlib import Path
+from typing import Any, Callable, Literal, Mapping
+from xml.etree import ElementTree
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
+
+from cosim.errors import ScenarioError
+from cosim.nc import NCConfig
+from cosim.sensors import SensorsConfig
+
+Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
+INPUT_ROLES = ("speed_ref", "load")
+OUTPUT_ROLES = ("voltage", "voltage_ref", "current", "speed", "position")
+REQUIRED_ROLES = ("speed_ref", "voltage", "current", "speed", "position")
+ROLE_UNITS = {"speed_ref": "rad/s", "load": "N.m", "voltage": "V", "voltage_ref": "V", "current": "A",
+              "speed": "rad/s", "position": "m"}
+BUILTIN_MAP = {"speed_ref": "w_ref", "load": "Tl", "voltage": "u", "voltage_ref": "u_ref", "current": "i",
+               "speed": "w", "position": "x"}
+STANDARD_COMPONENTS = ("nc", "plant", "sensors", "monitor")
+DEFAULT_MONITOR = "cosim.monitor:Monitor"
+
+KeyPath = tuple[Any, ...]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+
+
+class MapEntry(_Strict):
+    """One role <-> FMU variable conversion: ``role = scale * var + offset`` (or its inverse for inputs)."""
+
+    var: str
+    scale: float = 1.0
+    offset: float = 0.0
+
+    @field_validator("scale")
+    @classmethod
+    def _scale_nonzero(cls, v: float) -> float:
+        if v == 0 or not math.isfinite(v):
+            raise ValueError("scale must be finite and non-zero")
+        return v
+
+
+class PlantConfig(_Strict):
+    """The plant FMU. After loading, ``fmu`` is an absolute path, ``sha256`` its hash, ``map`` complete."""
+
+    fmu: str = "builtin"
+    sha256: str | None = None
+    interface: Literal["cs", "me"] = "cs"
+    tolerance: float = Field(1e-8, gt=0, description="relative tolerance of CVode (interface: me)")
+    parameters: dict[str, float] = {}
+    start: dict[str, float] = {}
+    map: dict[Role, MapEntry] = {}
+
+
+class ComponentSpec(_Strict):
+    """A user component: ``class: package.module:ClassName``; ``inputs`` maps its ports to sources."""
+
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
+    class_: str = Field(alias="class")
+    config: dict[str, Any] = {}
+    inputs: dict[str, str | float] = {}
+
+
+class Event(_Strict):
+    """At the first grid point ``t_n >= time``, ``component.set_parameter(name, value)`` (target ``component.name``)."""
+
+    time: float = Field(ge=0)
+    target: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*\..+$")
+    value: float | str
+
+
+class Scenario(_Strict):
+    """A validated scenario; build it with :func:`load_scenario` or :func:`scenario_from_dict`."""
+
+    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
+    axis: str = "X"
+    step: float = Field(1.0e-4, gt=0, description="communication step [s]")
+    stop_time: float | None = Field(None, gt=0, description="[s]; default: NC program duration + 0.3 s")
+    plant: PlantConfig = PlantConfig()
+    sensors: SensorsConfig = Field(default_factory=SensorsConfig)
+    nc: NCConfig
+    monitor: Any = None  # ComponentSpec or None, built by the loader from the ``monitor:`` section
+    components: list[ComponentSpec] = []
+    connections: dict[str, str | float] = {}
+    events: list[Event] = []
+    record: Literal["all"] | list[str] = "all"
+
+    _source: str = PrivateAttr("<dict>")
+    _lines: dict = PrivateAttr(default_factory=dict)
+    _base_dir: Path = PrivateAttr(default_factory=Path.cwd)
+
+    @property
+    def source(self) -> str:
+        """The scenario file (or ``<dict>``)."""
+        return self._source
+
+    @property
+    def base_dir(self) -> Path:
+        """Directory against which relative paths of the scenario are resolved."""
+        return self._base_dir
+
+    def error(self, path: KeyPath, message: str) -> ScenarioError:
+        """A ScenarioError naming the file, the YAML line of ``path`` (or its nearest parent) and the key."""
+        return _error(self._source, self._lines, path, message)
+
+    def to_dict(self) -> dict:
+        """Everything as plain YAML-able data, defaults filled; ``scenario_from_dict`` reads it back."""
+        data = self.model_dump(mode="json", by_alias=True, exclude={"monitor"}, exclude_none=True)
+        spec = self.monitor
+        if spec is not None:
+            cfg = spec.config.model_dump(mode="json", exclude_none=True) if isinstance(spec.config, BaseModel) \
+                else spec.config
+            data["monitor"] = cfg if spec.class_ == DEFAULT_MONITOR else {"class": spec.class_, "config": cfg}
+        return data
+
+
+# -- loading -------------------------------------------------------------------------------------
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and check a scenario file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The YAML file. Relative FMU paths in it are resolved against its directory.
+
+    Returns
+    -------
+    Scenario
+        Frozen, with the plant FMU resolved (absolute path, sha256, complete role map).
+
+    Raises
+    ------
+    ScenarioError
+        Unreadable or malformed file; the message has ``file:line: key:`` and what was expected.
+    """
+    path = Path(path)
+    data, lines = _read_yaml(path)
+    return scenario_from_dict(data, source=str(path), base_dir=path.resolve().parent, lines=lines)
+
+
+def load_plant_map(path: str | Path) -> tuple[dict[str, MapEntry], Callable[[KeyPath, str], ScenarioError]]:
+    """The role map of a scenario file's ``plant:`` section (with the built-in defaults when its FMU is
+    ``builtin``), without resolving its FMU; and a factory of errors naming that file and line."""
+    path = Path(path)
+    data, lines = _read_yaml(path)
+    raw = data.get("plant") or {} if isinstance(data, dict) else {}
+    try:
+        plant = PlantConfig.model_validate(raw)
+    except ValidationError as exc:
+        raise _from_validation(exc, raw, str(path), lines, prefix=("plant",), model=PlantConfig) from None
+    defaults = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} if plant.fmu == "builtin" else {}
+    return defaults | dict(plant.map), lambda key, message: _error(str(path), lines, key, message)
+
+
+def _read_yaml(path: Path) -> tuple[Any, dict[KeyPath, int]]:
+    """The data of a YAML file and its key path -> line map."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read scenario file ({exc.strerror or exc})") from None
+    try:
+        root = yaml.compose(text)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark else str(path)
+        raise ScenarioError(f"{where}: invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    lines: dict[KeyPath, int] = {}
+    if root is not None:
+        _line_map(root, (), lines)
+    return data, lines
+
+
+def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Path | None = None,
+                       lines: Mapping[KeyPath, int] | None = None) -> Scenario:
+    """Check a scenario given as plain data (as read from YAML); see :func:`load_scenario`.
+
+    Campaigns use it on modified copies of a base scenario; ``base_dir`` resolves relative FMU paths
+    (default: the current directory) and ``lines`` (key path -> YAML line) improves messages.
+    """
+    lines = dict(lines or {})
+    if not isinstance(data, dict):
+        raise _error(source, lines, (), f"expected a mapping of scenario keys, got {type(data).__name__}")
+    data = _follow_builtin_drive_chain(dict(data))
+    base_dir = Path(base_dir or ".").resolve()
+    data["monitor"] = _monitor_spec(data.get("monitor"), data, base_dir, source, lines)
+    try:
+        scenario = Scenario.model_validate(data)
+    except ValidationError as exc:
+        raise _from_validation(exc, data, source, lines) from None
+    scenario._source = source
+    scenario._lines = lines
+    scenario._base_dir = base_dir
+    plant, md = _resolve_plant(scenario)
+    _check_events(scenario, md)
+    return scenario.model_copy(update={"plant": plant})
+
+
+def _follow_builtin_drive_chain(data: dict) -> dict:
+    """With the built-in plant, ``pitch`` and ``belt_ratio`` given in ``plant.parameters`` become the defaults
+    of the NC's and the encoder's (which otherwise default to the model's nominal drive chain)."""
+    plant = data.get("plant")
+    params = plant.get("parameters") if isinstance(plant, dict) and plant.get("fmu", "builtin") == "builtin" else None
+    chain = {k: params[k] for k in ("pitch", "belt_ratio") if k in params} if isinstance(params, dict) else {}
+    nc, sensors = data.get("nc"), data.get("sensors") or {}
+    if chain and isinstance(nc, dict):
+        data["nc"] = chain | nc
+    if chain and isinstance(sensors, dict) and isinstance(sensors.get("encoder") or {}, dict):
+        data["sensors"] = sensors | {"encoder": chain | (sensors.get("encoder") or {})}
+    return data
+
+
+def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict) -> ComponentSpec | None:
+    """``monitor: {...}`` is the default monitor's config; ``{class: ..., config: ...}`` replaces it.
+
+    The default monitor's ``axis`` and ``scenario`` default to the scenario's ``axis`` and ``name``, and a
+    relative history ``db`` is resolved against the scenario's directory (as FMU paths are)."""
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        raise _error(source, lines, ("monitor",), f"expected a mapping, got {type(raw).__name__}")
+    if "class" in raw and raw["class"] != DEFAULT_MONITOR:
+        try:
+            return ComponentSpec.model_validate({"name": "monitor", **raw})
+        except ValidationError as exc:
+            raise _from_validation(exc, raw, source, lines, prefix=("monitor",), model=ComponentSpec) from None
+    try:
+        from cosim.monitor import MonitorConfig
+    except ImportError:
+        warnings.warn(f"{source}: monitor: cosim.monitor is not available; running without a monitor",
+                      stacklevel=3)
+        return None
+    prefix: KeyPath = ("monitor",)
+    if "class" in raw:
+        raw, prefix = raw.get("config") or {}, ("monitor", "config")
+    fields = MonitorConfig.model_fields
+    implied = {k: v for k, v in (("axis", data.get("axis", "X")), ("scenario", data.get("name")))
+               if k in fields and isinstance(v, str)}
+    if isinstance(raw, dict) and isinstance(raw.get("db"), str) and "db" in fields:
+        raw = raw | {"db": str(base_dir / Path(raw["db"]).expanduser())}
+    try:
+        config = MonitorConfig.model_validate(implied | raw if isinstance(raw, dict) else raw)
+    except ValidationError as exc:
+        raise _from_validation(exc, raw, source, lines, prefix=prefix, model=MonitorConfig) from None
+    return ComponentSpec(name="monitor", class_=DEFAULT_MONITOR, config={}).model_copy(update={"config": config})
+
+
+# -- the plant FMU -------------------------------------------------------------------------------
+
+
+def fmi_version(path: Path) -> str:
+    """The ``fmiVersion`` attribute of an FMU's modelDescription.xml (raises ValueError if unreadable)."""
+    try:
+        with zipfile.ZipFile(path) as z, z.open("modelDescription.xml") as f:
+            return ElementTree.parse(f).getroot().get("fmiVersion", "")
+    except (zipfile.BadZipFile, KeyError, ElementTree.ParseError) as exc:
+        raise ValueError(f"not an FMU (a zip file with a modelDescription.xml): {exc}") from None
+
+
+def sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def check_map(md: Any, role_map: Mapping[str, MapEntry], fmu_name: str) -> list[tuple[KeyPath, str]]:
+    """Problems of a role map against an FMU's model description, as ``(key path, message)`` pairs."""
+    variables = {v.name: v for v in md.modelVariables}
+    problems = []
+    missing = [r for r in REQUIRED_ROLES if r not in role_map]
+    if missing:
+        problems.append((("plant", "map"), f"roles {', '.join(missing)} are not mapped; expected entries "
+                         f"{{role: {{var: <FMU variable>}}}} for {', '.join(REQUIRED_ROLES)}"))
+    for role, entry in role_map.items():
+        v = variables.get(entry.var)
+        path = ("plant", "map", role, "var")
+        want = "input" if role in INPUT_ROLES else "output"
+        candidates = [n for n, x in variables.items() if x.causality == want and x.type == "Real"]
+        if v is None:
+            problems.append((path, f"FMU {fmu_name!r} has no variable {entry.var!r}; its Real {want}s are: "
+                             f"{', '.join(candidates) or 'none'}"))
+        elif v.type != "Real":
+            problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real"))
+        elif role in INPUT_ROLES and v.causality != "input":
+            problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an input"))
+        elif role not in INPUT_ROLES and v.causality not in ("output", "local"):
+            problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an output"))
+    return problems
+
+
+def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
+    from fmpy import read_model_description
+
+    p = s.plant
+    if p.fmu == "builtin":
+        from fmu_build import builtin_fmu
+
+        path = Path(builtin_fmu()).resolve()
+        role_map = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} | dict(p.map)
+    else:
+        path = (s.base_dir / Path(p.fmu).expanduser()).resolve()
+        role_map = dict(p.map)
+        if not path.is_file():
+            raise s.error(("plant", "fmu"), f"FMU file not found: {path} (expected 'builtin' or the path of an "
+                                            ".fmu, relative to the scenario file)")
+    try:
+        version = fmi_version(path)
+    except ValueError as exc:
+        raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
+    if version != "2.0":
+        raise s.error(("plant", "fmu"), f"{path.name} is an FMI {version or '(unknown)'} FMU; expected FMI 2.0")
+    digest = sha256(path)
+    if p.sha256 and p.sha256 != digest:
+        raise s.error(("plant", "sha256"), f"{path.name} has sha256 {digest}, expected {p.sha256} "
+                                           "(the FMU changed since the scenario was resolved)")
+    md = read_model_description(str(path))
+    if (md.coSimulation if p.interface == "cs" else md.modelExchange) is None:
+        kind = {"cs": "Co-Simulation", "me": "Model Exchange"}[p.interface]
+        raise s.error(("plant", "interface"), f"{path.name} does not support {kind}; expected interface "
+                                              f"{'me' if p.interface == 'cs' else 'cs'}")
+    problems = check_map(md, role_map, path.name)
+    if problems:
+        raise s.error(*problems[0])
+    variables = {v.name: v for v in md.modelVariables}
+    for key, want in (("parameters", ("parameter",)), ("start", None)):
+        for name in getattr(p, key):
+            v = variables.get(name)
+            if v is None or (want and v.causality not in want) or v.type != "Real":
+                kinds = ", ".join(n for n, x in variables.items() if x.type == "Real"
+                                  and (not want or x.causality in want))
+                raise s.error(("plant", key, name), f"{path.name} has no Real "
+                              f"{'parameter' if want else 'variable'} {name!r}; expected one of: {kinds}")
+    plant = p.model_copy(update={"fmu": str(path), "sha256": digest, "map": role_map})
+    return plant, md
+
+
+def _check_events(s: Scenario, md: Any) -> None:
+    names = {"plant", "nc", "sensors"} | {c.name for c in s.components} | ({"monitor"} if s.monitor else set())
+    users = [c.name for c in s.components]
+    clash = sorted(set(users) & set(STANDARD_COMPONENTS)) or sorted({n for n in users if users.count(n) > 1})
+    if clash:
+        raise s.error(("components",), f"component name {clash[0]!r} is used twice; names must be unique "
+                                       f"and differ from {', '.join(STANDARD_COMPONENTS)}")
+    variables = {v.name: v for v in md.modelVariables}
+    for k, ev in enumerate(s.events):
+        comp, _, param = ev.target.partition(".")
+        if comp not in names:
+            raise s.error(("events", k, "target"), f"unknown component {comp!r}; expected one of "
+                                                   f"{', '.join(sorted(names))}")
+        if comp == "plant":
+            v = variables.get(param)
+            if v is None or v.causality != "parameter" or v.variability != "tunable" or v.type != "Real":
+                tunable = [n for n, x in variables.items() if x.causality == "parameter"
+                           and x.variability == "tunable" and x.type == "Real"]
+                raise s.error(("events", k, "target"), f"{param!r} is not a tunable Real parameter of the plant "
+                                                       f"FMU; expected one of: {', '.join(tunable)}")
+            if not isinstance(ev.value, float):
+                raise s.error(("events", k, "value"), f"expected a number for plant.{param}, got {ev.value!r}")
+
+
+# -- error messages ------------------------------------------------------------------------------
+
+
+def _line_map(node: yaml.Node, path: KeyPath, out: dict[KeyPath, int]) -> None:
+    out.setdefault(path, node.start_mark.line + 1)
+    if isinstance(node, yaml.MappingNode):
+        for key, value in node.value:
+            sub = path + (key.value,)
+            out[sub] = key.start_mark.line + 1
+            _line_map(value, sub, out)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            _line_map(item, path + (i,), out)
+
+
+def format_path(path: KeyPath) -> str:
+    """``("nc", "program", 2, "rapid")`` -> ``nc.program[2].rapid``."""
+    text = ""
+    for part in path:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text
+
+
+def _error(source: str, lines: Mapping[KeyPath, int], path: KeyPath, message: str) -> ScenarioError:
+    path = tuple(path)
+    line = next((lines[path[:k]] for k in range(len(path), -1, -1) if path[:k] in lines), None)
+    where = f"{source}:{line}" if line else source
+    key = f" {format_path(path)}:" if path else ""
+    return ScenarioError(f"{where}:{key} {message}")
+
+
+def _allowed_keys(model: type, loc: KeyPath) -> list[str]:
+    """Field names (aliases) of the pydantic model found at ``loc`` inside ``model``, if any."""
+    candidates = [model]
+    for part in loc:
+        nxt = []
+        for tp in candidates:
+            for t in _unwrap(tp):
+                if isinstance(t, type) and issubclass(t, BaseModel) and isinstance(part, str):
+                    f = next((f for n, f in t.model_fields.items() if (f.alias or n) == part), None)
+                    if f is not None:
+                        nxt.append(f.annotation)
+                elif typing.get_origin(t) in (list, tuple) and isinstance(part, int):
+                    nxt.extend(typing.get_args(t)[:1])
+                elif typing.get_origin(t) is dict:
+                    nxt.extend(typing.get_args(t)[1:2])
+        candidates = nxt
+    return sorted({f.alias or n for tp in candidates for t in _unwrap(tp)
+                   if isinstance(t, type) and issubclass(t, BaseModel) for n, f in t.model_fields.items()})
+
+
+def _unwrap(tp: Any) -> list[Any]:
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        return [a for x in typing.get_args(tp) for a in _unwrap(x)]
+    if typing.get_origin(tp) is typing.Annotated:
+        return _unwrap(typing.get_args(tp)[0])
+    return [tp]
+
+
+def _from_validation(exc: ValidationError, data: Any, source: str, lines: Mapping[KeyPath, int],
+                     prefix: KeyPath = (), model: type = Scenario) -> ScenarioError:
+    errors = exc.errors(include_url=False)
+    e = errors[0]
+    loc = _data_path(data, e["loc"])
+    if e["type"] == "extra_forbidden":
+        allowed = _allowed_keys(model, loc[:-1])
+        message = f"unknown key {loc[-1]!r}" + (f"; expected one of: {', '.join(allowed)}" if allowed else "")
+    elif e["type"] == "missing":
+        message = "missing required key"
+    else:
+        # a union reports one error per member at the same key: say every alternative
+        same = [x for x in errors if _data_path(data, x["loc"]) == loc and x["type"] != "value_error"]
+        text = " or ".join(dict.fromkeys(x["msg"].removeprefix("Input should be ") for x in same)) \
+            if len(same) > 1 else e["msg"].removeprefix("Value error, ")
+        text = f"Input should be {text}" if len(same) > 1 else text
+        got = repr(e.get("input"))
+        message = text if len(got) > 60 or e["type"] == "value_error" else f"{text}, got {got}"
+        errors = [x for x in errors if x not in same[1:]]
+    more = f" (and {len(errors) - 1} more problem{'s' * (len(errors) > 2)})" if len(errors) > 1 else ""
+    return _error(source, lines, prefix + loc, message + more)
+
+
+def _data_path(data: Any, loc: KeyPath) -> KeyPath:
+    """Drop the union-member tags pydantic puts in ``loc`` ('str', "literal['all']", ...): keep the parts
+    that index into the data, and a last part that names a missing key."""
+    path: list = []
+    for k, part in enumerate(loc):
+        if isinstance(data, dict) and part in data:
+            data = data[part]
+        elif isinstance(data, list) and isinstance(part, int) and part < len(data):
+            data = data[part]
+        elif k < len(loc) - 1 or not isinstance(data, dict):
+            continue
+        path.append(part)
+    return tuple(path)

@@ -1,0 +1,107 @@
+"""``cosim run`` and ``cosim info`` end to end: files, physics of the example, exit codes, one-line errors."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from cosim.cli import main
+from cosim.scenario import load_scenario
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+SHORT = """\
+name: short
+plant: {{fmu: builtin}}
+nc:
+  program:
+    - rapid: {{to: 0.02}}
+{extra}"""
+
+
+def read_csv(path: Path) -> dict[str, np.ndarray]:
+    header = path.read_text().split("\n", 1)[0].split(",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return {name: data[:, k] for k, name in enumerate(header)}
+
+
+@pytest.mark.slow
+def test_tool_change_example_runs_end_to_end(tmp_path, feeddrive_fmu, capsys):
+    out = tmp_path / "run"
+    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--out", str(out), "--no-progress"]) == 0
+    summary = capsys.readouterr().out
+    assert summary.startswith("tool-change: ") and "position:" in summary
+    s = read_csv(out / "signals.csv")
+    t, x, w, state = s["time [s]"], s["plant.position [m]"], s["plant.speed [rad/s]"], s["nc.state [1]"]
+    np.testing.assert_allclose(np.diff(t), 1e-4, rtol=1e-6)
+    # out to the tool-change position and back: the speed reverses at about the paper's 70 rad/s
+    assert abs(x.max() - 0.27) < 1e-4 and abs(x[-1] - s["nc.x_ref [m]"][-1]) < 1e-5
+    assert 65 < w.max() < 75 and -75 < w.min() < -65
+    assert (state == 1).sum() * 1e-4 == pytest.approx(3.49, abs=0.01)  # one ~3.5 s high-speed motion
+    assert abs(s["plant.voltage [V]"]).max() < 100 and abs(s["plant.current [A]"]).max() < 30
+    report = json.loads((out / "report.json").read_text())
+    assert report["status"] == "ok" and report["steps"] == len(t) - 1
+    assert report["plant"]["sha256"] and set(report["components"]) == {"nc", "plant", "sensors", "monitor"}
+    assert len(report["motions"]) == 1 and report["motions"][0]["validated"] is True  # healthy axis
+    assert {"motion_1_currents.png", "motion_1_profiles.png"} <= {p.name for p in (out / "plots").iterdir()}
+    assert sorted(report["files"]["plots"]) == sorted(f"plots/{p.name}" for p in (out / "plots").iterdir())
+    resolved = yaml.safe_load((out / "scenario.resolved.yaml").read_text())
+    assert Path(resolved["plant"]["fmu"]).is_absolute() and resolved["stop_time"] == pytest.approx(t[-1])
+    assert resolved["connections"]["nc.position"] == "plant.position"
+    assert load_scenario(out / "scenario.resolved.yaml").to_dict() == resolved  # reproducible as written
+
+
+def test_output_directory_is_never_overwritten_without_the_flag(tmp_path, feeddrive_fmu, capsys):
+    path = tmp_path / "short.yaml"
+    path.write_text(SHORT.format(extra="stop_time: 0.05\n"))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 0
+    before = (out / "signals.csv").read_text()
+    capsys.readouterr()
+    assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "is not empty" in err and "--overwrite" in err
+    assert (out / "signals.csv").read_text() == before
+    assert main(["run", str(path), "--out", str(out), "--no-progress", "--overwrite"]) == 0
+    assert (out / "signals.csv").read_text() == before  # deterministic rerun
+
+
+def test_fmu_error_mid_run_exits_1_with_one_line_and_partial_signals(tmp_path, feeddrive_fmu, capsys):
+    path = tmp_path / "broken.yaml"
+    path.write_text(SHORT.format(extra="events:\n  - {time: 0.05, target: plant.R, value: -1}\n"))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0, err
+    assert err.startswith("cosim run: failed: plant: fmi2SetReal returned fmi2Error at t=0.05 s: ")
+    s = read_csv(out / "signals.csv")
+    assert s["time [s]"][-1] == pytest.approx(0.05) and np.abs(s["plant.speed [rad/s]"]).max() > 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["status"] == "failed" and "fmi2Error" in report["error"]
+    assert report["recorded_until_s"] == pytest.approx(0.05)
+
+
+def test_bad_scenario_exits_2_with_one_line(tmp_path, capsys):
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: bad\nstep: -1\nnc: {program: []}\n")
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"cosim run: error: {path}:2: step: Input should be greater than 0, got -1"
+    assert not (tmp_path / "out").exists()
+
+
+def test_info_lists_variables_and_checks_a_map(tmp_path, feeddrive_fmu, capsys):
+    assert main(["info", "builtin"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    row = next(ln.split() for ln in lines if ln.split()[:1] == ["Cd"])
+    assert row == ["Cd", "Real", "parameter", "tunable", "N.m", "1.2"]
+    assert main(["info", "builtin", "--map", str(EXAMPLES / "tool_change.yaml")]) == 0
+    assert "map OK" in capsys.readouterr().out
+    assert main(["info", str(feeddrive_fmu), "--map", str(EXAMPLES / "vendor_fmu.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"cosim info: error: {EXAMPLES / 'vendor_fmu.yaml'}:") and err.count("\n") == 0
+    assert "plant.map.speed_ref.var: FMU 'FeedDrive.fmu' has no variable 'n_cmd'" in err
+    assert main(["info", str(tmp_path / "none.fmu")]) == 2
