@@ -67,6 +67,11 @@ class MapEntry(_Strict):
         return v
 
 
+#: ``plant.fmu`` values naming a built-in plant: the paper's model, and its variant with backlash in the
+#: drive chain (``models.feed_drive(backlash=True)``), which provokes a model mismatch in the monitor.
+BUILTIN_PLANTS = ("builtin", "builtin-backlash")
+
+
 class PlantConfig(_Strict):
     """The plant FMU. After loading, ``fmu`` is an absolute path, ``sha256`` its hash, ``map`` complete."""
 
@@ -177,7 +182,7 @@ def load_plant_map(path: str | Path) -> tuple[dict[str, MapEntry], Callable[[Key
         plant = PlantConfig.model_validate(raw)
     except ValidationError as exc:
         raise _from_validation(exc, raw, str(path), lines, prefix=("plant",), model=PlantConfig) from None
-    defaults = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} if plant.fmu == "builtin" else {}
+    defaults = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} if plant.fmu in BUILTIN_PLANTS else {}
     return defaults | dict(plant.map), lambda key, message: _error(str(path), lines, key, message)
 
 
@@ -229,7 +234,8 @@ def _follow_builtin_drive_chain(data: dict) -> dict:
     """With the built-in plant, ``pitch`` and ``belt_ratio`` given in ``plant.parameters`` become the defaults
     of the NC's and the encoder's (which otherwise default to the model's nominal drive chain)."""
     plant = data.get("plant")
-    params = plant.get("parameters") if isinstance(plant, dict) and plant.get("fmu", "builtin") == "builtin" else None
+    params = (plant.get("parameters") if isinstance(plant, dict) and plant.get("fmu", "builtin") in BUILTIN_PLANTS
+              else None)
     chain = {k: params[k] for k in ("pitch", "belt_ratio") if k in params} if isinstance(params, dict) else {}
     nc, sensors = data.get("nc"), data.get("sensors") or {}
     if chain and isinstance(nc, dict):
@@ -323,16 +329,16 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     from fmpy import read_model_description
 
     p = s.plant
-    if p.fmu == "builtin":
+    if p.fmu in BUILTIN_PLANTS:
         from fmu_build import builtin_fmu
 
-        path = Path(builtin_fmu()).resolve()
+        path = Path(builtin_fmu(backlash=p.fmu == "builtin-backlash")).resolve()
         role_map = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} | dict(p.map)
     else:
         path = (s.base_dir / Path(p.fmu).expanduser()).resolve()
         role_map = dict(p.map)
         if not path.is_file():
-            raise s.error(("plant", "fmu"), f"FMU file not found: {path} (expected 'builtin' or the path of an "
+            raise s.error(("plant", "fmu"), f"FMU file not found: {path} (expected 'builtin', 'builtin-backlash' or the path of an "
                                             ".fmu, relative to the scenario file)")
     try:
         version = fmi_version(path)

@@ -5,7 +5,7 @@ The FMU has one flat array of reals; a variable's value reference is its index i
 =========================  ===========================================================
 block                      contents (feed drive)
 =========================  ===========================================================
-states                     ``i, w, theta`` (outputs), ``xi_w, xi_i`` (local)
+states                     ``i, w, theta`` (outputs), ``xi_w, xi_i, w_rf`` (local)
 inputs                     ``w_ref, Tl, u_in``
 parameters                 the model's physical then design parameters, then ``cs_substep``
 calculated outputs         the model's outputs that are not states (``i_ref, u_ref, u, x``)

@@ -80,8 +80,8 @@ def test_cache_is_reused_and_rebuilt_when_the_sources_change(tmp_path, monkeypat
     stamp = first.stat().st_mtime_ns
     assert builtin_fmu(tmp_path) == first and first.stat().st_mtime_ns == stamp  # not rebuilt
 
-    def heavier_drive() -> Model:  # a model edit: the default inertia
-        m = feed_drive()
+    def heavier_drive(backlash: bool = False) -> Model:  # a model edit: the default inertia
+        m = feed_drive(backlash)
         m.variables["Jt"] = replace(m.variables["Jt"], nominal=0.2)
         return m
 
@@ -111,7 +111,7 @@ def test_cli_builds_and_refuses_to_overwrite(tmp_path, capsys):
     assert cosim_main(["build-fmu", "--out", str(out)]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == str(out)
-    assert lines[1].startswith("FeedDrive: FMI 2.0 Co-Simulation + Model Exchange, 5 states, 3 inputs, 7 outputs")
+    assert lines[1].startswith("FeedDrive: FMI 2.0 Co-Simulation + Model Exchange, 6 states, 3 inputs, 7 outputs")
     stamp = out.stat().st_mtime_ns
     assert cosim_main(["build-fmu", "--out", str(out)]) == 2
     assert "file exists (use --force to overwrite)" in capsys.readouterr().err
