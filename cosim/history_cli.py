@@ -1,0 +1,80 @@
+"""``cosim history``: print an axis's stored motions and plot each parameter's trend with its CI band.
+
+    cosim history [--db PATH] [--axis ID] [--plot [PNG]] [--overwrite] [--json]
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import math
+from pathlib import Path
+
+from cosim.errors import InputError
+
+#: history file used by ``cosim monitor`` and ``cosim history`` when --db is not given
+DEFAULT_DB = "history.sqlite"
+NAMES = ("R", "L", "K", "Jt", "ft", "Cd")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--db", default=DEFAULT_DB, help=f"SQLite history file (default: {DEFAULT_DB})")
+    parser.add_argument("--axis", help="machine/axis id (default: every axis in the file)")
+    parser.add_argument("--plot", nargs="?", const="", metavar="PNG",
+                        help="draw the parameter trends (default file: history_<axis>.png)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing plot file")
+    parser.add_argument("--json", action="store_true", help="print the stored motions as JSON")
+
+
+def main(args: argparse.Namespace) -> int:
+    from estimator.history import History
+
+    db = Path(args.db)
+    if not db.is_file():  # reading must not create an empty database
+        raise InputError(f"history database {db} does not exist")
+    with History(db) as history:
+        axes = [args.axis] if args.axis else history.axes()
+        motions = {axis: history.motions(axis) for axis in axes}
+    if args.axis and not motions[args.axis]:
+        raise InputError(f"history database {db}: no motion for axis {args.axis!r} (axes: {', '.join(axes) or 'none'})")
+    if args.plot is not None:
+        from cosim.monitor_plots import plot_trends
+
+        if args.plot and len(axes) > 1:
+            raise InputError("--plot PNG names one file: choose an axis with --axis")
+        for axis in axes:
+            path = Path(args.plot or f"history_{axis}.png")
+            if path.exists() and not args.overwrite:
+                raise InputError(f"plot file {path} exists; use --overwrite to replace it")
+            plot_trends(motions[axis], path, title=f"axis {axis}")
+            print(f"wrote {path}")
+    if args.json:
+        print(json.dumps({"db": str(db), "axes": motions}, indent=2))
+    else:
+        for axis in axes:
+            print(format_table(axis, motions[axis]))
+    return 0
+
+
+def format_table(axis: str, motions: list[dict]) -> str:
+    """One line per motion: time, validation, each parameter as value +- half its 95 % CI, faults, diagnosis."""
+    head = f"{'id':>4} {'motion':>6} {'time (UTC)':19} {'valid':5} " + " ".join(f"{n:>17}" for n in NAMES)
+    lines = [f"axis {axis}: {len(motions)} motion(s)", head + "  sensor faults / diagnosis"]
+    for m in motions:
+        when = _dt.datetime.fromtimestamp(m["time"], _dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+        cells = []
+        for n in NAMES:
+            p = m.get("parameters", {}).get(n)
+            if p is None:
+                cells.append(f"{'-':>17}")
+            else:
+                lo, hi = p["ci95"]
+                half = (hi - lo) / 2 if lo is not None and hi is not None else math.nan
+                cells.append(f"{p['value']:>9.4g} ±{half:<7.2g}")
+        extra = [f"{f['sensor']}:{f['kind']}" for f in m.get("sensor_faults", [])]
+        extra += [d["fault"] for d in m.get("diagnosis", [])]
+        if m.get("error"):
+            extra.append(m["error"])
+        lines.append(f"{m['id']:>4} {str(m.get('motion', '')):>6} {when:19} {'yes' if m['validated'] else 'no':5} "
+                     + " ".join(cells) + "  " + "; ".join(extra))
+    return "\n".join(lines)

@@ -1,0 +1,354 @@
+"""The monitor: the paper's Fig. 4 as a co-simulation component (and as a pipeline on recorded data).
+
+For every high-speed motion without machining (NC ``state == 1``, one ``motion`` index), the
+monitor buffers the redundant measurements and, when the motion ends, runs in order:
+
+    filtering (eq. 8) -> measurement validation (Fig. 5, 6) -> estimation (eq. 4, 5)
+    -> model validation (IV.B.3) -> diagnosis (Table I) -> history (SQLite)
+
+and measures its own processing time against the paper's budget (1-2 s between the end of the rapid
+motion and the tool engaging the work-piece). theta_{j-1} (``last_validated``) and the healthy
+baseline are read from the history at setup, so a second run on the same axis and database
+continues where the first stopped. The output ``request`` is 1.0 while the identification is too old
+(no validated identification for more than ``max_motions`` motions or ``max_age_s`` seconds of
+machine time); the NC then inserts an identification motion.
+
+Machine time is the wall-clock time at setup plus the simulated time, so ages are comparable across
+runs. ``MonitorPipeline`` is the same treatment without the component (``cosim monitor`` on CSVs).
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Mapping, Sequence
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from cosim.component import Component
+from cosim.errors import ScenarioError
+from cosim.nc import describe_validation_error
+from estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
+from estimator.errors import EstimatorInputError, NotEnoughExcitation
+from estimator.estimate import EstimationOptions, MotionData, estimate_motion
+from estimator.filtering import FilterSpec
+from estimator.history import History
+from estimator.mismatch import MismatchResult, check_model
+from estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
+
+#: NC state of a high-speed motion without machining
+RAPID = 1
+#: measurement inputs, in the order the buffer stores them
+MEASUREMENTS = ("Im1", "Im2", "u", "u_ref", "w_tach", "w_enc", "theta_enc")
+
+
+class MonitorConfig(BaseModel):
+    """The scenario's ``monitor:`` section (all keys optional).
+
+    Attributes
+    ----------
+    axis : str or None
+        Machine/axis id in the history; None: the scenario's ``axis`` (set by the loader), else ``X``.
+    scenario : str
+        Scenario name stored with each motion.
+    db : str or None
+        SQLite history file; None keeps the history in memory (nothing persists between runs).
+    method : {"ls", "iv", "oe"}
+        Estimation method whose parameters are validated and stored.
+    filter_cutoff_hz, filter_order : float, int
+        The identical low-pass of every signal (eq. 8), used by validation and estimation.
+    speed_threshold : float
+        Samples with ``|w|`` below it [rad/s] are excluded from the sign(w) term.
+    alpha : float
+        Level of every statistical test (residues, model whiteness, drifts).
+    window_s, gain_tol, offset_tol : float
+        Residue windows [s]; sensor gain error [relative] and offset [fraction of range] that count as faults.
+    mismatch_rms_tol : float
+        RMS output-error residue (fraction of the signal's range) above which a coloured residue is a mismatch.
+    baseline : {"motions", "nominal"}
+        Healthy baseline: the first ``baseline_motions`` validated motions, or the model's nominal values.
+    baseline_motions : int
+    min_relative_drift : float
+        Smallest relative parameter change diagnosed.
+    min_motion_s, max_motion_s : float
+        Shorter motions are recorded as not identified; longer ones are cut to this length [s].
+    max_motions, max_age_s : int, float
+        Identification too old: more motions than this, or more seconds, since the last validated one.
+    budget_s : float
+        Processing time allowed per motion [s] (paper: 1-2 s).
+    keep_traces : int
+        Motions whose signals are kept for the monitor plots (the last ones).
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    axis: str | None = Field(None, min_length=1)
+    scenario: str = ""
+    db: str | None = None
+    method: Literal["ls", "iv", "oe"] = "iv"
+    filter_cutoff_hz: float = Field(100.0, gt=0)
+    filter_order: int = Field(4, ge=1)
+    speed_threshold: float = Field(2.0, ge=0)
+    alpha: float = Field(1e-3, gt=0, lt=0.5)
+    window_s: float = Field(0.05, gt=0)
+    gain_tol: float = Field(0.005, gt=0)
+    offset_tol: float = Field(0.005, gt=0)
+    mismatch_rms_tol: float = Field(0.01, gt=0)
+    baseline: Literal["motions", "nominal"] = "motions"
+    baseline_motions: int = Field(3, ge=1)
+    min_relative_drift: float = Field(0.05, gt=0)
+    min_motion_s: float = Field(1.0, gt=0)
+    max_motion_s: float = Field(30.0, gt=0)
+    max_motions: int = Field(10, ge=0)
+    max_age_s: float = Field(7 * 86400.0, gt=0)
+    budget_s: float = Field(2.0, gt=0)
+    keep_traces: int = Field(5, ge=0)
+
+    @property
+    def filter(self) -> FilterSpec:
+        return FilterSpec(self.filter_cutoff_hz, self.filter_order)
+
+
+@dataclass
+class MotionTrace:
+    """Signals of one processed motion, for the monitor plots (paper Fig. 9-14)."""
+
+    motion: int
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+    validation: MeasurementValidation | None = None
+    mismatch: MismatchResult | None = None
+    result: dict = field(default_factory=dict)
+
+
+class MonitorPipeline:
+    """The monitor's treatment of one motion at a time, with its memory (theta_{j-1}, baseline).
+
+    Parameters
+    ----------
+    config : MonitorConfig
+    history : History
+        The store; theta_{j-1}, the baseline and the recent validated sets are read from it now.
+    axis : str
+    """
+
+    def __init__(self, config: MonitorConfig, history: History, axis: str) -> None:
+        from models import feed_drive
+
+        self.config, self.history, self.axis = config, history, axis
+        self.nominal = feed_drive().nominal(("physical",))
+        self.validation_options = ValidationOptions(config.alpha, config.window_s, config.gain_tol, config.offset_tol)
+        self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
+                                                    speed_threshold=config.speed_threshold)
+        self.diagnosis_options = DiagnosisOptions(config.alpha, config.min_relative_drift)
+        last = history.last_validated(axis)
+        self.last_validated: dict | None = last["parameters"] if last else None
+        self.baseline_sets = [b["parameters"] for b in history.baseline(axis, config.baseline_motions)]
+        self.recent = [r["parameters"] for r in history.recent_validated(axis, self.diagnosis_options.trend_motions)]
+
+    def baseline(self) -> dict | None:
+        """The healthy baseline (name -> (value, std)), or None while it is being built."""
+        if self.config.baseline == "nominal":
+            return {k: (v, 0.0) for k, v in self.nominal.items()}
+        if len(self.baseline_sets) < self.config.baseline_motions:
+            return None
+        return make_baseline(self.baseline_sets)
+
+    def process(self, signals: Mapping[str, np.ndarray | None], h: float, start: float, motion: int,
+                time: float, scenario: str = "") -> MotionTrace:
+        """Validate, estimate, check, diagnose and store one motion.
+
+        Parameters
+        ----------
+        signals : mapping of str to ndarray, shape (n,)
+            ``Im1, Im2`` [A], ``u, u_ref`` [V], ``w_tach, w_enc`` [rad/s] (second sensors may be None).
+        h : float
+            Sample time [s].
+        start : float
+            Time of the first sample in the run or recording [s].
+        motion : int
+            Motion index.
+        time : float
+            Machine clock at the end of the motion [s since the epoch], for the history.
+        scenario : str
+            Stored with the motion.
+
+        Returns
+        -------
+        MotionTrace
+            ``result`` is the per-motion dict stored in the history and in report.json.
+        """
+        tic = _time.perf_counter()
+        n = len(signals["Im1"])
+        result: dict[str, Any] = {"motion": int(motion), "start": start, "end": start + (n - 1) * h,
+                                  "method": self.config.method, "validated": False, "measurements_valid": None,
+                                  "reference": None, "parameters": {}, "sensor_faults": [], "gain_ratio": None,
+                                  "residues": {}, "mismatch": None, "diagnosis": [], "notes": [], "error": None}
+        trace = MotionTrace(int(motion), start + h * np.arange(n), dict(signals), result=result)
+        if (n - 1) * h < self.config.min_motion_s:
+            result["error"] = (f"motion of {(n - 1) * h:.3g} s is shorter than "
+                               f"min_motion_s = {self.config.min_motion_s} s")
+        else:
+            try:
+                self._identify(signals, h, start, trace)
+            except (NotEnoughExcitation, EstimatorInputError) as exc:  # this motion cannot be used; the next may
+                result["error"] = str(exc)
+        result["processing_s"] = _time.perf_counter() - tic
+        result["within_budget"] = result["processing_s"] <= self.config.budget_s
+        self.history.record(self.axis, result, scenario=scenario, time=time)
+        return trace
+
+    def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> None:
+        result = trace.result
+        electrical = None if self.last_validated is None else {k: self.last_validated[k]["value"] for k in "RLK"}
+        v = validate_measurements(signals, h, electrical, self.config.filter, self.validation_options,
+                                  nominal=self.nominal)
+        trace.validation = v
+        result |= {"measurements_valid": v.valid, "reference": v.reference, "gain_ratio": v.gain_ratio,
+                   "relative_gain_error": 1.0 - v.gain_ratio,
+                   "sensor_faults": [f.to_dict() for f in v.sensor_faults],
+                   "residues": {q: _residue_dict(p) for q, p in v.pairs.items() if p.residue is not None}}
+        result["notes"] += list(v.notes) + [n for p in v.pairs.values() for n in p.notes]
+        est = estimate_motion(MotionData(h, u=v.u, i=v.i, w=v.w, t0=start), self.estimation_options)
+        params = est.parameters
+        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95)} for k, p in params.items()}
+        result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
+        mismatch = check_model(v.u, v.i, v.w, h, {k: p.value for k, p in params.items()}, self.config.filter,
+                               self.config.alpha, rms_tol=self.config.mismatch_rms_tol)
+        trace.mismatch = mismatch
+        result["mismatch"] = mismatch.to_dict()
+        result["validated"] = bool(v.valid and mismatch.passed)
+        if not v.valid:
+            result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
+        if not mismatch.passed:
+            result["notes"].append("not validated: model mismatch (no diagnosis; parameters reported)")
+        if not result["validated"]:
+            return
+        current = result["parameters"]
+        baseline = self.baseline()
+        if baseline is None:
+            result["notes"].append(f"healthy baseline: motion {len(self.baseline_sets) + 1} of "
+                                   f"{self.config.baseline_motions}")
+        else:
+            result["diagnosis"] = [d.to_dict() for d in diagnose(current, baseline, self.last_validated, self.recent,
+                                                                 self.diagnosis_options)]
+        self.last_validated = current
+        if len(self.baseline_sets) < self.config.baseline_motions:
+            self.baseline_sets.append(current)
+        self.recent = (self.recent + [current])[-self.diagnosis_options.trend_motions:]
+
+
+def _residue_dict(pair) -> dict:
+    r = pair.residue
+    return {"kind": r.kind, "gain_diff": r.gain_diff, "gain_diff_ci95": list(r.gain_diff_ci95), "p_gain": r.p_gain,
+            "offset": r.offset, "offset_ci95": list(r.offset_ci95), "p_offset": r.p_offset,
+            "noise_std": r.noise_std, "trusted": pair.trusted, "valid": pair.valid}
+
+
+class Monitor(Component):
+    """Co-simulation component of the monitor; see the module docstring.
+
+    Inputs: ``Im1, Im2, u, u_ref, w_tach, w_enc, theta_enc`` (sensors), ``state, motion`` (NC).
+    Output: ``request`` (1.0 while the identification is too old).
+    """
+
+    input_names = MEASUREMENTS + ("state", "motion")
+    output_names = ("request",)
+    output_units = ("1",)
+
+    def __init__(self, name: str, config: MonitorConfig | Mapping | None = None) -> None:
+        if not isinstance(config, MonitorConfig):
+            try:
+                config = MonitorConfig.model_validate(config or {})
+            except ValidationError as exc:
+                raise ScenarioError(describe_validation_error(exc, name)) from None
+        super().__init__(name, config)
+        self.axis = config.axis or "X"
+        self.history: History | None = None
+        self.pipeline: MonitorPipeline | None = None
+        self.traces: list[MotionTrace] = []
+        self.results: list[dict] = []
+
+    def setup(self, t0: float, h: float, n_steps: int) -> None:
+        cfg = self.config
+        self.t0, self.h = t0, h
+        self.history = History(cfg.db or ":memory:")
+        self.pipeline = MonitorPipeline(cfg, self.history, self.axis)
+        self.clock0 = _time.time() - t0  # machine time of simulated time 0
+        capacity = min(n_steps + 1, int(round(cfg.max_motion_s / h)) + 1)
+        self._rows: list = [None] * capacity
+        self._k = 0  # samples buffered in the current motion
+        self._motion = None  # index of the motion being buffered
+        self._start = 0
+        self._in: tuple = (0.0,) * len(self.input_names)
+        self._update_request(t0)
+
+    def _update_request(self, t: float) -> None:
+        age = self.history.age(self.axis, self.clock0 + t)
+        self._request = 1.0 if age.too_old(self.config.max_motions, self.config.max_age_s) else 0.0
+        # the step from which the age in seconds exceeds max_age_s: one integer compare per step
+        remaining = self.config.max_age_s - age.seconds
+        self._age_step = math.inf if self._request else math.floor((t - self.t0 + remaining) / self.h) + 1
+
+    def set_inputs(self, values: Sequence[float]) -> None:
+        self._in = values if type(values) is tuple else tuple(values)
+
+    def step(self, n: int) -> None:
+        values = self._in
+        if values[7] == RAPID:
+            if self._motion is None:
+                self._motion, self._start, self._k = values[8], n + 1, 0
+            elif values[8] != self._motion:
+                self._end_motion()
+                self._motion, self._start, self._k = values[8], n + 1, 0
+            if self._k < len(self._rows):
+                self._rows[self._k] = values
+                self._k += 1
+        elif self._motion is not None:
+            self._end_motion()
+        if n >= self._age_step:
+            self._request, self._age_step = 1.0, math.inf
+
+    def _end_motion(self) -> None:
+        rows = np.array(self._rows[:self._k], dtype=float)
+        motion, self._motion = int(self._motion), None
+        if rows.shape[0] < 2:
+            return
+        signals = dict(zip(MEASUREMENTS, rows[:, :len(MEASUREMENTS)].T))
+        start = self.t0 + self._start * self.h
+        end = start + (rows.shape[0] - 1) * self.h
+        trace = self.pipeline.process(signals, self.h, start, motion, self.clock0 + end, self.config.scenario)
+        if self._k == len(self._rows):
+            trace.result["notes"].append(f"motion longer than max_motion_s = {self.config.max_motion_s} s: cut")
+        self.results.append(trace.result)
+        if self.config.keep_traces:
+            self.traces = (self.traces + [trace])[-self.config.keep_traces:]
+        self._update_request(end)
+
+    def get_outputs(self) -> list[float]:
+        return [self._request]
+
+    def report(self) -> dict:
+        times = [r["processing_s"] for r in self.results]
+        return {"axis": self.axis, "db": self.config.db, "budget_s": self.config.budget_s,
+                "max_processing_s": max(times, default=None),
+                "within_budget": all(r["within_budget"] for r in self.results),
+                "request": self._request, "unfinished_motion": self._motion, "motions": self.results}
+
+    def write_plots(self, folder: str | Path) -> list[Path]:
+        """Monitor plots of the kept motions and the parameter trends of the axis into ``folder``."""
+        from cosim.monitor_plots import plot_monitor
+
+        if self.config.db:
+            with History(self.config.db) as history:
+                motions = history.motions(self.axis)
+        else:
+            motions = self.results
+        return plot_monitor(self.traces, motions, Path(folder))
+
+    def terminate(self) -> None:
+        if self.history is not None:
+            self.history.close()
+            self.history = None

@@ -1,0 +1,130 @@
+"""``cosim monitor DATA.csv --map ROLE=COLUMN ...``: the monitor's pipeline on a recorded CSV.
+
+Roles: ``time``, ``voltage`` (terminal) and ``voltage_ref`` (regulator reference) [V], ``current1`` and
+``current2`` [A], ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad],
+``state`` (NC state, 1 = rapid). Required: ``voltage``, ``current1`` and ``speed`` or ``position``;
+each missing second sensor leaves its quantity unchecked (said in the notes). The encoder angle is
+differentiated (central differences) into the second speed.
+
+Each high-speed motion (``--segment``: the NC state when mapped, else the speed profile) goes through
+validation, estimation, model validation and diagnosis, and is stored in the history (``--db``) of
+``--axis``, continuing from what the history already holds. Machine time of a motion: the file's
+modification time is taken as the end of the recording.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from cosim.errors import InputError
+from cosim.estimate_cli import _pairs
+from cosim.history_cli import DEFAULT_DB
+from cosim.monitor import MonitorConfig, MonitorPipeline
+from cosim.recorded import load_recording
+from estimator.segmentation import MODES, segment
+
+#: role -> monitor signal
+ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
+         "speed": "w_tach", "position": None, "state": None}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", help="CSV file with a header row")
+    parser.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",
+                        help=f"column of a role ({', '.join(ROLES)}); repeat for each role")
+    parser.add_argument("--sample-time", type=float, default=None, metavar="H",
+                        help="sampling period [s] (needed without a time column)")
+    parser.add_argument("--db", default=DEFAULT_DB, help=f"SQLite history file (default: {DEFAULT_DB})")
+    parser.add_argument("--axis", default="X", help="machine/axis id in the history (default X)")
+    parser.add_argument("--segment", choices=MODES, default="auto",
+                        help="motions from the NC state or the speed profile (auto), the NC state (nc) "
+                             "or the whole record (none)")
+    parser.add_argument("--method", choices=("ls", "iv", "oe"), default="iv", help="estimator (default iv)")
+    parser.add_argument("--filter-cutoff", type=float, default=MonitorConfig().filter_cutoff_hz, metavar="HZ",
+                        help="cut-off of the identical low-pass filter [Hz] (default %(default)s)")
+    parser.add_argument("--plots", metavar="DIR", help="write the monitor plots of every motion into DIR")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing plot files")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+
+def main(args: argparse.Namespace) -> int:
+    from estimator.history import History
+
+    role_map = _pairs(args.map, "--map")
+    unknown = sorted(set(role_map) - set(ROLES))
+    if unknown:
+        raise InputError(f"--map: unknown role(s) {unknown}; roles are {list(ROLES)}")
+    missing = [r for r in ("voltage", "current1") if r not in role_map]
+    if not {"speed", "position"} & set(role_map):
+        missing.append("speed or position")
+    if missing:
+        raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
+    rec = load_recording(args.data, role_map, args.sample_time)
+    sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
+    if "position" in rec.signals:
+        w_enc = np.gradient(rec.signals["position"], rec.h)
+        sig["w_enc" if "w_tach" in sig else "w_tach"] = w_enc
+    segments = segment(args.segment, rec.n, rec.h, sig["w_tach"], rec.signals.get("state"))
+    if not segments:
+        raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
+    plots = Path(args.plots) if args.plots else None
+    if plots is not None and not args.overwrite and any(plots.glob("monitor_*.png")):
+        raise InputError(f"plot folder {plots} already holds monitor plots; use --overwrite to replace them")
+    config = MonitorConfig(axis=args.axis, scenario=str(rec.path), db=args.db, method=args.method,
+                           filter_cutoff_hz=args.filter_cutoff)
+    end_clock = rec.path.stat().st_mtime - (rec.n - 1) * rec.h  # machine time of sample 0
+    traces = []
+    with History(args.db) as history:
+        pipeline = MonitorPipeline(config, history, args.axis)
+        for k, seg in enumerate(segments, 1):
+            part = {name: x[seg.start:seg.stop] for name, x in sig.items()}
+            traces.append(pipeline.process(part, rec.h, rec.t0 + seg.start * rec.h, k,
+                                           end_clock + (seg.stop - 1) * rec.h, str(rec.path)))
+        motions = history.motions(args.axis)
+    results = [t.result for t in traces]
+    if plots is not None:
+        from cosim.monitor_plots import plot_monitor
+
+        for p in plot_monitor(traces, motions, plots):
+            print(f"wrote {p}")
+    if args.json:
+        print(json.dumps({"axis": args.axis, "db": args.db, "motions": results}, default=_jsonable))
+    else:
+        print(table(results))
+    return 0
+
+
+def _jsonable(x):  # noqa: ANN001, ANN202 - numpy scalars in the results
+    if hasattr(x, "item"):
+        return x.item()
+    raise TypeError(f"cosim monitor: {type(x).__name__} is not JSON-serialisable")
+
+
+def table(results: list[dict]) -> str:
+    """One block per motion: verdicts, sensor faults, parameters with 95 % CIs, model check, diagnosis."""
+    lines = []
+    for r in results:
+        verdict = "validated" if r["validated"] else "NOT validated"
+        lines.append(f"motion {r['motion']}: {r['start']:.4g}-{r['end']:.4g} s, {verdict}, "
+                     f"processing {r['processing_s']:.3g} s")
+        if r["error"]:
+            lines.append(f"  not identified: {r['error']}")
+        for f in r["sensor_faults"]:
+            lines.append(f"  sensor fault {f['sensor']}: {f['kind']}, gain {f['gain']:.4f} "
+                         f"[{f['gain_ci95'][0]:.4f}, {f['gain_ci95'][1]:.4f}], offset {f['offset']:.4g} "
+                         f"[{f['offset_ci95'][0]:.4g}, {f['offset_ci95'][1]:.4g}]")
+        if r["gain_ratio"] is not None:
+            lines.append(f"  current gain ratio a1/a2 = {r['gain_ratio']:.4f}")
+        for name, p in r["parameters"].items():
+            lines.append(f"  {name:3} {p['value']:12.6g}  95 % CI [{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")
+        if r["mismatch"]:
+            m = r["mismatch"]
+            lines.append(f"  model check ({m['test']}): p = {m['p_value']:.3g}, "
+                         f"{'passed' if m['passed'] else 'MISMATCH'}")
+        for d in r["diagnosis"]:
+            lines.append(f"  diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
+        lines += [f"  note: {n}" for n in r["notes"]]
+    return "\n".join(lines)

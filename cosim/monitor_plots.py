@@ -1,0 +1,102 @@
+"""Plots of the monitor (matplotlib, Agg backend).
+
+* per motion: the current residue ``Im1 - Im2`` with its window means (paper Fig. 9, 10), the
+  measured and model-simulated current (Fig. 12), the measured and simulated speed and their residue
+  (Fig. 13, 14);
+* per axis: each parameter's trend over the motions with its 95 % confidence band.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
+
+from cosim.errors import InputError  # noqa: E402
+
+PARAMETERS = (("R", "Ohm"), ("L", "H"), ("K", "N.m/A"), ("Jt", "kg.m2"), ("ft", "N.m.s/rad"), ("Cd", "N.m"))
+
+
+def plot_motion(trace, path: Path) -> Path:
+    """One motion's validation and model check (``trace``: ``cosim.monitor.MotionTrace``) into ``path`` (PNG)."""
+    v, mm = trace.validation, trace.mismatch
+    panels = 1 + (mm is not None) * 3
+    fig, axes = plt.subplots(panels, 1, figsize=(9, 2.4 * panels), sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    t = trace.t
+    r = np.asarray(trace.signals["Im1"]) - np.asarray(trace.signals["Im2"])
+    axes[0].plot(t, r, lw=0.3, color="0.6", label="r = Im1 - Im2")
+    if v is not None and v.pairs["current"].residue is not None:
+        res = v.pairs["current"].residue
+        tw = t[0] + res.centers * (t[1] - t[0])
+        axes[0].step(tw, res.means, where="mid", color="C0", label=f"window means ({res.kind})")
+        axes[0].plot(tw, res.offset + res.gain_diff * res.levels, "C3--", lw=1, label="offset + gain diff x level")
+    axes[0].set_ylabel("residue [A]")
+    axes[0].legend(loc="upper right", fontsize=7)
+    if mm is not None:
+        cur, speed = mm.checks["current"], mm.checks["speed"]
+        axes[1].plot(t, cur.simulated + cur.residue, label="measured (filtered)")
+        axes[1].plot(t, cur.simulated, "--", label="simulated from the estimated model")
+        axes[1].set_ylabel("current [A]")
+        axes[2].plot(t, speed.simulated + speed.residue, label="measured (filtered)")
+        axes[2].plot(t, speed.simulated, "--", label="simulated from the estimated model")
+        axes[2].set_ylabel("speed [rad/s]")
+        axes[3].plot(t, speed.residue, color="C3")
+        axes[3].set_ylabel("speed residue [rad/s]")
+        axes[3].set_title(f"Ljung-Box p = {speed.p_value:.3g}, RMS = {100 * speed.rms_relative:.2f} % of range, "
+                          f"{'passed' if speed.passed else 'MISMATCH'}", fontsize=8)
+        for ax in axes[1:3]:
+            ax.legend(loc="upper right", fontsize=7)
+    axes[-1].set_xlabel("time [s]")
+    state = "validated" if trace.result.get("validated") else "not validated"
+    fig.suptitle(f"motion {trace.motion}: {state}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_trends(motions: Sequence[dict], path: Path, title: str = "") -> Path:
+    """Each parameter's value and 95 % CI band over the stored motions (filled: validated)."""
+    rows = [m for m in motions if m.get("parameters")]
+    if not rows:
+        raise InputError(f"no motion with estimated parameters to plot{' for ' + title if title else ''}")
+    fig, axes = plt.subplots(3, 2, figsize=(10, 7.5), sharex=True)
+    for ax, (name, unit) in zip(axes.T.ravel(), PARAMETERS):
+        pts = [(k, m["parameters"][name], bool(m["validated"]))
+               for k, m in enumerate(rows, 1) if name in m["parameters"]]
+        if not pts:
+            ax.set_visible(False)
+            continue
+        k = np.array([p[0] for p in pts])
+        val = np.array([p[1]["value"] for p in pts])
+        lo, hi = (np.array([p[1]["ci95"][j] for p in pts], dtype=float) for j in (0, 1))
+        ok = np.array([p[2] for p in pts])
+        ax.fill_between(k, lo, hi, color="C0", alpha=0.25, lw=0, label="95 % CI")
+        ax.plot(k, val, color="C0", lw=0.8)
+        ax.plot(k[ok], val[ok], "o", color="C0", ms=4, label="validated")
+        ax.plot(k[~ok], val[~ok], "o", mfc="none", color="C3", ms=4, label="not validated")
+        ax.set_ylabel(f"{name} [{unit}]")
+    axes[0, 0].legend(fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("motion (in history order)")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    fig.suptitle(f"parameter trends {title}".strip(), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_monitor(traces: Sequence, motions: Sequence[dict], folder: Path) -> list[Path]:
+    """``monitor_motion<k>.png`` for each kept trace and ``monitor_trends.png`` into ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = [plot_motion(tr, folder / f"monitor_motion{tr.motion}.png") for tr in traces]
+    if any(m.get("parameters") for m in motions):
+        paths.append(plot_trends(motions, folder / "monitor_trends.png"))
+    return paths

@@ -1,0 +1,204 @@
+"""Diagnosis of plant faults from parameter drifts (paper Table I; EQUATIONS.md section 2).
+
+Each VALIDATED parameter set theta_j is compared with
+
+* a healthy baseline (the mean of the first N validated motions, or nominal values), and
+* the last validated set theta_{j-1} (a sudden change),
+
+in standard errors that combine both uncertainties: ``z = (theta_j - theta_ref) / sqrt(s_j^2 + s_ref^2)``.
+A parameter has drifted when ``|z| > z_crit`` (two-sided level ``alpha``, default 1e-3: 3.29) AND the
+relative change exceeds ``min_relative`` (default 5 %): a significant but tiny change is not a fault.
+Drifted parameters are mapped to the faults of Table I whose sensitive parameters and direction of
+change explain them; a fault explaining a strict subset of what another explains is dropped (R and K
+both up -> motor heating, not also brush wear). Drifts that no fault explains are reported as
+``unexplained drift``. Directions (Table I gives none; physics does): wear and lack of oil raise the
+friction Cd, ft; a missing work-piece lowers Jt; brush wear and heating raise R; heating and
+demagnetisation lower K; L may move either way.
+
+A sensor fault is not a plant fault: parameters estimated from invalid measurements (or from a model
+that failed validation) must never be passed here; the monitor enforces it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy import stats
+
+from estimator.errors import EstimatorInputError
+
+#: Table I: fault -> {sensitive parameter: direction of change (+1 up, -1 down, 0 either)}
+TABLE_I: dict[str, dict[str, int]] = {
+    "bearing or slide-way wear": {"Cd": +1, "ft": +1},
+    "lack or ageing of lubricating oil": {"Cd": +1, "ft": +1},
+    "missing work-piece or work-piece holder": {"Jt": -1},
+    "brush wear": {"R": +1},
+    "motor heating": {"R": +1, "L": 0, "K": -1},
+    "demagnetisation": {"L": 0, "K": -1},
+}
+UNEXPLAINED = "unexplained drift"
+
+
+@dataclass(frozen=True)
+class DiagnosisOptions:
+    """Thresholds of the drift test.
+
+    Attributes
+    ----------
+    alpha : float
+        Two-sided level of the drift test in combined standard errors.
+    min_relative : float or mapping of str to float
+        Smallest relative change that counts (one value for all parameters or per parameter).
+    trend_motions : int
+        Validated motions (current included) over which the trend is fitted.
+    """
+
+    alpha: float = 1e-3
+    min_relative: float | Mapping[str, float] = 0.05
+    trend_motions: int = 5
+
+    def __post_init__(self) -> None:
+        if not 0 < self.alpha < 0.5:
+            raise EstimatorInputError(f"DiagnosisOptions.alpha: must be in (0, 0.5), got {self.alpha!r}")
+        if self.trend_motions < 2:
+            raise EstimatorInputError(f"DiagnosisOptions.trend_motions: must be >= 2, got {self.trend_motions!r}")
+
+    @property
+    def z_crit(self) -> float:
+        return float(stats.norm.isf(self.alpha / 2))
+
+    def min_rel(self, name: str) -> float:
+        m = self.min_relative
+        return float(m.get(name, 0.05) if isinstance(m, Mapping) else m)
+
+
+@dataclass(frozen=True)
+class Drift:
+    """Evidence for one parameter: value, reference values and the size of the change."""
+
+    parameter: str
+    value: float
+    baseline: float
+    relative_change: float
+    z_baseline: float
+    z_last: float | None
+    trend_per_motion: float | None
+    significant: bool
+
+    def to_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """One diagnosed fault with the parameters that point at it and their evidence."""
+
+    fault: str
+    parameters: tuple[str, ...]
+    evidence: tuple[Drift, ...]
+
+    def to_dict(self) -> dict:
+        return {"fault": self.fault, "parameters": list(self.parameters),
+                "evidence": [d.to_dict() for d in self.evidence]}
+
+
+def _value_std(p: Any, name: str) -> tuple[float, float]:
+    if isinstance(p, Mapping):
+        value, std = p.get("value"), p.get("std")
+    elif isinstance(p, tuple):
+        value, std = p
+    else:
+        value, std = getattr(p, "value", None), getattr(p, "std", None)
+    if value is None or std is None or not (np.isfinite(value) and np.isfinite(std) and std >= 0):
+        raise EstimatorInputError(f"parameter {name!r}: expected a finite value and std >= 0, got {p!r}")
+    return float(value), float(std)
+
+
+def make_baseline(sets: Sequence[Mapping[str, Any]]) -> dict[str, tuple[float, float]]:
+    """Healthy baseline from the first validated parameter sets.
+
+    Parameters
+    ----------
+    sets : sequence of mapping name -> {value, std} (or ``(value, std)`` or an object with them)
+
+    Returns
+    -------
+    dict name -> (value, std)
+        Mean value; std of the mean, the larger of the propagated standard errors and the scatter
+        between the sets (so a baseline from disagreeing motions is not over-confident).
+    """
+    if not sets:
+        raise EstimatorInputError("make_baseline: no parameter sets given")
+    names = set.intersection(*(set(s) for s in sets))
+    out = {}
+    for name in sorted(names):
+        v, s = np.array([_value_std(p[name], name) for p in sets]).T
+        n = v.size
+        spread = float(np.std(v, ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+        out[name] = (float(v.mean()), max(float(np.sqrt(np.sum(s**2)) / n), spread))
+    return out
+
+
+def drifts(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mapping[str, Any] | None = None,
+           recent: Sequence[Mapping[str, Any]] = (), options: DiagnosisOptions = DiagnosisOptions()) -> list[Drift]:
+    """Drift of each parameter of ``current`` present in ``baseline``.
+
+    Parameters
+    ----------
+    current, baseline, last : mapping name -> {value, std}
+        The validated set theta_j, the healthy baseline, theta_{j-1} (or None).
+    recent : sequence of mapping name -> {value, std}
+        Earlier validated sets, oldest first, for the trend (relative change per motion of a
+        straight line through the last ``trend_motions`` values, current included).
+    options : DiagnosisOptions
+
+    Returns
+    -------
+    list of Drift
+    """
+    out = []
+    for name in current:
+        if name not in baseline:
+            continue
+        v, s = _value_std(current[name], name)
+        b, sb = _value_std(baseline[name], name)
+        z = (v - b) / max(np.hypot(s, sb), np.finfo(float).tiny)
+        rel = (v - b) / abs(b) if b != 0 else float("inf") * np.sign(v - b)
+        z_last = None
+        if last is not None and name in last:
+            vl, sl = _value_std(last[name], name)
+            z_last = float((v - vl) / max(np.hypot(s, sl), np.finfo(float).tiny))
+        series = [_value_std(r[name], name)[0] for r in recent if name in r][-(options.trend_motions - 1):] + [v]
+        trend = None
+        if len(series) >= 3 and b != 0:
+            trend = float(np.polyfit(np.arange(len(series)), series, 1)[0] / abs(b))
+        significant = abs(z) > options.z_crit and abs(rel) > options.min_rel(name)
+        out.append(Drift(name, v, b, float(rel), float(z), z_last, trend, bool(significant)))
+    return out
+
+
+def diagnose(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mapping[str, Any] | None = None,
+             recent: Sequence[Mapping[str, Any]] = (), options: DiagnosisOptions = DiagnosisOptions()
+             ) -> list[Diagnosis]:
+    """Map the significant drifts of a validated parameter set to the faults of Table I.
+
+    Parameters are those of ``drifts``. Returns one ``Diagnosis`` per candidate fault (several when
+    Table I cannot tell them apart, e.g. wear and lubrication), plus ``unexplained drift`` for the
+    drifted parameters no fault explains; an empty list when nothing drifted.
+    """
+    evidence = {d.parameter: d for d in drifts(current, baseline, last, recent, options) if d.significant}
+    if not evidence:
+        return []
+    explains = {}
+    for fault, sens in TABLE_I.items():
+        hit = frozenset(p for p, d in evidence.items()
+                        if p in sens and (sens[p] == 0 or np.sign(d.relative_change) == sens[p]))
+        if hit:
+            explains[fault] = hit
+    kept = [f for f, hit in explains.items() if not any(hit < other for other in explains.values())]
+    out = [Diagnosis(f, tuple(sorted(explains[f])), tuple(evidence[p] for p in sorted(explains[f]))) for f in kept]
+    rest = sorted(set(evidence) - set().union(*explains.values()))
+    if rest:
+        out.append(Diagnosis(UNEXPLAINED, tuple(rest), tuple(evidence[p] for p in rest)))
+    return out

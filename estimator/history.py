@@ -1,0 +1,274 @@
+"""The monitor's memory: one SQLite file holding every motion's result (paper Fig. 4: "stored").
+
+Each motion is written in ONE transaction (the motion row, its parameters, sensor faults and
+diagnoses), with the journal in WAL mode and ``synchronous=FULL``: a process killed in the middle of
+a write (SIGKILL, power loss after fsync) leaves the database consistent, without a half-written
+motion; the next connection rolls the incomplete transaction back.
+
+Times. ``time`` is the machine clock at the end of the motion [s since the Unix epoch]; the
+co-simulation monitor uses the wall-clock start of the run plus the simulated time, so runs on the
+same axis line up. ``start``/``end`` are the motion's times within its run or recording [s].
+
+The motion result (``record``) is the monitor's per-motion dict::
+
+    {"motion", "start", "end", "method", "validated", "measurements_valid",
+     "parameters": {name: {"value", "std", "ci95": [lo, hi]}},
+     "sensor_faults": [{"sensor", "kind", "gain", "gain_ci95", "offset", "offset_ci95"}],
+     "gain_ratio", "mismatch": {"test", "statistic", "p_value", "passed"} or None,
+     "diagnosis": [{"fault", "parameters", "evidence"}], "processing_s", "notes", "error"}
+
+Only ``parameters`` and ``validated`` are required; the whole dict is also kept as JSON.
+"""
+from __future__ import annotations
+
+import json
+import sqlite3
+import time as _time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator, Mapping
+
+from estimator.errors import EstimatorInputError
+
+SCHEMA_VERSION = 1
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS motions (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    axis TEXT NOT NULL,
+    scenario TEXT NOT NULL,
+    motion INTEGER,
+    time REAL NOT NULL,
+    start REAL,
+    "end" REAL,
+    validated INTEGER NOT NULL,
+    measurements_valid INTEGER,
+    method TEXT,
+    gain_ratio REAL,
+    mismatch_test TEXT,
+    mismatch_statistic REAL,
+    mismatch_p_value REAL,
+    mismatch_passed INTEGER,
+    processing_s REAL,
+    result TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS motions_axis ON motions (axis, validated, id);
+CREATE TABLE IF NOT EXISTS parameters (
+    motion_id INTEGER NOT NULL REFERENCES motions (id) ON DELETE CASCADE,
+    name TEXT NOT NULL, value REAL NOT NULL, std REAL, ci_low REAL, ci_high REAL, method TEXT,
+    PRIMARY KEY (motion_id, name)
+);
+CREATE TABLE IF NOT EXISTS sensor_faults (
+    motion_id INTEGER NOT NULL REFERENCES motions (id) ON DELETE CASCADE,
+    sensor TEXT NOT NULL, kind TEXT NOT NULL,
+    gain REAL, gain_low REAL, gain_high REAL, offset REAL, offset_low REAL, offset_high REAL
+);
+CREATE TABLE IF NOT EXISTS diagnoses (
+    motion_id INTEGER NOT NULL REFERENCES motions (id) ON DELETE CASCADE,
+    fault TEXT NOT NULL, parameters TEXT NOT NULL, evidence TEXT NOT NULL
+);
+"""
+
+
+@dataclass(frozen=True)
+class IdentificationAge:
+    """How long the axis has gone without a validated identification.
+
+    Attributes
+    ----------
+    motions : int
+        Motions recorded after the last validated one (all motions when none is validated).
+    seconds : float
+        ``now`` minus the time of the last validated motion (of the first motion when none is).
+    last_validated_id : int or None
+    """
+
+    motions: int
+    seconds: float
+    last_validated_id: int | None
+
+    def too_old(self, max_motions: int, max_seconds: float) -> bool:
+        """True when more than ``max_motions`` motions or ``max_seconds`` s passed without one."""
+        return self.motions > max_motions or self.seconds > max_seconds
+
+
+class History:
+    """SQLite history of one or more axes.
+
+    Parameters
+    ----------
+    path : str or Path
+        Database file (created with its folder's existence required); ``":memory:"`` for a
+        throw-away store.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = str(path)
+        if self.path != ":memory:":
+            parent = Path(self.path).expanduser().resolve().parent
+            if not parent.is_dir():
+                raise EstimatorInputError(f"history database {self.path}: folder {parent} does not exist")
+        try:
+            self._db = sqlite3.connect(self.path, isolation_level=None, timeout=30.0)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.execute("PRAGMA foreign_keys=ON")
+            with self._transaction():
+                for stmt in _SCHEMA.split(";"):
+                    if stmt.strip():
+                        self._db.execute(stmt)
+                row = self._db.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+                if row is None:
+                    self._db.execute("INSERT INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
+                elif int(row[0]) != SCHEMA_VERSION:
+                    raise EstimatorInputError(
+                        f"history database {self.path}: schema version {row[0]}, this program reads {SCHEMA_VERSION}")
+        except sqlite3.DatabaseError as exc:
+            raise EstimatorInputError(f"history database {self.path}: not a usable SQLite file ({exc})") from None
+
+    # -- writing -------------------------------------------------------------------
+    @contextmanager
+    def _transaction(self) -> Iterator[None]:
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        self._db.execute("COMMIT")
+
+    def record(self, axis: str, result: Mapping[str, Any], scenario: str = "", time: float | None = None) -> int:
+        """Store one motion's result in one transaction.
+
+        Parameters
+        ----------
+        axis : str
+            Machine/axis id.
+        result : mapping
+            The per-motion result (module docstring); ``parameters`` and ``validated`` are required.
+        scenario : str
+            Scenario name or recording file.
+        time : float, optional
+            Machine clock at the end of the motion [s since the epoch]; default now.
+
+        Returns
+        -------
+        int
+            The motion's id in the database.
+        """
+        if not axis:
+            raise EstimatorInputError("history: axis id must be a non-empty string")
+        for key in ("parameters", "validated"):
+            if key not in result:
+                raise EstimatorInputError(f"history: motion result has no {key!r}")
+        mismatch = result.get("mismatch") or {}
+        payload = json.dumps(result, default=_jsonable, allow_nan=True)
+        with self._transaction():
+            cur = self._db.execute(
+                'INSERT INTO motions (axis, scenario, motion, time, start, "end", validated, measurements_valid, '
+                "method, gain_ratio, mismatch_test, mismatch_statistic, mismatch_p_value, mismatch_passed, "
+                "processing_s, result) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (axis, scenario, result.get("motion"), _time.time() if time is None else float(time),
+                 result.get("start"), result.get("end"), int(bool(result["validated"])),
+                 _flag(result.get("measurements_valid")), result.get("method"), _num(result.get("gain_ratio")),
+                 mismatch.get("test"), _num(mismatch.get("statistic")), _num(mismatch.get("p_value")),
+                 _flag(mismatch.get("passed")), _num(result.get("processing_s")), payload))
+            mid = cur.lastrowid
+            self._db.executemany(
+                "INSERT INTO parameters VALUES (?, ?, ?, ?, ?, ?, ?)",
+                [(mid, name, float(p["value"]), _num(p.get("std")), *_pair(p.get("ci95")), result.get("method"))
+                 for name, p in result["parameters"].items()])
+            self._db.executemany(
+                "INSERT INTO sensor_faults VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                [(mid, f["sensor"], f["kind"], _num(f.get("gain")), *_pair(f.get("gain_ci95")),
+                  _num(f.get("offset")), *_pair(f.get("offset_ci95"))) for f in result.get("sensor_faults", ())])
+            self._db.executemany(
+                "INSERT INTO diagnoses VALUES (?, ?, ?, ?)",
+                [(mid, d["fault"], json.dumps(list(d["parameters"])),
+                  json.dumps(d.get("evidence", []), default=_jsonable))
+                 for d in result.get("diagnosis", ())])
+        return int(mid)
+
+    # -- reading -------------------------------------------------------------------
+    def _parameters(self, motion_ids: list[int]) -> dict[int, dict[str, dict]]:
+        out: dict[int, dict[str, dict]] = {m: {} for m in motion_ids}
+        if not motion_ids:
+            return out
+        marks = ",".join("?" * len(motion_ids))
+        for mid, name, value, std, lo, hi in self._db.execute(
+                f"SELECT motion_id, name, value, std, ci_low, ci_high FROM parameters WHERE motion_id IN ({marks})",
+                motion_ids):
+            out[mid][name] = {"value": value, "std": std, "ci95": [lo, hi]}
+        return out
+
+    def _validated(self, axis: str, order: str, n: int | None) -> list[dict]:
+        limit = "" if n is None else f" LIMIT {int(n)}"
+        rows = self._db.execute(
+            f'SELECT id, motion, time, start, "end", method FROM motions WHERE axis = ? AND validated = 1 '
+            f"ORDER BY id {order}{limit}", (axis,)).fetchall()
+        params = self._parameters([r[0] for r in rows])
+        return [{"id": r[0], "motion": r[1], "time": r[2], "start": r[3], "end": r[4], "method": r[5],
+                 "parameters": params[r[0]]} for r in rows]
+
+    def last_validated(self, axis: str) -> dict | None:
+        """theta_{j-1}: the newest validated motion of ``axis`` (``{"id", "time", "parameters", ...}``) or None."""
+        rows = self._validated(axis, "DESC", 1)
+        return rows[0] if rows else None
+
+    def baseline(self, axis: str, n: int) -> list[dict]:
+        """The first ``n`` validated motions of ``axis``, oldest first (fewer when fewer exist)."""
+        return self._validated(axis, "ASC", n)
+
+    def recent_validated(self, axis: str, n: int) -> list[dict]:
+        """The last ``n`` validated motions of ``axis``, oldest first."""
+        return self._validated(axis, "DESC", n)[::-1]
+
+    def age(self, axis: str, now: float) -> IdentificationAge:
+        """Motions and seconds since the last validated identification of ``axis``; ``now`` [s since epoch]."""
+        last = self._db.execute("SELECT id, time FROM motions WHERE axis = ? AND validated = 1 "
+                                "ORDER BY id DESC LIMIT 1", (axis,)).fetchone()
+        if last is None:
+            n, first = self._db.execute("SELECT COUNT(*), MIN(time) FROM motions WHERE axis = ?", (axis,)).fetchone()
+            return IdentificationAge(int(n), 0.0 if first is None else now - first, None)
+        (n,) = self._db.execute("SELECT COUNT(*) FROM motions WHERE axis = ? AND id > ?", (axis, last[0])).fetchone()
+        return IdentificationAge(int(n), now - last[1], int(last[0]))
+
+    def motions(self, axis: str | None = None) -> list[dict]:
+        """Every stored motion (of ``axis``, or all), oldest first, as the stored result dicts plus
+        ``id``, ``axis``, ``scenario`` and ``time``."""
+        where, args = ("WHERE axis = ?", (axis,)) if axis else ("", ())
+        rows = self._db.execute(f"SELECT id, axis, scenario, time, result FROM motions {where} ORDER BY id", args)
+        return [{**json.loads(r[4]), "id": r[0], "axis": r[1], "scenario": r[2], "time": r[3]} for r in rows]
+
+    def axes(self) -> list[str]:
+        return [r[0] for r in self._db.execute("SELECT DISTINCT axis FROM motions ORDER BY axis")]
+
+    def close(self) -> None:
+        self._db.close()
+
+    def __enter__(self) -> "History":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _num(x: Any) -> float | None:
+    return None if x is None else float(x)
+
+
+def _flag(x: Any) -> int | None:
+    return None if x is None else int(bool(x))
+
+
+def _pair(x: Any) -> tuple[float | None, float | None]:
+    return (None, None) if x is None else (float(x[0]), float(x[1]))
+
+
+def _jsonable(x: Any) -> Any:
+    if hasattr(x, "tolist"):
+        return x.tolist()
+    if hasattr(x, "to_dict"):
+        return x.to_dict()
+    raise TypeError(f"history: {type(x).__name__} is not JSON-serialisable")

@@ -1,0 +1,470 @@
+"""Measurement validation (paper section IV.B, Fig. 4-6; EQUATIONS.md section 6).
+
+Three redundant pairs are checked on each high-speed motion:
+
+* current: two current sensors ``Im1``, ``Im2`` (eq. 9: ``Imi = ai Ir + bi + ni``);
+* voltage: terminal voltage ``u`` and the regulator's reference ``u_ref``;
+* speed: tachometer ``w_tach`` and the differentiated encoder ``w_enc``.
+
+Detection (eq. 10). The residue ``r = x1 - x2`` is cut into consecutive, non-overlapping windows
+(``window_s``). On the window means ``r_k`` and the window levels ``l_k = mean((x1 + x2) / 2)`` the
+regression ``r_k = c l_k + d`` is fitted: for eq. 9, ``c = a1 - a2`` (differential gain) and
+``d = b1 - b2`` (differential offset). The variance of a window mean is the larger of
+
+* the high-frequency noise prediction ``sigma^2 / m`` (``sigma`` from the first differences of ``r``,
+  robust MAD estimate; ``m`` samples per window; exact for white noise), and
+* the scatter of the window means about the fit (covers coloured noise and unmodelled structure),
+
+and ``c`` and ``d`` get t-tests with ``n_windows - 2`` degrees of freedom at level ``alpha``
+(default 1e-3). A fault is declared only when it is statistically significant AND larger than a
+stated tolerance (``gain_tol`` relative, ``offset_tol`` as a fraction of the signal's range), so
+a tiny but significant bias on a long motion is not a fault. A chi-square test of the fit residuals
+against ``sigma^2 / m`` tells whether the residue has structure beyond gain and offset
+(``p_structure``; for example a delay between the sensors).
+
+Gain ratio (eq. 12, 11) on the filtered signals: ``a1/a2 = mean[(x1f - mean x1f) / (x2f - mean x2f)]``,
+averaged over the samples whose denominator exceeds 20 % of its largest magnitude (the ratio is
+meaningless near the zero crossings of the denominator); ``Er = 1 - a1/a2``.
+
+Isolation by analytical redundancy (Fig. 6). When a pair's residue shows a fault, a third,
+model-based value of the quantity is computed from the other two quantities and the electrical
+equation (eq. 1) with the LAST VALIDATED ``L, R, K`` (or nominal values for the first motion)::
+
+    current  Ir_hat(s) = (uf(s) - K wf(s)) / (L s + R)      (Tustin discretisation, steady-state start)
+    voltage  u_hat     = R if + L d(if)/dt + K wf
+    speed    w_hat     = (uf - R if - L d(if)/dt) / K
+
+and each sensor is fitted as ``xkf = ak x_hat + bk`` (eq. 13, 14) by OLS with heteroscedasticity-
+and-autocorrelation-consistent (Newey-West) standard errors, because the residuals of filtered
+signals are coloured. A sensor is faulty when its gain CI excludes 1 (and ``|ak - 1| > gain_tol``) or
+its offset CI excludes 0 (and ``|bk| > offset_tol * range``). The sensor with the smaller error
+``rms((ak - 1) x_hat + bk)`` is trusted; if it is itself faulty the pair's signal is the corrected
+``(x - bk) / ak`` and the pair is not valid (parameters estimated from it must not be diagnosed).
+Without a fault the pair's signal is the mean of the two sensors.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+import statsmodels.api as sm
+from scipy import signal, stats
+
+from estimator.errors import EstimatorInputError
+from estimator.filtering import FilterSpec
+
+#: the redundant pairs: quantity -> (sensor 1, sensor 2)
+PAIRS: dict[str, tuple[str, str]] = {
+    "current": ("Im1", "Im2"),
+    "voltage": ("u", "u_ref"),
+    "speed": ("w_tach", "w_enc"),
+}
+KINDS = ("none", "offset", "gain", "gain+offset")
+
+
+@dataclass(frozen=True)
+class ValidationOptions:
+    """Settings of the measurement validation.
+
+    Attributes
+    ----------
+    alpha : float
+        Level of every statistical test (probability of a false alarm per test).
+    window_s : float
+        Length of the residue windows [s].
+    gain_tol : float
+        Smallest relative gain error that counts as a fault (0.005 = 0.5 %).
+    offset_tol : float
+        Smallest offset that counts as a fault, as a fraction of the largest absolute value of the
+        signal over the motion (0.005 = 0.5 % of the range; 0.1 A at 20 A).
+    edge_s : float
+        Samples dropped at each end of the motion for the isolation fits [s] (filter transients).
+    """
+
+    alpha: float = 1e-3
+    window_s: float = 0.05
+    gain_tol: float = 0.005
+    offset_tol: float = 0.005
+    edge_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        for name in ("alpha", "window_s", "gain_tol", "offset_tol"):
+            if not getattr(self, name) > 0:
+                raise EstimatorInputError(f"ValidationOptions.{name}: must be > 0, got {getattr(self, name)!r}")
+        if not self.alpha < 0.5:
+            raise EstimatorInputError(f"ValidationOptions.alpha: must be < 0.5, got {self.alpha!r}")
+        if self.edge_s < 0:
+            raise EstimatorInputError(f"ValidationOptions.edge_s: must be >= 0, got {self.edge_s!r}")
+
+
+@dataclass(frozen=True)
+class ResidueTest:
+    """Detection on the residue ``r = x1 - x2`` (eq. 10).
+
+    Attributes
+    ----------
+    kind : str
+        ``none``, ``offset``, ``gain`` or ``gain+offset``.
+    noise_std : float
+        High-frequency noise std of ``r`` from its first differences [signal unit].
+    window : int
+        Samples per window.
+    gain_diff, gain_diff_ci95, p_gain : float, tuple, float
+        Slope ``a1 - a2`` of the window means on the level, its 95 % CI and the test's p-value.
+    offset, offset_ci95, p_offset : float, tuple, float
+        ``b1 - b2`` [signal unit], its 95 % CI and p-value.
+    p_structure : float
+        p-value of the chi-square lack-of-fit test (small: structure beyond gain and offset).
+    centers, means, levels : ndarray, shape (n_windows,)
+        Window centre sample indices, window means of ``r`` and window levels.
+    """
+
+    kind: str
+    noise_std: float
+    window: int
+    gain_diff: float
+    gain_diff_ci95: tuple[float, float]
+    p_gain: float
+    offset: float
+    offset_ci95: tuple[float, float]
+    p_offset: float
+    p_structure: float
+    centers: np.ndarray = field(repr=False)
+    means: np.ndarray = field(repr=False)
+    levels: np.ndarray = field(repr=False)
+
+
+@dataclass(frozen=True)
+class SensorFit:
+    """Isolation fit of one sensor against the model-based value (eq. 13, 14)."""
+
+    sensor: str
+    gain: float
+    gain_ci95: tuple[float, float]
+    offset: float
+    offset_ci95: tuple[float, float]
+    faulty: bool
+    kind: str
+    error_rms: float
+
+    def to_dict(self) -> dict:
+        return {"sensor": self.sensor, "kind": self.kind, "gain": self.gain, "gain_ci95": list(self.gain_ci95),
+                "offset": self.offset, "offset_ci95": list(self.offset_ci95)}
+
+
+@dataclass(frozen=True)
+class PairValidation:
+    """Validation of one redundant pair.
+
+    Attributes
+    ----------
+    quantity : str
+        ``current``, ``voltage`` or ``speed``.
+    sensors : tuple of str
+        The two sensor names (the second is None without redundancy).
+    residue : ResidueTest or None
+        None without redundancy.
+    gain_ratio, relative_gain_error : float
+        ``a1/a2`` (eq. 12) and ``Er = 1 - a1/a2`` (eq. 11); NaN without redundancy.
+    fits : tuple of SensorFit
+        Isolation fits (empty when the residue shows no fault).
+    trusted : str or None
+        Sensor whose signal (or corrected signal) is passed on; None when the mean of both is.
+    signal : ndarray, shape (n,)
+        The validated (or corrected) raw signal for the estimator.
+    valid : bool
+        False when no sensor of the pair can be trusted.
+    notes : tuple of str
+    """
+
+    quantity: str
+    sensors: tuple
+    residue: ResidueTest | None
+    gain_ratio: float
+    relative_gain_error: float
+    fits: tuple[SensorFit, ...]
+    trusted: str | None
+    signal: np.ndarray = field(repr=False)
+    valid: bool
+    notes: tuple[str, ...] = ()
+
+    @property
+    def faults(self) -> list[SensorFit]:
+        return [f for f in self.fits if f.faulty]
+
+
+@dataclass(frozen=True)
+class MeasurementValidation:
+    """Result of ``validate_measurements``: one ``PairValidation`` per quantity and the signals to use."""
+
+    pairs: dict[str, PairValidation]
+    reference: str
+    u: np.ndarray = field(repr=False)
+    i: np.ndarray = field(repr=False)
+    w: np.ndarray = field(repr=False)
+    notes: tuple[str, ...] = ()
+
+    @property
+    def valid(self) -> bool:
+        return all(p.valid for p in self.pairs.values())
+
+    @property
+    def sensor_faults(self) -> list[SensorFit]:
+        return [f for p in self.pairs.values() for f in p.faults]
+
+    @property
+    def gain_ratio(self) -> float:
+        return self.pairs["current"].gain_ratio if "current" in self.pairs else float("nan")
+
+
+def noise_std(x: np.ndarray) -> float:
+    """High-frequency noise std of ``x`` from its first differences (robust, MAD based).
+
+    For white noise of std ``s`` on a slowly varying signal, ``diff(x)`` has std ``s sqrt(2)``.
+    """
+    d = np.diff(np.asarray(x, dtype=float))
+    return float(stats.median_abs_deviation(d, scale="normal") / np.sqrt(2.0))
+
+
+def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
+                 options: ValidationOptions = ValidationOptions()) -> ResidueTest:
+    """Detect and classify a disagreement between two sensors of one quantity (eq. 10).
+
+    Parameters
+    ----------
+    x1, x2 : ndarray, shape (n,)
+        Raw (unfiltered) measurements of the same quantity, same samples.
+    h : float
+        Sample time [s].
+    options : ValidationOptions
+
+    Returns
+    -------
+    ResidueTest
+    """
+    x1, x2 = _same_shape(x1, x2, "x1", "x2")
+    m = max(int(round(options.window_s / h)), 2)
+    n_win = x1.size // m
+    if n_win < 8:
+        raise EstimatorInputError(
+            f"residue_test: {x1.size} samples give {n_win} windows of {options.window_s} s; need at least 8")
+    r = x1 - x2
+    sigma = noise_std(r)
+    cut = n_win * m
+    means = r[:cut].reshape(n_win, m).mean(axis=1)
+    levels = (0.5 * (x1 + x2))[:cut].reshape(n_win, m).mean(axis=1)
+    centers = np.arange(n_win) * m + (m - 1) / 2
+    X = np.column_stack([levels, np.ones(n_win)])
+    coef, *_ = np.linalg.lstsq(X, means, rcond=None)
+    resid = means - X @ coef
+    dof = n_win - 2
+    var_hf = sigma**2 / m
+    scale = max(float(resid @ resid) / dof, var_hf, np.finfo(float).tiny)
+    cov = scale * np.linalg.pinv(X.T @ X)
+    se = np.sqrt(np.diag(cov))
+    tq = stats.t.ppf(0.975, dof)
+    p = 2 * stats.t.sf(np.abs(coef) / np.where(se > 0, se, np.inf), dof)
+    p_structure = float(stats.chi2.sf(float(resid @ resid) / var_hf, dof)) if var_hf > 0 else 0.0
+    span = float(np.max(np.abs(levels)))
+    gain = p[0] < options.alpha and abs(coef[0]) > options.gain_tol
+    offset = p[1] < options.alpha and abs(coef[1]) > options.offset_tol * span
+    kind = KINDS[int(offset) + 2 * int(gain)]
+    ci = [(float(c - tq * s), float(c + tq * s)) for c, s in zip(coef, se)]
+    return ResidueTest(kind, sigma, m, float(coef[0]), ci[0], float(p[0]), float(coef[1]), ci[1], float(p[1]),
+                       p_structure, centers, means, levels)
+
+
+def gain_ratio(x1f: np.ndarray, x2f: np.ndarray) -> float:
+    """Gain ratio ``a1/a2`` of two filtered sensors (eq. 12).
+
+    Parameters
+    ----------
+    x1f, x2f : ndarray, shape (n,)
+        Filtered measurements of the same quantity.
+
+    Returns
+    -------
+    float
+        ``mean[(x1f - mean x1f) / (x2f - mean x2f)]`` over the samples where
+        ``|x2f - mean x2f|`` exceeds 20 % of its maximum. ``Er = 1 - a1/a2`` (eq. 11).
+    """
+    x1f, x2f = _same_shape(x1f, x2f, "x1f", "x2f")
+    d1, d2 = x1f - x1f.mean(), x2f - x2f.mean()
+    keep = np.abs(d2) > 0.2 * np.max(np.abs(d2))
+    if not keep.any():
+        raise EstimatorInputError("gain_ratio: the second signal is constant; no gain ratio")
+    return float(np.mean(d1[keep] / d2[keep]))
+
+
+def model_reference(quantity: str, filtered: Mapping[str, np.ndarray], h: float,
+                    electrical: Mapping[str, float]) -> np.ndarray:
+    """Model-based value of one quantity from the two others and eq. 1 (analytical redundancy).
+
+    Parameters
+    ----------
+    quantity : {"current", "voltage", "speed"}
+    filtered : mapping with filtered ``u`` [V], ``i`` [A], ``w`` [rad/s], arrays of shape (n,)
+        (only the two quantities other than ``quantity`` are read).
+    h : float
+        Sample time [s].
+    electrical : mapping with ``R`` [Ohm], ``L`` [H], ``K`` [V s/rad]
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``Ir_hat`` [A], ``u_hat`` [V] or ``w_hat`` [rad/s].
+    """
+    R, L, K = (float(electrical[k]) for k in ("R", "L", "K"))
+    if quantity == "current":
+        v = filtered["u"] - K * filtered["w"]
+        b, a = signal.cont2discrete(([1.0], [L, R]), h, method="bilinear")[:2]
+        b = np.ravel(b)
+        zi = signal.lfilter_zi(b, a) * v[0]  # start in steady state: i = v / R
+        return signal.lfilter(b, a, v, zi=zi)[0]
+    di = np.gradient(filtered["i"], h)
+    if quantity == "voltage":
+        return R * filtered["i"] + L * di + K * filtered["w"]
+    if quantity == "speed":
+        return (filtered["u"] - R * filtered["i"] - L * di) / K
+    raise EstimatorInputError(f"model_reference: quantity must be one of {tuple(PAIRS)}, got {quantity!r}")
+
+
+def isolate(x1f: np.ndarray, x2f: np.ndarray, reference: np.ndarray, names: tuple[str, str], h: float,
+            cutoff_hz: float, options: ValidationOptions = ValidationOptions()) -> tuple[SensorFit, SensorFit]:
+    """Fit each filtered sensor on the model-based value, ``xkf = ak x_hat + bk`` (eq. 13, 14).
+
+    Parameters
+    ----------
+    x1f, x2f, reference : ndarray, shape (n,)
+        Filtered sensors and the model-based value (``model_reference``).
+    names : (str, str)
+        Sensor names.
+    h : float
+        Sample time [s].
+    cutoff_hz : float
+        Cut-off of the filter applied to the signals [Hz]: the fit uses about 4 samples per
+        cut-off period and Newey-West errors over 4 cut-off periods, since the residuals are coloured.
+    options : ValidationOptions
+
+    Returns
+    -------
+    (SensorFit, SensorFit)
+    """
+    edge = int(round(options.edge_s / h))
+    step = max(1, int(1.0 / (4.0 * cutoff_hz * h)))
+    sl = slice(edge, x1f.size - edge, step)
+    ref = reference[sl]
+    if ref.size < 20:
+        raise EstimatorInputError(f"isolate: {ref.size} samples left after trimming {options.edge_s} s edges")
+    X = np.column_stack([ref, np.ones(ref.size)])
+    span = float(np.max(np.abs(ref)))
+    fits = []
+    for name, x in zip(names, (x1f, x2f)):
+        res = sm.OLS(x[sl], X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
+        (a, b), ((alo, ahi), (blo, bhi)) = res.params, res.conf_int(0.05)
+        gain = not alo <= 1.0 <= ahi and abs(a - 1.0) > options.gain_tol
+        offset = not blo <= 0.0 <= bhi and abs(b) > options.offset_tol * span
+        err = float(np.sqrt(np.mean(((a - 1.0) * ref + b) ** 2)))
+        fits.append(SensorFit(name, float(a), (float(alo), float(ahi)), float(b), (float(blo), float(bhi)),
+                              bool(gain or offset), KINDS[int(offset) + 2 * int(gain)], err))
+    return fits[0], fits[1]
+
+
+def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrical: Mapping[str, float] | None,
+                          filter: FilterSpec, options: ValidationOptions = ValidationOptions(),
+                          nominal: Mapping[str, float] | None = None) -> MeasurementValidation:
+    """Validate the redundant measurements of one high-speed motion (paper Fig. 4-6).
+
+    Parameters
+    ----------
+    signals : mapping of str to ndarray, shape (n,)
+        Raw measurements: ``Im1`` (required) and ``Im2`` [A], ``u`` (required) and ``u_ref`` [V],
+        ``w_tach`` (required) and ``w_enc`` [rad/s]. A missing or None second sensor means no
+        redundancy for that quantity: its first sensor is passed on unchecked (with a note).
+    h : float
+        Sample time [s].
+    electrical : mapping with ``R``, ``L``, ``K``, or None
+        Last validated electrical parameters (theta_{j-1}). None on the first motion: ``nominal`` is used.
+    filter : estimator.filtering.FilterSpec
+        The monitor's low-pass filter (eq. 8), the same as the estimator's.
+    options : ValidationOptions
+    nominal : mapping with ``R``, ``L``, ``K``, optional
+        Used when ``electrical`` is None; defaults to the feed-drive model's nominal values.
+
+    Returns
+    -------
+    MeasurementValidation
+    """
+    if h <= 0:
+        raise EstimatorInputError(f"validate_measurements: sample time h must be > 0, got {h!r}")
+    notes = []
+    if electrical is None:
+        if nominal is None:
+            from models import feed_drive
+            nominal = feed_drive().nominal()
+        electrical = nominal
+        reference = "nominal"
+        notes.append("no validated parameters yet (first motion): isolation uses nominal R, L, K")
+    else:
+        reference = "last validated"
+    raw = {}
+    for q, (s1, s2) in PAIRS.items():
+        if signals.get(s1) is None:
+            raise EstimatorInputError(f"validate_measurements: signal {s1!r} is required")
+        raw[s1] = np.asarray(signals[s1], dtype=float)
+        if signals.get(s2) is not None:
+            raw[s2] = _same_shape(raw[s1], signals[s2], s1, s2)[1]
+    n = raw["Im1"].size
+    for name, x in raw.items():
+        if x.shape != (n,) or not np.all(np.isfinite(x)):
+            raise EstimatorInputError(f"validate_measurements: signal {name!r} must be finite with shape ({n},)")
+    filt = filter.apply(raw, h)
+    symbol = {"current": "i", "voltage": "u", "speed": "w"}
+    residues, best = {}, {}  # best: quantity symbol -> (raw, filtered) signal to pass on
+    for q, (s1, s2) in PAIRS.items():
+        if s2 in raw:
+            residues[q] = residue_test(raw[s1], raw[s2], h, options)
+            best[symbol[q]] = (0.5 * (raw[s1] + raw[s2]), 0.5 * (filt[s1] + filt[s2]))
+        else:
+            best[symbol[q]] = (raw[s1], filt[s1])
+    pairs = {}
+    for q, (s1, s2) in PAIRS.items():
+        if s2 not in raw:
+            pairs[q] = PairValidation(q, (s1, None), None, float("nan"), float("nan"), (), s1, raw[s1], True,
+                                      (f"{q}: no redundant sensor, {s1} passed on unchecked",))
+            continue
+        res = residues[q]
+        ratio = gain_ratio(filt[s1], filt[s2])
+        if res.kind == "none":
+            pairs[q] = PairValidation(q, (s1, s2), res, ratio, 1.0 - ratio, (), None, best[symbol[q]][0], True)
+            continue
+        others = {k: v[1] for k, v in best.items()}
+        ref = model_reference(q, others, h, electrical)
+        fits = isolate(filt[s1], filt[s2], ref, (s1, s2), h, filter.cutoff_hz, options)
+        chosen = min(fits, key=lambda f: f.error_rms)
+        pair_notes = []
+        if chosen.faulty:
+            x = (raw[chosen.sensor] - chosen.offset) / chosen.gain
+            xf = (filt[chosen.sensor] - chosen.offset) / chosen.gain
+            pair_notes.append(f"{q}: both sensors faulty; {chosen.sensor} corrected with its isolation fit")
+        else:
+            x, xf = raw[chosen.sensor], filt[chosen.sensor]
+        valid = not chosen.faulty and any(f.faulty for f in fits)
+        if not any(f.faulty for f in fits):
+            pair_notes.append(f"{q}: the residue shows a {res.kind} fault that isolation cannot attribute")
+        best[symbol[q]] = (x, xf)
+        pairs[q] = PairValidation(q, (s1, s2), res, ratio, 1.0 - ratio, fits, chosen.sensor, x, valid,
+                                  tuple(pair_notes))
+    faulty_pairs = [q for q, p in pairs.items() if p.residue is not None and p.residue.kind != "none"]
+    if len(faulty_pairs) > 1:
+        notes.append(f"faults on several quantities ({', '.join(faulty_pairs)}): each isolation used the "
+                     "others' best signals, which may themselves be corrected")
+    return MeasurementValidation(pairs, reference, best["u"][0], best["i"][0], best["w"][0], tuple(notes))
+
+
+def _same_shape(x1, x2, n1: str, n2: str) -> tuple[np.ndarray, np.ndarray]:
+    x1, x2 = np.asarray(x1, dtype=float), np.asarray(x2, dtype=float)
+    if x1.ndim != 1 or x1.shape != x2.shape:
+        raise EstimatorInputError(f"{n1} and {n2} must be 1-D arrays of the same length, got {x1.shape} and {x2.shape}")
+    return x1, x2

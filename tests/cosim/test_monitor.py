@@ -1,0 +1,187 @@
+"""The Monitor component driven through the Component call order with plant data.
+
+Plant data: the closed-loop CasADi model with redundant sensors of tests/estimator/test_validation.py
+(loaded by path: test folders are not packages). Between motions the NC is idle (state 0).
+"""
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+from cosim.errors import ScenarioError
+from cosim.monitor import MEASUREMENTS, Monitor, MonitorConfig
+from estimator.history import History
+
+_spec = importlib.util.spec_from_file_location(
+    "validation_plant", Path(__file__).parents[1] / "estimator" / "test_validation.py")
+plant = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(plant)
+H = plant.H
+TRUTH = {k: v for k, v in plant.NOMINAL.items() if k in ("R", "L", "K", "Jt", "ft", "Cd")}
+IDLE = 0.05
+
+
+def motion(seed=1, changes=(), **faults):
+    return plant.measure(plant.plant_motion(changes), seed, **faults)
+
+
+def run(monitor: Monitor, motions: list[dict], idle: float = IDLE) -> list[float]:
+    """Feed idle, motion 1, idle, motion 2, ... idle; returns the ``request`` output after every step."""
+    gap = int(round(idle / H))
+    rows = []
+    for k, m in enumerate(motions, start=1):
+        rows.append(np.zeros((gap, len(MEASUREMENTS) + 2)))
+        n = len(m["Im1"])
+        rows.append(np.column_stack([np.asarray(m[s]) for s in MEASUREMENTS] + [np.ones(n), np.full(n, k)]))
+    rows.append(np.zeros((gap, len(MEASUREMENTS) + 2)))
+    inputs = np.vstack(rows).tolist()
+    monitor.setup(0.0, H, len(inputs))
+    request = [monitor.get_outputs()[0]]
+    for n, values in enumerate(inputs):
+        monitor.set_inputs(values)
+        monitor.step(n)
+        request.append(monitor.get_outputs()[0])
+    return request
+
+
+def new(tmp_path=None, **config) -> Monitor:
+    db = {"db": str(tmp_path / "history.sqlite")} if tmp_path is not None else {}
+    return Monitor("monitor", MonitorConfig(**db, **config))
+
+
+def test_healthy_then_sensor_offset(tmp_path):
+    mon = new(tmp_path, axis="X1", scenario="unit")
+    run(mon, [motion(1), motion(2, Im1=(1.0, 0.3))])
+    report = json.loads(json.dumps(mon.report()))  # JSON-serialisable for report.json
+    mon.terminate()
+    first, second = report["motions"]
+    assert [first["motion"], second["motion"]] == [1, 2]
+    n = len(motion(1)["Im1"])
+    assert first["start"] == pytest.approx(IDLE + H) and first["end"] == pytest.approx(IDLE + n * H)
+    assert first["validated"] and first["reference"] == "nominal" and first["sensor_faults"] == []
+    for name, truth in TRUTH.items():
+        p = first["parameters"][name]
+        assert p["value"] == pytest.approx(truth, rel=0.01), name
+        assert p["ci95"][0] < p["value"] < p["ci95"][1]
+    assert first["mismatch"]["test"] == "ljung-box" and first["mismatch"]["passed"] is True
+    assert first["gain_ratio"] == pytest.approx(1.0, abs=2e-3)
+    assert first["processing_s"] > 0 and first["diagnosis"] == []
+    # motion 2: Im1 offset isolated against the model with motion 1's validated R, L, K; Im2 trusted
+    assert second["reference"] == "last validated" and second["validated"]
+    (fault,) = second["sensor_faults"]
+    assert fault["sensor"] == "Im1" and fault["kind"] == "offset"
+    assert fault["offset"] == pytest.approx(0.3, abs=0.02) and fault["offset_ci95"][0] < 0.3 < fault["offset_ci95"][1]
+    assert second["residues"]["current"]["trusted"] == "Im2"
+    assert second["parameters"]["R"]["value"] == pytest.approx(TRUTH["R"], rel=0.01)
+    with History(tmp_path / "history.sqlite") as h:
+        assert [m["motion"] for m in h.motions("X1")] == [1, 2]
+        assert h.last_validated("X1")["motion"] == 2
+
+
+def test_a_second_monitor_continues_from_the_database(tmp_path):
+    """theta_{j-1} and the baseline come back from the history: the second run does not start over."""
+    first = new(tmp_path, baseline_motions=2)
+    run(first, [motion(3)])
+    first.terminate()
+    second = new(tmp_path, baseline_motions=2)
+    run(second, [motion(4), motion(5, changes=(("Jt", 0.07, 0.0),))])
+    results = second.report()["motions"]
+    second.terminate()
+    assert results[0]["reference"] == "last validated"
+    assert results[0]["diagnosis"] == [] and "healthy baseline: motion 2 of 2" in results[0]["notes"]
+    # the baseline (motion of run 1 + first motion of run 2) is complete: the lighter table is diagnosed
+    (diag,) = results[1]["diagnosis"]
+    assert diag["fault"] == "missing work-piece or work-piece holder" and diag["parameters"] == ["Jt"]
+    (ev,) = diag["evidence"]
+    assert ev["relative_change"] == pytest.approx(-0.3, abs=0.01) and ev["z_baseline"] < -10
+
+
+def test_invalid_measurements_are_never_diagnosed(tmp_path):
+    mon = new(tmp_path, baseline="nominal")
+    run(mon, [motion(6, Im1=(1.02, 0.2), Im2=(0.96, -0.25), changes=(("Cd", 2.0, 0.0),))])
+    (res,) = mon.report()["motions"]
+    assert not res["measurements_valid"] and not res["validated"]
+    assert {f["sensor"] for f in res["sensor_faults"]} == {"Im1", "Im2"}
+    assert res["diagnosis"] == [] and res["parameters"]  # parameters reported, no plant fault claimed
+    assert mon.pipeline.last_validated is None
+    mon.terminate()
+
+
+def test_model_mismatch_is_not_validated():
+    mon = new()
+    run(mon, [motion(7, changes=(("Cd", 2.4, 1.6),))])
+    (res,) = mon.report()["motions"]
+    assert res["measurements_valid"] and not res["mismatch"]["passed"] and not res["validated"]
+    assert any("mismatch" in n for n in res["notes"])
+
+
+def test_identification_request_by_motions_and_by_age():
+    short = {k: v[:3000] for k, v in motion(8).items()}  # 0.3 s: too short to identify
+    mon = new(max_motions=1, min_motion_s=1.0)
+    request = run(mon, [short, short, motion(8)])
+    results = mon.report()["motions"]
+    assert [r["validated"] for r in results] == [False, False, True]
+    assert "shorter than min_motion_s" in results[0]["error"]
+    gap, n_short = int(round(IDLE / H)), 3000
+    end2 = 2 * (gap + n_short)  # step at which motion 2 is seen to end
+    assert max(request[:end2]) == 0.0 and request[end2 + 1] == 1.0  # 2 motions > max_motions = 1
+    assert request[-1] == 0.0  # the identification is fresh again
+    # by age: 0.02 s of machine time after the validated motion ended, the request rises
+    mon = new(max_age_s=0.02)
+    request = run(mon, [motion(9)], idle=0.05)
+    n = len(motion(9)["Im1"])
+    end = int(round(IDLE / H)) + n  # the step at which the motion's end is seen
+    rise = int(np.argmax(np.array(request[end + 1:]) > 0)) + end + 1
+    assert rise - end == pytest.approx(0.02 / H, abs=2)
+
+
+def test_config_errors_name_the_key():
+    with pytest.raises(ScenarioError, match="^monitor.filter_cutof_hz: unknown key"):
+        Monitor("monitor", {"filter_cutof_hz": 50})
+    with pytest.raises(ScenarioError, match=r"^monitor.alpha: .*less than 0.5 \(got 0.9\)"):
+        Monitor("monitor", {"alpha": 0.9})
+
+
+def test_unusable_motion_is_recorded_not_fatal():
+    """A motion without speed excitation (standstill) is stored with the estimator's reason."""
+    still = {k: np.zeros(15000) + (0.05 * np.random.default_rng(0).standard_normal(15000) if k != "theta_enc" else 0)
+             for k in MEASUREMENTS}
+    mon = new()
+    run(mon, [still, motion(10)])
+    first, second = mon.report()["motions"]
+    assert not first["validated"] and first["error"] and first["parameters"] == {}
+    assert second["validated"] and second["reference"] == "nominal"
+
+
+def test_monitor_plots(tmp_path):
+    mon = new(tmp_path)
+    run(mon, [motion(11), motion(12, Im2=(1.03, 0.0))])
+    mon.terminate()
+    paths = mon.write_plots(tmp_path / "plots")
+    assert [p.name for p in paths] == ["monitor_motion1.png", "monitor_motion2.png", "monitor_trends.png"]
+    for p in paths:
+        assert matplotlib.image.imread(p).shape[0] > 400
+
+
+@pytest.mark.slow
+def test_friction_drift_over_20_motions_is_diagnosed_in_time():
+    """Cd and ft rise 2 % per motion from motion 5 (plant data, whole pipeline): no alarm while the drift
+    is <= 3 %, wear / lubrication from 8 % on (the threshold is 5 %)."""
+    drift = [max(0, j - 4) * 0.02 for j in range(20)]
+    motions = [motion(100 + j, changes=(("Cd", 1.2 * (1 + d), 0.0), ("ft", 0.02 * (1 + d), 0.0)))
+               for j, d in enumerate(drift)]
+    mon = new(baseline_motions=3)
+    run(mon, motions)
+    results = mon.report()["motions"]
+    assert all(r["validated"] for r in results)
+    for d, r in zip(drift, results):
+        faults = {x["fault"] for x in r["diagnosis"]}
+        if d <= 0.03:
+            assert faults == set(), (r["motion"], faults)
+        elif d >= 0.08:
+            assert faults == {"bearing or slide-way wear", "lack or ageing of lubricating oil"}, r["motion"]

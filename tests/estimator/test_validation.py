@@ -1,0 +1,240 @@
+"""Measurement validation on the real plant model with injected sensor faults (EQUATIONS.md section 6).
+
+The plant is the closed-loop CasADi feed-drive model (RK4, 1e-5 s substeps, 10 kHz output) following
+a round-trip trapezoid 0 -> +70 -> 0 -> -70 -> 0 rad/s, interpolated linearly inside each step.
+Sensors apply eq. 9 (gain, offset, white noise) to its true signals; the encoder is quantised to
+10000 counts/rev and differentiated. ``plant_motion`` and ``measure`` are loaded (by path) by the
+other monitor tests.
+"""
+from __future__ import annotations
+
+import functools
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from estimator.errors import EstimatorInputError
+from estimator.filtering import FilterSpec
+from estimator.validation import (ValidationOptions, gain_ratio, model_reference, noise_std, residue_test,
+                                  validate_measurements)
+from models import feed_drive
+
+H = 1e-4
+ACCEL, W_MAX = 184.0, 70.0
+FILTER = FilterSpec(100.0)
+NOISE = {"Im1": 0.05, "Im2": 0.05, "u": 0.2, "u_ref": 0.2, "w_tach": 0.05}
+COUNTS = 10000  # 2500 lines x 4
+
+
+def speed_reference(plateau: float = 0.8, rest: float = 0.1) -> np.ndarray:
+    """Round-trip trapezoid w_ref [rad/s] at 10 kHz: rest, +70 plateau, rest, -70 plateau, rest."""
+    ramp = W_MAX / ACCEL
+    pieces = [(rest / 2, 0, 0), (ramp, 0, ACCEL), (plateau, W_MAX, 0), (ramp, W_MAX, -ACCEL), (rest, 0, 0),
+              (ramp, 0, -ACCEL), (plateau, -W_MAX, 0), (ramp, -W_MAX, ACCEL), (rest / 2, 0, 0)]
+    out = []
+    for duration, w0, a in pieces:
+        k = np.arange(int(round(duration / H)))
+        out.append(w0 + a * k * H)
+    return np.concatenate(out)
+
+
+@functools.lru_cache(maxsize=4)
+def _stepper(n: int) -> ca.Function:
+    m = feed_drive()
+    f, g = m.rhs_function(), m.output_function()
+    x, u0, p = m.vectors()
+    u1 = ca.SX.sym("u1", u0.shape[0])
+    hs, xk = H / 10, x
+    for j in range(10):
+        ua, um, ub = (u0 + (u1 - u0) * (j + c) / 10 for c in (0.0, 0.5, 1.0))
+        k1 = f(xk, ua, p)
+        k2 = f(xk + hs / 2 * k1, um, p)
+        k3 = f(xk + hs / 2 * k2, um, p)
+        k4 = f(xk + hs * k3, ub, p)
+        xk = xk + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return ca.Function("step", [x, u0, u1, p], [xk, g(xk, u1, p)]).mapaccum("steps", n)
+
+
+@functools.lru_cache(maxsize=16)
+def _plant(changes: tuple, plateau: float) -> dict:
+    m = feed_drive()
+    w_ref = speed_reference(plateau)
+    n = w_ref.size
+    names = [v.name for v in m.parameters]
+    P = np.tile(np.array([m.nominal()[k] for k in names])[:, None], (1, n))
+    for name, value, t_change in changes:
+        P[names.index(name), int(round(t_change / H)):] = value
+    U = np.vstack([w_ref, np.zeros(n), np.zeros(n)])
+    U1 = np.hstack([U[:, 1:], U[:, -1:]])
+    _, Y = _stepper(n)(np.zeros(len(m.states)), U, U1, P)
+    y = dict(zip([o.name for o in m.outputs], np.asarray(Y)))
+    for v in y.values():
+        v.setflags(write=False)
+    return y
+
+
+def plant_motion(changes: tuple = (), plateau: float = 0.8) -> dict:
+    """True plant signals ``u, u_ref, i, w, theta, ...`` (arrays (n,), read-only) of one motion.
+
+    ``changes``: tuple of ``(parameter, value, time [s])`` parameter steps (value from ``time`` on).
+    """
+    return _plant(tuple(changes), plateau)
+
+
+def measure(true: dict, seed: int, **faults: tuple[float, float]) -> dict:
+    """Redundant measurements of eq. 9; ``faults``: sensor -> (gain, offset)."""
+    rng = np.random.default_rng(seed)
+    source = {"Im1": "i", "Im2": "i", "u": "u", "u_ref": "u_ref", "w_tach": "w"}
+    out = {}
+    for name, sig in source.items():
+        a, b = faults.get(name, (1.0, 0.0))
+        out[name] = a * true[sig] + b + NOISE[name] * rng.standard_normal(true[sig].size)
+    a, b = faults.get("w_enc", (1.0, 0.0))
+    theta_enc = np.floor(true["theta"] * COUNTS / (2 * np.pi)) * (2 * np.pi / COUNTS)
+    out["w_enc"] = a * np.gradient(theta_enc, H) + b
+    out["theta_enc"] = theta_enc
+    return out
+
+
+NOMINAL = feed_drive().nominal()
+ELECTRICAL = {k: NOMINAL[k] for k in ("R", "L", "K")}
+
+
+def validate(meas, electrical=ELECTRICAL):
+    return validate_measurements(meas, H, electrical, FILTER)
+
+
+def test_plant_motion_resembles_the_paper_bench():
+    y = plant_motion()
+    assert np.max(y["w"]) == pytest.approx(70.0, abs=2) and np.min(y["w"]) == pytest.approx(-70.0, abs=2)
+    assert 15 < np.max(y["i"]) < 25 and -25 < np.min(y["i"]) < -10
+    assert 70 < np.max(y["u"]) < 100
+
+
+def test_healthy_sensors_pass_every_check():
+    v = validate(measure(plant_motion(), seed=1))
+    assert v.valid and v.sensor_faults == [] and v.reference == "last validated"
+    for q, pair in v.pairs.items():
+        assert pair.residue.kind == "none", q
+        assert pair.fits == ()
+        assert pair.gain_ratio == pytest.approx(1.0, abs=2e-3), q
+    assert abs(v.pairs["current"].residue.offset) < 0.01
+    # the passed-on current is the mean of the sensors: noise std 0.05 / sqrt(2)
+    assert noise_std(v.i) == pytest.approx(0.05 / np.sqrt(2), rel=0.05)
+
+
+def test_first_motion_uses_nominal_parameters_and_says_so():
+    v = validate_measurements(measure(plant_motion(), seed=2, Im1=(1.0, 0.3)), H, None, FILTER)
+    assert v.reference == "nominal" and any("nominal" in n for n in v.notes)
+    assert [f.sensor for f in v.sensor_faults] == ["Im1"]
+
+
+def test_offset_on_current_sensor_1_is_detected_isolated_and_sized():
+    v = validate(measure(plant_motion(), seed=3, Im1=(1.0, 0.3)))
+    cur = v.pairs["current"]
+    assert cur.residue.kind == "offset"
+    assert cur.residue.offset_ci95[0] < 0.3 < cur.residue.offset_ci95[1]
+    f1, f2 = cur.fits
+    assert f1.faulty and f1.kind == "offset" and not f2.faulty
+    assert f1.offset_ci95[0] < 0.3 < f1.offset_ci95[1] and f1.offset == pytest.approx(0.3, abs=0.02)
+    assert f1.gain == pytest.approx(1.0, abs=2e-3)
+    assert cur.trusted == "Im2" and cur.valid and v.valid
+    np.testing.assert_array_equal(v.i, measure(plant_motion(), seed=3)["Im2"])
+    assert v.pairs["voltage"].residue.kind == "none" and v.pairs["speed"].residue.kind == "none"
+
+
+def test_gain_on_current_sensor_2_is_detected_isolated_and_sized():
+    v = validate(measure(plant_motion(), seed=4, Im2=(1.03, 0.0)))
+    cur = v.pairs["current"]
+    assert cur.residue.kind == "gain"
+    assert cur.residue.gain_diff == pytest.approx(-0.03, abs=2e-3)
+    assert cur.relative_gain_error == pytest.approx(1 - 1 / 1.03, abs=1e-3)  # eq. 11, 12
+    f1, f2 = cur.fits
+    assert f2.faulty and f2.kind == "gain" and not f1.faulty
+    assert f2.gain_ci95[0] < 1.03 < f2.gain_ci95[1] and f2.gain == pytest.approx(1.03, abs=3e-3)
+    assert cur.trusted == "Im1" and v.valid
+
+
+def test_gain_and_offset_on_both_current_sensors():
+    """All four sized; sensor 1 has the smaller error and is trusted, corrected; not valid."""
+    a1, b1, a2, b2 = 1.02, 0.2, 0.96, -0.25
+    true = plant_motion()
+    v = validate(measure(true, seed=5, Im1=(a1, b1), Im2=(a2, b2)))
+    cur = v.pairs["current"]
+    assert cur.residue.kind == "gain+offset"
+    assert cur.residue.gain_diff == pytest.approx(a1 - a2, abs=3e-3)
+    assert cur.residue.offset == pytest.approx(b1 - b2, abs=0.03)
+    f1, f2 = cur.fits
+    for fit, a, b in ((f1, a1, b1), (f2, a2, b2)):
+        assert fit.faulty and fit.kind == "gain+offset"
+        assert fit.gain == pytest.approx(a, abs=3e-3) and fit.offset == pytest.approx(b, abs=0.03)
+        assert fit.gain_ci95[0] < a < fit.gain_ci95[1] and fit.offset_ci95[0] < b < fit.offset_ci95[1]
+    assert cur.trusted == "Im1" and not cur.valid and not v.valid
+    # the corrected current follows the true one to well within the fault size
+    err = (FILTER.apply({"i": v.i - true["i"]}, H)["i"])[200:-200]
+    assert np.sqrt(np.mean(err**2)) < 0.1 * f1.error_rms
+
+
+def test_tachometer_gain_fault_is_isolated_against_the_encoder():
+    v = validate(measure(plant_motion(), seed=6, w_tach=(1.02, 0.0)))
+    speed = v.pairs["speed"]
+    assert speed.residue.kind == "gain" and speed.residue.gain_diff == pytest.approx(0.02, abs=2e-3)
+    tach, enc = speed.fits
+    assert tach.faulty and tach.kind == "gain" and tach.gain == pytest.approx(1.02, abs=3e-3)
+    assert not enc.faulty and speed.trusted == "w_enc" and v.valid
+    assert v.pairs["current"].residue.kind == "none"
+
+
+def test_voltage_reference_offset_is_isolated():
+    v = validate(measure(plant_motion(), seed=7, u_ref=(1.0, 2.0)))
+    volt = v.pairs["voltage"]
+    assert volt.residue.kind == "offset" and volt.residue.offset == pytest.approx(-2.0, abs=0.05)
+    u, u_ref = volt.fits
+    assert u_ref.faulty and u_ref.kind == "offset" and u_ref.offset == pytest.approx(2.0, abs=0.1)
+    assert u_ref.offset_ci95[0] < 2.0 < u_ref.offset_ci95[1]
+    assert not u.faulty and volt.trusted == "u" and v.valid
+
+
+def test_model_reference_reconstructs_each_quantity_from_the_two_others():
+    y = plant_motion()
+    f = FILTER.apply({"u": y["u"], "i": y["i"], "w": y["w"]}, H)
+    edge = slice(200, -200)
+    for q, s in (("current", "i"), ("voltage", "u"), ("speed", "w")):
+        err = model_reference(q, f, H, ELECTRICAL)[edge] - f[s][edge]
+        assert np.max(np.abs(err)) < 0.005 * np.max(np.abs(f[s])), q
+
+
+def test_no_false_alarm_on_noise_only_residues():
+    """50 seeds of two healthy noisy sensors: at alpha = 1e-3 with tolerances, no alarm."""
+    level = plant_motion()["i"]
+    for seed in range(50):
+        rng = np.random.default_rng(seed)
+        res = residue_test(level + 0.05 * rng.standard_normal(level.size),
+                           level + 0.05 * rng.standard_normal(level.size), H)
+        assert res.kind == "none"
+
+
+def test_gain_ratio_is_eq_12():
+    x = np.sin(np.linspace(0, 20, 5000)) * 10 + 3
+    assert gain_ratio(0.99 * x + 0.5, x) == pytest.approx(0.99, rel=1e-12)
+
+
+def test_bad_input_is_named():
+    meas = measure(plant_motion(), seed=8)
+    with pytest.raises(EstimatorInputError, match="Im1 and Im2"):
+        validate_measurements({**meas, "Im2": meas["Im2"][:-1]}, H, ELECTRICAL, FILTER)
+    with pytest.raises(EstimatorInputError, match="'u'"):
+        validate_measurements({k: v for k, v in meas.items() if k != "u"}, H, ELECTRICAL, FILTER)
+    with pytest.raises(EstimatorInputError, match="windows"):
+        residue_test(np.ones(100), np.ones(100), H)
+    with pytest.raises(EstimatorInputError, match="alpha"):
+        ValidationOptions(alpha=0.7)
+
+
+def test_missing_redundancy_passes_the_sensor_on_with_a_note():
+    meas = measure(plant_motion(), seed=9)
+    v = validate_measurements({**meas, "u_ref": None}, H, ELECTRICAL, FILTER)
+    volt = v.pairs["voltage"]
+    assert volt.residue is None and volt.trusted == "u" and volt.valid and "unchecked" in volt.notes[0]
+    np.testing.assert_array_equal(v.u, meas["u"])
