@@ -166,8 +166,9 @@ class Model:
         return {v.name: float(v.nominal) for v in self.of_kind(*kinds)}
 
     def symbol(self, name: str) -> ca.SX:
-        if name in self.derivative:
-            return self.derivative[name]
+        """The symbol of a variable, or of a state's time derivative as ``der(name)``."""
+        if name.startswith("der(") and name.endswith(")"):
+            return self.derivative[name[4:-1]]
         return self.variables[name].sym
 
     # -- derived expressions ---------------------------------------------------

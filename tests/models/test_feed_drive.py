@@ -101,3 +101,9 @@ def test_variable_validation():
         Variable("q", "1", "bad", "constant")
     with pytest.raises(ValueError, match="outputs"):
         Variable("q", "1", "bad", "physical", 1.0, output=True)
+
+
+def test_symbol_lookup(model):
+    assert model.symbol("i") is model.variables["i"].sym
+    assert model.symbol("der(i)") is model.derivative["i"]
+    assert ca.depends_on(model.equations["electrical"].residual, model.symbol("der(i)"))

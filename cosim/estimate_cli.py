@@ -1,0 +1,120 @@
+"""``cosim estimate DATA.csv --map ROLE=COLUMN ...``: R, L, K, Jt, ft, Cd from a recorded CSV.
+
+Roles: ``time``, ``voltage`` [V], ``current`` [A], ``speed`` [rad/s], ``position`` (motor angle, rad),
+``torque`` [N.m], ``state`` (NC state, 1 = rapid). The recording is cut into high-speed motions
+(``--segment``), each estimated on its own; the output is a table per motion with 95 % confidence
+intervals, or with ``--json``::
+
+    {"segments": [{"start": s, "end": s, "method": m, "parameters": {"R": {"value": v, "ci95": [lo, hi]}, ...},
+                   "condition_number": c, "fit_error": e}]}
+
+holding only the parameters the data determine. When there are several motions, one that cannot
+be estimated (too short, not exciting every parameter) is reported on stderr and left out; if no
+motion is left, the exit status is 2.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from cosim.errors import InputError
+from cosim.recorded import load_recording
+from estimator import (
+    EstimationOptions,
+    EstimatorInputError,
+    FilterSpec,
+    MotionData,
+    NotEnoughExcitation,
+    estimate_motion,
+)
+from estimator.segmentation import MODES, segment
+from models import feed_drive
+
+ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
+         "state": None}
+
+
+def _pairs(items: list[str], what: str) -> dict[str, str]:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise InputError(f"{what} {item!r}: expected NAME=VALUE")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", help="CSV file with a header row")
+    parser.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",
+                        help=f"column of a role ({', '.join(ROLES)}); repeat for each role")
+    parser.add_argument("--sample-time", type=float, default=None, metavar="H",
+                        help="sampling period [s] (needed without a time column)")
+    parser.add_argument("--known", action="append", default=[], metavar="NAME=VALUE",
+                        help="a parameter known in advance, e.g. K=1.05 (mechanical equation only)")
+    parser.add_argument("--offset", action="store_true", help="also estimate a constant torque offset T0")
+    parser.add_argument("--filter-cutoff", type=float, default=EstimationOptions().filter.cutoff_hz, metavar="HZ",
+                        help="cut-off of the identical low-pass filter [Hz] (default %(default)s)")
+    parser.add_argument("--segment", choices=MODES, default="auto",
+                        help="motions from the NC state or the speed profile (auto), the NC state (nc) "
+                             "or the whole record (none)")
+    parser.add_argument("--method", choices=("ls", "iv", "oe"), default="iv", help="estimator (default iv)")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+
+def main(args: argparse.Namespace) -> int:
+    role_map = _pairs(args.map, "--map")
+    unknown = sorted(set(role_map) - set(ROLES))
+    if unknown:
+        raise InputError(f"--map: unknown role(s) {unknown}; roles are {list(ROLES)}")
+    known = {}
+    for name, value in _pairs(args.known, "--known").items():
+        try:
+            known[name] = float(value)
+        except ValueError:
+            raise InputError(f"--known {name}={value!r}: expected a number") from None
+    options = EstimationOptions(method=args.method, filter=FilterSpec(args.filter_cutoff), known=known,
+                                offset=args.offset)
+    rec = load_recording(args.data, role_map, args.sample_time)
+    sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
+    speed = sig.get("w")
+    if speed is None and "position" in sig:
+        speed = np.gradient(sig["position"], rec.h)
+    segments = segment(args.segment, rec.n, rec.h, speed, rec.signals.get("state"))
+    if not segments:
+        raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
+    results = []
+    for seg in segments:
+        part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
+        data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, **part)
+        try:
+            results.append(estimate_motion(data, options))
+        except (NotEnoughExcitation, EstimatorInputError) as exc:  # e.g. a rapid block too short to filter
+            if len(segments) == 1:
+                raise
+            print(f"cosim estimate: motion {data.t0:.4g}-{data.t0 + (data.n - 1) * data.h:.4g} s left out: {exc}",
+                  file=sys.stderr)
+    if not results:
+        raise InputError(f"{args.data}: no motion could be estimated (see above)")
+    if args.json:
+        print(json.dumps({"segments": [r.to_dict() for r in results]}))
+    else:
+        print(table(results))
+    return 0
+
+
+def table(results) -> str:  # noqa: ANN001 - list of estimator.MotionEstimate
+    """One block per motion: parameter, value, unit, 95 % confidence interval."""
+    units = {v.name: v.unit for v in feed_drive().parameters}
+    lines = []
+    for k, r in enumerate(results, 1):
+        lines.append(f"motion {k}: {r.start:.4g}-{r.end:.4g} s, {r.method.upper()}, condition number "
+                     f"{r.condition_number:.3g}, fit error {r.fit_error:.3g}")
+        if r.result.message:
+            lines.append(f"  ({r.result.message})")
+        for name, p in r.parameters.items():
+            lines.append(f"  {name:3} {p.value:12.6g} {units[name]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]")
+    return "\n".join(lines)

@@ -1,0 +1,44 @@
+"""The paper's "zero-forcing #1" derivative operator (eq. 3)."""
+from __future__ import annotations
+
+import numpy as np
+
+from estimator.errors import EstimatorInputError
+
+#: Weights of x(t+h), x(t), x(t-h), x(t-2h), as published (4 digits). They sum to 0 and their first
+#: moment is 1.0001, second moment -0.0001: exact on polynomials of degree <= 2 up to that rounding.
+ZERO_FORCING_WEIGHTS = (0.2047, 0.886, -1.386, 0.2953)
+#: Samples the operator needs before and after the sample it differentiates.
+PAST, FUTURE = 2, 1
+
+
+def zero_forcing_derivative(x: np.ndarray, h: float) -> tuple[np.ndarray, slice]:
+    """Differentiate a sampled signal with the zero-forcing #1 operator.
+
+    ``Dx[k] = (0.2047 x[k+1] + 0.886 x[k] - 1.386 x[k-1] + 0.2953 x[k-2]) / h``. It needs two past
+    samples and one future sample, so the first two and the last sample have no derivative: they
+    are dropped, never extrapolated.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Signal sampled every ``h`` seconds, n >= 4.
+    h : float
+        Sampling period [s], > 0.
+
+    Returns
+    -------
+    dx : ndarray, shape (n - 3,)
+        Derivative [unit of x / s] at samples 2 .. n-2.
+    valid : slice
+        ``slice(2, n - 1)``: ``x[valid]`` are the samples ``dx`` belongs to.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 1 or x.size < PAST + FUTURE + 1:
+        raise EstimatorInputError(f"zero_forcing_derivative: x must be 1-D with at least 4 samples, got shape {x.shape}")
+    if not h > 0:
+        raise EstimatorInputError(f"zero_forcing_derivative: h must be > 0 s, got {h}")
+    n = x.size
+    a, b, c, d = ZERO_FORCING_WEIGHTS
+    dx = (a * x[3:] + b * x[2:n - 1] + c * x[1:n - 2] + d * x[:n - 3]) / h
+    return dx, slice(PAST, n - FUTURE)

@@ -1,0 +1,84 @@
+"""The identical low-pass filter of every measured signal (paper eq. 8).
+
+Filtering all signals with the same linear filter F leaves the model unchanged
+(``H = Y/U = FY/FU``) while removing the noise the derivative operator would amplify.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+from scipy import signal
+
+from estimator.errors import EstimatorInputError
+
+
+@dataclass(frozen=True)
+class FilterSpec:
+    """The one place that decides the filter F.
+
+    Attributes
+    ----------
+    cutoff_hz : float
+        -3 dB cut-off of the Butterworth low-pass [Hz]; must be below 0.45 of the Nyquist frequency.
+    order : int
+        Butterworth order (the zero-phase filter squares the magnitude response).
+    zero_phase : bool
+        True: forward-backward (``sosfiltfilt``, offline, no delay). False: causal (``sosfilt``).
+    """
+
+    cutoff_hz: float
+    order: int = 4
+    zero_phase: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.cutoff_hz > 0:
+            raise EstimatorInputError(f"filter cutoff_hz must be > 0 Hz, got {self.cutoff_hz}")
+        if int(self.order) != self.order or self.order < 1:
+            raise EstimatorInputError(f"filter order must be a positive integer, got {self.order}")
+
+    def sos(self, h: float) -> np.ndarray:
+        """Second-order sections of the filter for sampling period ``h`` [s]."""
+        nyquist = 0.5 / h
+        if self.cutoff_hz >= 0.45 * nyquist:
+            raise EstimatorInputError(
+                f"filter cutoff {self.cutoff_hz} Hz must be below 0.45 x Nyquist ({0.45 * nyquist:g} Hz at h={h:g} s)")
+        return signal.butter(self.order, self.cutoff_hz, fs=1.0 / h, output="sos")
+
+    def apply(self, signals: Mapping[str, np.ndarray], h: float) -> dict[str, np.ndarray]:
+        """Filter every signal identically.
+
+        Parameters
+        ----------
+        signals : mapping of str to ndarray, each shape (n,)
+            Signals sampled every ``h`` seconds (None values are passed through).
+        h : float
+            Sampling period [s].
+
+        Returns
+        -------
+        dict of str to ndarray, shape (n,)
+            Filtered signals, same keys.
+        """
+        sos = self.sos(h)
+        out = {}
+        for name, x in signals.items():
+            if x is None:
+                out[name] = None
+                continue
+            x = np.asarray(x, dtype=float)
+            if self.zero_phase:
+                pad = 3 * (2 * len(sos) + 1)
+                if x.size <= pad:
+                    raise EstimatorInputError(f"signal {name!r}: {x.size} samples, the zero-phase filter needs > {pad}")
+                out[name] = signal.sosfiltfilt(sos, x)
+            else:
+                out[name] = signal.sosfilt(sos, x, zi=signal.sosfilt_zi(sos) * x[0])[0]
+        return out
+
+
+def lowpass(signals: Mapping[str, np.ndarray], h: float, cutoff_hz: float, order: int = 4,
+            zero_phase: bool = True) -> dict[str, np.ndarray]:
+    """Thin wrapper: ``FilterSpec(cutoff_hz, order, zero_phase).apply(signals, h)``."""
+    return FilterSpec(cutoff_hz, order, zero_phase).apply(signals, h)

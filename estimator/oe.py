@@ -1,0 +1,120 @@
+"""Output-error refinement: fit the simulated current and speed to the measured ones.
+
+Both model equations are integrated together over the motion with the measured (filtered)
+voltage as the only input, from the IV estimate, by Levenberg-Marquardt (Gauss-Newton with
+damping) with CasADi forward sensitivities. The filtered signals are decimated to
+``options.oe_rate_hz`` first. The initial current and speed are estimated with the parameters.
+Each output is weighted by the inverse RMS of its residual at the IV estimate.
+
+Covariance: sandwich ``A^-1 S A^-1`` with ``A = J^T J`` and ``S`` the batch-means long-run
+variance of ``J_t^T r_t`` (blocks of at least 0.2 s: output errors are correlated over the
+mechanical time constant). If the fit does not converge, the IV result is returned with the reason.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from estimator.errors import NotEnoughExcitation
+from estimator.estimate import PHYSICAL, EstimationOptions, MethodResult, Prepared, _check, _long_run
+from estimator.simulation import MODEL, _ode, _rollout
+
+MAX_ITERATIONS = 30
+OE_W_EPS = 0.01
+
+
+@lru_cache(maxsize=8)
+def _sensitivities(n: int, free: tuple[str, ...]) -> tuple[ca.Function, ca.Function]:
+    """``f(q, U (2, n-1), fixed, h) -> X (2, n-1)`` and ``(X, dX/dq)``; q = free parameters, i0, w0."""
+    roll = _rollout(MODEL, ("electrical", "mechanical"), ("u",), n, 2)
+    _, states, phys, _ = _ode(MODEL, ("electrical", "mechanical"), ("u",))
+    q = ca.MX.sym("q", len(free) + 2)
+    fixed = ca.MX.sym("fixed", len(phys) + 1)  # every physical parameter and w_eps; free ones overwritten
+    p = ca.vertcat(*[q[free.index(v.name)] if v.name in free else fixed[j] for j, v in enumerate(phys)],
+                   fixed[len(phys)])
+    U, h = ca.MX.sym("U", 2, n - 1), ca.MX.sym("h")
+    x0 = ca.vertcat(*[q[len(free) + ["i", "w"].index(s)] for s in states])
+    X = roll(x0, U, p, h)
+    if states != ("i", "w"):
+        X = X[[states.index("i"), states.index("w")], :]
+    return (ca.Function("oe_sim", [q, U, fixed, h], [X]),
+            ca.Function("oe_jac", [q, U, fixed, h], [X, ca.jacobian(ca.vec(X), q)]))
+
+
+def output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -> MethodResult:
+    """Refine ``start`` (the IV result) by output error; see the module docstring.
+
+    Returns
+    -------
+    MethodResult
+        Method ``oe``; or ``start`` relabelled ``oe`` with ``message`` saying why it fell back.
+    """
+    def fallback(reason: str) -> MethodResult:
+        return replace(start, method="oe", message=f"output error fell back to IV: {reason}")
+
+    s = p.signals
+    if {r.equation for r in p.regressions} != {"electrical", "mechanical"} or any(p.overrides.values()):
+        return fallback("needs voltage, current and speed, with K i (not a torque signal)")
+    k = max(1, int(round(1.0 / (options.oe_rate_hz * p.h))))
+    u, y = s["u"][::k], np.vstack([s["i"][::k], s["w"][::k]])
+    n, h = u.size, k * p.h
+    free = start.names
+    sim, sens = _sensitivities(n, free)
+    values = {**{v.name: v.nominal for v in PHYSICAL}, **p.known, **start.as_dict()}
+    fixed = [float(values[v.name]) for v in PHYSICAL] + [OE_W_EPS]
+    U = np.vstack([u[:-1], u[1:]])
+    q = np.concatenate([start.values, y[:, 0]])
+    scale = np.concatenate([np.abs(start.values).clip(1e-9), np.sqrt(np.mean(y ** 2, axis=1)).clip(1e-9)])
+
+    def jacobian(q):
+        X, J = sens(q, U, fixed, h)
+        return np.asarray(X), np.asarray(ca.densify(J)).reshape(2, n - 1, -1, order="F")
+
+    X, J = jacobian(q)
+    weight = 1.0 / np.sqrt(np.mean((y[:, 1:] - X) ** 2, axis=1)).clip(1e-12)[:, None]
+
+    def residual(X):
+        return (y[:, 1:] - X) * weight
+
+    r = residual(X)
+    cost, lam, converged = np.sum(r ** 2), 1e-3, False
+    for it in range(1, MAX_ITERATIONS + 1):
+        Jw = (J * weight[:, :, None]).reshape(-1, len(q)) * scale
+        A, g = Jw.T @ Jw, Jw.T @ r.ravel()
+        while True:
+            step = np.linalg.solve(A + lam * np.diag(np.diag(A)), g) * scale
+            Xn = np.asarray(sim(q + step, U, fixed, h))  # trial steps: no sensitivities
+            rn = residual(Xn)
+            cost_n = np.sum(rn ** 2)
+            if np.isfinite(cost_n) and cost_n <= cost:
+                break
+            lam *= 10
+            if lam > 1e8:
+                return fallback(f"no descent step after {it} iterations")
+        q, r = q + step, rn
+        X, J = jacobian(q)
+        # the cost is about the number of residuals: a relative decrease of 1e-6 is far below noise
+        small = np.max(np.abs(step) / scale) < 1e-7 or cost - cost_n < 1e-6 * cost
+        cost, lam = cost_n, max(lam / 10, 1e-9)
+        if small:
+            converged = True
+            break
+    if not converged:
+        return fallback(f"not converged in {MAX_ITERATIONS} iterations")
+    Jw = (J * weight[:, :, None])  # (2, n-1, nq)
+    A = Jw.reshape(-1, len(q)).T @ Jw.reshape(-1, len(q))
+    G = np.einsum("ctq,ct->tq", Jw, r)
+    S, nb = _long_run(G, max(1, int(round(max(0.2, options.block()) / h))))
+    Ai = np.linalg.inv(A)
+    cov = (Ai @ S @ Ai.T)[:len(free), :len(free)]
+    sv = np.linalg.svd(Jw.reshape(-1, len(q)) * scale, compute_uv=False)
+    fit = float(np.max(np.sqrt(np.sum((y[:, 1:] - X) ** 2, axis=1) / np.sum(y[:, 1:] ** 2, axis=1))))
+    result = MethodResult("oe", free, q[:len(free)].copy(), cov, nb - len(q), float(sv[0] / sv[-1]), fit, it)
+    try:
+        _check(result, options)
+    except NotEnoughExcitation as exc:
+        return fallback(str(exc))
+    return result

@@ -1,0 +1,207 @@
+"""Model-based simulation of the feed drive's physical equations (the IV instruments, OE, validation).
+
+Each model equation is solved for the derivative of its state, as the model does for its ODE; the
+signals that are not simulated are measured inputs. Dry friction uses the model's smoothed sign with
+a smoothing speed ``w_eps`` chosen for the integration step (the estimator excludes the samples near
+zero speed where it differs from the exact sign). RK4, inputs linearly interpolated between samples.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Mapping
+
+import casadi as ca
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from estimator.errors import EstimatorInputError
+from models import feed_drive
+
+MODEL = feed_drive()
+#: Default smoothing speed of sign(w) in simulations [rad/s]: well below the estimator's speed threshold.
+W_EPS = 0.1
+
+
+@lru_cache(maxsize=32)
+def _ode(model, equations: tuple[str, ...], inputs: tuple[str, ...]):
+    """ODE ``f(x, s, p)`` of the states solved by ``equations``; s = inputs, p = physical params + w_eps."""
+    eqs = [model.equations[e] for e in equations]
+    states = [e.solves_for for e in eqs]
+    x = [model.variables[s].sym for s in states]
+    s = [model.variables[n].sym for n in inputs]
+    phys = [v for v in model.parameters if v.kind == "physical"]
+    p = [v.sym for v in phys] + [model.variables["w_eps"].sym]
+    rhs = []
+    for e in eqs:
+        r = e.residual
+        # algebraic signals that are not measured inputs get their model definition (sgn_w = tanh(w/w_eps))
+        for name, definition in model.algebraic.items():
+            if name not in inputs and ca.depends_on(r, model.variables[name].sym):
+                r = ca.substitute(r, model.variables[name].sym, definition)
+        d = model.derivative[e.solves_for]
+        rhs.append(-ca.substitute(r, d, 0) / ca.jacobian(r, d))
+    rhs = ca.vertcat(*rhs)
+    others = [v for v in model.variables.values()
+              if ca.depends_on(rhs, v.sym) and v.sym.name() not in {y.name() for y in x + s + p}]
+    zero = [v for v in others if v.kind == "input"]  # load torque: zero in a high-speed motion
+    design = [v for v in others if v.kind == "design"]
+    unknown = [v.name for v in others if v.kind not in ("input", "design")]
+    if unknown:
+        raise EstimatorInputError(f"simulating {equations} needs the signals {unknown} as inputs")
+    rhs = ca.substitute(rhs, ca.vertcat(*[v.sym for v in zero + design]),
+                        ca.DM([0.0] * len(zero) + [float(v.nominal) for v in design])) if zero + design else rhs
+    used = tuple(v for v in phys if ca.depends_on(rhs, v.sym))
+    return ca.Function("ode", [ca.vertcat(*x), ca.vertcat(*s), ca.vertcat(*p)], [rhs]), tuple(states), phys, used
+
+
+@lru_cache(maxsize=32)
+def _rollout(model, equations: tuple[str, ...], inputs: tuple[str, ...], n: int, substeps: int):
+    """``F(x0, S (2 len(inputs), n-1), p, h) -> X (nx, n-1)``: RK4 from each sample to the next."""
+    f, states, _, _ = _ode(model, equations, inputs)
+    nx, ns = len(states), len(inputs)
+    x, s0, s1 = ca.SX.sym("x", nx), ca.SX.sym("s0", ns), ca.SX.sym("s1", ns)
+    p, h = ca.SX.sym("p", f.size1_in(2)), ca.SX.sym("h")
+    dt = h / substeps
+    xk = x
+    for k in range(substeps):
+        a, b = s0 + (s1 - s0) * (k / substeps), s0 + (s1 - s0) * ((k + 1) / substeps)
+        k1 = f(xk, a, p)
+        k2 = f(xk + dt / 2 * k1, (a + b) / 2, p)
+        k3 = f(xk + dt / 2 * k2, (a + b) / 2, p)
+        k4 = f(xk + dt * k3, b, p)
+        xk = xk + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    step = ca.Function("step", [x, ca.vertcat(s0, s1), p, h], [xk])
+    return step.mapaccum("rollout", n - 1, [0], [0])
+
+
+def simulate(equations: tuple[str, ...], inputs: Mapping[str, np.ndarray], params: Mapping[str, float], h: float,
+             x0: Mapping[str, float], step: float | None = None, w_eps: float = W_EPS, model=MODEL,
+             at: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Simulate the states solved by ``equations`` from measured inputs.
+
+    Parameters
+    ----------
+    equations : tuple of str
+        Model equations to integrate (``("electrical",)``, ``("mechanical",)`` or both).
+    inputs : mapping of str to ndarray, each shape (n,)
+        Measured signals the equations need and do not simulate (``u``, ``i``, ``w``), sampled every h.
+    params : mapping of str to float
+        Physical parameters; missing optional ones take their nominal value.
+    h : float
+        Sampling period of the inputs [s].
+    x0 : mapping of str to float
+        Initial value of each simulated state at the first sample.
+    step : float, optional
+        Integration step [s], a multiple of h; the result is interpolated back (cubic) to every sample.
+        Default: h.
+    w_eps : float
+        Smoothing speed of sign(w) [rad/s].
+    at : ndarray, shape (m,), optional
+        Fractional sample indices to return the states at (cubic interpolation); default every sample.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (n,) or (m,)
+        The simulated states.
+    """
+    names = tuple(sorted(inputs))
+    n = len(next(iter(inputs.values())))
+    k = max(1, int(round((step or h) / h)))
+    idx = np.arange(0, n, k)
+    if idx[-1] != n - 1:
+        idx = np.append(idx, n - 1)
+    f, states, phys, used = _ode(model, tuple(equations), names)
+    values = []
+    for v in phys:
+        if v.name not in params and v in used and not v.optional:
+            raise EstimatorInputError(f"simulation needs parameter {v.name!r}")
+        values.append(float(params.get(v.name, v.nominal)))
+    if len(idx) < 2:
+        raise EstimatorInputError(f"simulation needs at least 2 samples, got {n}")
+    S = np.vstack([np.asarray(inputs[m], dtype=float)[idx] for m in names])
+    hk = np.diff(idx) * h
+    # mapaccum needs one step size: integrate the uniform part, the last (shorter) step separately
+    uniform = hk == k * h
+    m = int(uniform.sum()) + 1
+    roll = _rollout(model, tuple(equations), names, m, 2 if k > 1 else 1)
+    x = np.array([float(x0[s]) for s in states])
+    X = np.asarray(roll(x, np.vstack([S[:, :m - 1], S[:, 1:m]]), values + [w_eps], k * h)).reshape(len(states), -1)
+    X = np.hstack([x[:, None], X])
+    if m < len(idx):
+        last = _rollout(model, tuple(equations), names, 2, 2)
+        xe = np.asarray(last(X[:, -1], np.concatenate([S[:, m - 1], S[:, m]]), values + [w_eps], hk[-1]))
+        X = np.hstack([X, xe.reshape(-1, 1)])
+    if k > 1 or at is not None:
+        X = CubicSpline(idx, X, axis=1)(np.arange(n) if at is None else at)
+    return {s: X[j] for j, s in enumerate(states)}
+
+
+def simulate_current(u: np.ndarray, w: np.ndarray, params: Mapping[str, float], h: float, i0: float = 0.0,
+                     step: float | None = None) -> np.ndarray:
+    """Current from voltage and speed, electrical equation: ``I(s) = (U(s) - K W(s)) / (L s + R)``.
+
+    This is the paper's Ir_hat (section IV.B) when ``u``, ``w`` are the validated filtered signals and
+    ``params`` the last validated R, L, K.
+
+    Parameters
+    ----------
+    u, w : ndarray, shape (n,)
+        Armature voltage [V] and motor speed [rad/s], sampled every h.
+    params : mapping
+        At least ``R`` [Ohm], ``L`` [H], ``K`` [V.s/rad].
+    h : float
+        Sampling period [s].
+    i0 : float
+        Current at the first sample [A].
+    step : float, optional
+        Integration step [s] (a multiple of h); default h.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Simulated current [A].
+    """
+    return simulate(("electrical",), {"u": u, "w": w}, params, h, {"i": i0}, step)["i"]
+
+
+def simulate_speed(i: np.ndarray, params: Mapping[str, float], h: float, w0: float = 0.0,
+                   step: float | None = None, w_eps: float = W_EPS) -> np.ndarray:
+    """Speed from current, mechanical equation: ``Jt dw/dt = K i - ft w - Cd sign(w) - T0``.
+
+    Used for model validation (measured speed against speed simulated from the estimated model).
+    For a torque signal, pass it as ``i`` with ``K = 1``.
+
+    Parameters
+    ----------
+    i : ndarray, shape (n,)
+        Armature current [A], sampled every h.
+    params : mapping
+        At least ``K, Jt, ft, Cd`` (``T0`` defaults to 0).
+    h : float
+        Sampling period [s].
+    w0 : float
+        Speed at the first sample [rad/s].
+    step : float, optional
+        Integration step [s] (a multiple of h); default h.
+    w_eps : float
+        Smoothing speed of sign(w) [rad/s].
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Simulated speed [rad/s].
+    """
+    return simulate(("mechanical",), {"i": i}, params, h, {"w": w0}, step, w_eps)["w"]
+
+
+def simulate_motor(u: np.ndarray, params: Mapping[str, float], h: float, i0: float = 0.0, w0: float = 0.0,
+                   step: float | None = None, w_eps: float = W_EPS) -> tuple[np.ndarray, np.ndarray]:
+    """Current and speed from the voltage alone (both equations coupled).
+
+    Returns
+    -------
+    i, w : ndarray, shape (n,)
+        Simulated current [A] and speed [rad/s].
+    """
+    x = simulate(("electrical", "mechanical"), {"u": u}, params, h, {"i": i0, "w": w0}, step, w_eps)
+    return x["i"], x["w"]
