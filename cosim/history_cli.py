@@ -13,7 +13,9 @@ from pathlib import Path
 from cosim.errors import InputError
 
 #: history file used by ``cosim monitor`` and ``cosim history`` when --db is not given
-DEFAULT_DB = "history.sqlite"
+#: Where ``cosim run`` keeps the history by default (``history.sqlite`` beside its ``runs/<name>-<time>``
+#: output directories), so ``cosim history`` and ``cosim monitor`` find the same file.
+DEFAULT_DB = "runs/history.sqlite"
 NAMES = ("R", "L", "K", "Jt", "ft", "Cd")
 
 

@@ -77,6 +77,8 @@ def main(args: argparse.Namespace) -> int:
                            filter_cutoff_hz=args.filter_cutoff)
     end_clock = rec.path.stat().st_mtime - (rec.n - 1) * rec.h  # machine time of sample 0
     traces = []
+    if args.db == DEFAULT_DB:
+        Path(DEFAULT_DB).parent.mkdir(exist_ok=True)
     with History(args.db) as history:
         pipeline = MonitorPipeline(config, history, args.axis)
         for k, seg in enumerate(segments, 1):

@@ -8,6 +8,9 @@ Files in ``out_dir``::
     report.json              run metadata, each component's report(), the monitor's motions
     plots/*.png              per high-speed motion: profiles and current residue (cosim.plots),
                              and the figures of components that draw their own (the monitor)
+
+The monitor's history (SQLite) is ``monitor.db`` of the scenario, by default ``history.sqlite``
+beside ``out_dir``: ``runs/history.sqlite`` for the CLI's default output directories.
 """
 from __future__ import annotations
 
@@ -28,6 +31,9 @@ from cosim.master import Master
 from cosim.scenario import Scenario, load_scenario
 
 OUTPUTS = ("signals.csv", "scenario.resolved.yaml", "report.json")
+#: The monitor's history file when the scenario names none: beside the run's output directory, so
+#: that successive ``cosim run`` into ``runs/`` continue one history (``runs/history.sqlite``).
+DEFAULT_HISTORY = "history.sqlite"
 
 
 class OutputExistsError(InputError):
@@ -105,6 +111,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
                               "status": "running", "versions": _versions(),
                               "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,
                                         "interface": scenario.plant.interface}}
+    scenario = _with_default_history(scenario, out_dir.resolve().parent / DEFAULT_HISTORY)
     master = Master.from_scenario(scenario)
     wall = _time.perf_counter()
     try:
@@ -141,6 +148,16 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
                        for k, v in paths.items()}
     paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
     return RunResult(out_dir, recorder.time, signals, dict(zip(recorder.names, recorder.units)), report, paths)
+
+
+def _with_default_history(scenario: Scenario, db: Path) -> Scenario:
+    """The scenario with the default monitor's history file set to ``db`` when it names none."""
+    spec = scenario.monitor
+    config = getattr(spec, "config", None)
+    if config is None or not hasattr(config, "db") or config.db is not None:
+        return scenario
+    return scenario.model_copy(update={"monitor": spec.model_copy(
+        update={"config": config.model_copy(update={"db": str(db)})})})
 
 
 def _versions() -> dict[str, str]:

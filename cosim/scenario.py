@@ -249,7 +249,8 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     """``monitor: {...}`` is the default monitor's config; ``{class: ..., config: ...}`` replaces it.
 
     The default monitor's ``axis`` and ``scenario`` default to the scenario's ``axis`` and ``name``, and a
-    relative history ``db`` is resolved against the scenario's directory (as FMU paths are)."""
+    relative history ``db`` is resolved against the scenario's directory (as FMU paths are); ``:memory:``
+    keeps the history in memory. Without ``db``, ``run_scenario`` puts it beside the output directory."""
     if raw is None:
         return None
     if not isinstance(raw, dict):
@@ -271,7 +272,7 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     fields = MonitorConfig.model_fields
     implied = {k: v for k, v in (("axis", data.get("axis", "X")), ("scenario", data.get("name")))
                if k in fields and isinstance(v, str)}
-    if isinstance(raw, dict) and isinstance(raw.get("db"), str) and "db" in fields:
+    if isinstance(raw, dict) and isinstance(raw.get("db"), str) and raw["db"] != ":memory:" and "db" in fields:
         raw = raw | {"db": str(base_dir / Path(raw["db"]).expanduser())}
     try:
         config = MonitorConfig.model_validate(implied | raw if isinstance(raw, dict) else raw)

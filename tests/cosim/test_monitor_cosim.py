@@ -16,7 +16,7 @@ def scenario(name, db, program, events=(), monitor=None, stop_time=None, sensors
     data = {"name": name, "axis": "X", "step": 1e-4, "plant": {"fmu": "builtin"},
             "sensors": {"seed": 4, **(sensors or {})},
             "nc": {"program": program, "identification": {"distance": 0.2}},
-            "monitor": {"db": str(db), **(monitor or {})}, "events": list(events)}
+            "monitor": {**({"db": str(db)} if db else {}), **(monitor or {})}, "events": list(events)}
     if stop_time:
         data["stop_time"] = stop_time
     return scenario_from_dict(data)
@@ -26,14 +26,16 @@ TOOL_CHANGE = [{"dwell": {"time": 0.1}}, {"tool_change": {"position": 0.27, "v_m
 
 
 def test_two_runs_on_the_same_database_continue(tmp_path, feeddrive_fmu):
-    """Run 1 healthy; run 2 with a current-sensor fault isolates it with run 1's validated R, L, K."""
+    """Run 1 healthy; run 2 with a current-sensor fault isolates it with run 1's validated R, L, K.
+
+    Neither scenario names a history file: the default is ``history.sqlite`` beside the out dirs."""
     db = tmp_path / "history.sqlite"
-    first = run_scenario(scenario("healthy", db, TOOL_CHANGE), tmp_path / "run1", plots=False)
+    first = run_scenario(scenario("healthy", None, TOOL_CHANGE), tmp_path / "run1", plots=False)
     (m1,) = first.report["motions"]
     assert m1["validated"] and m1["reference"] == "nominal" and m1["sensor_faults"] == []
     for name, truth in (("K", 1.05), ("Jt", 0.1), ("Cd", 1.2)):
         assert m1["parameters"][name]["value"] == pytest.approx(truth, rel=0.02), name
-    faulty = scenario("im1-fault", db, TOOL_CHANGE,
+    faulty = scenario("im1-fault", None, TOOL_CHANGE,
                       sensors={"current": [{"gain": 1.03, "offset": 0.2}, {}]})
     second = run_scenario(faulty, tmp_path / "run2", plots=False)
     (m2,) = second.report["motions"]
