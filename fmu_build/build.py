@@ -51,6 +51,7 @@ def _pack(sources: Sources, library: Path, out: Path) -> None:
 
 def _build(sources: Sources, out: Path) -> Path:
     """Compile and pack into ``out``, atomically (a reader never sees a half-written FMU)."""
+    out = Path(os.path.abspath(out))  # the compiler runs in the build directory: no relative paths
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=out.parent, prefix=".fmu_build_") as tmp:
         library = _compile(sources, Path(tmp))

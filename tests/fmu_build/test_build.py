@@ -118,3 +118,11 @@ def test_cli_builds_and_refuses_to_overwrite(tmp_path, capsys):
     assert out.stat().st_mtime_ns == stamp
     assert cosim_main(["build-fmu", "--out", str(out), "--force"]) == 0
     assert validate_fmu(str(out)) == []
+
+
+def test_cli_default_out_is_relative_to_the_working_directory(tmp_path, monkeypatch):
+    """The default --out is ./FeedDrive.fmu: a relative path must survive the compiler's own cwd."""
+    monkeypatch.chdir(tmp_path)
+    assert cosim_main(["build-fmu"]) == 0
+    assert validate_fmu(str(tmp_path / "FeedDrive.fmu")) == []
+    assert not list(tmp_path.glob(".fmu_build_*"))  # the build directory is gone
