@@ -368,8 +368,17 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
                                   and (not want or x.causality in want))
                 raise s.error(("plant", key, name), f"{path.name} has no Real "
                               f"{'parameter' if want else 'variable'} {name!r}; expected one of: {kinds}")
+            _check_range(s, ("plant", key, name), v, getattr(p, key)[name], path.name)
     plant = p.model_copy(update={"fmu": str(path), "sha256": digest, "map": role_map})
     return plant, md
+
+
+def _check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str) -> None:
+    """Refuse a value outside the [min, max] the FMU declares for the variable (bad input, not a run failure)."""
+    for bound, outside in ((variable.min, lambda b: value < b), (variable.max, lambda b: value > b)):
+        if bound not in (None, "") and outside(float(bound)):
+            raise s.error(key, f"{variable.name} = {value:g} is outside the range [{variable.min or '-inf'}, "
+                               f"{variable.max or 'inf'}] that {fmu} declares")
 
 
 def _check_events(s: Scenario, md: Any) -> None:
@@ -394,6 +403,7 @@ def _check_events(s: Scenario, md: Any) -> None:
                                                        f"FMU; expected one of: {', '.join(tunable)}")
             if not isinstance(ev.value, float):
                 raise s.error(("events", k, "value"), f"expected a number for plant.{param}, got {ev.value!r}")
+            _check_range(s, ("events", k, "value"), v, ev.value, "the plant FMU")
 
 
 # -- error messages ------------------------------------------------------------------------------

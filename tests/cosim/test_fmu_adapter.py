@@ -62,7 +62,7 @@ def load_scenario_plant(fmu):
 
 
 def test_fmi2_error_mid_run_names_function_time_and_log(tmp_path, feeddrive_fmu, caplog):
-    extra = "events:\n  - {time: 0.05, target: plant.R, value: -1.0}\n"
+    extra = "events:\n  - {time: 0.05, target: plant.R, value: 0.0}\n"
     with caplog.at_level(logging.ERROR, logger="cosim.fmu.plant"), pytest.raises(FMIError) as info:
         signals(tmp_path, extra=extra, signals_path=tmp_path / "signals.csv")
     err = info.value

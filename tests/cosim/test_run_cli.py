@@ -71,7 +71,7 @@ def test_output_directory_is_never_overwritten_without_the_flag(tmp_path, feeddr
 
 def test_fmu_error_mid_run_exits_1_with_one_line_and_partial_signals(tmp_path, feeddrive_fmu, capsys):
     path = tmp_path / "broken.yaml"
-    path.write_text(SHORT.format(extra="events:\n  - {time: 0.05, target: plant.R, value: -1}\n"))
+    path.write_text(SHORT.format(extra="events:\n  - {time: 0.05, target: plant.R, value: 0}\n"))
     out = tmp_path / "out"
     assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 1
     err = capsys.readouterr().err.strip()

@@ -79,6 +79,10 @@ def test_changed_fmu_is_refused_by_its_recorded_hash(tmp_path, feeddrive_fmu):
     ("events:\n  - {time: 1.0, target: spindle.speed, value: 1}\n", 2,
      r"events\[0\]\.target: unknown component 'spindle'"),
     ("record: 3\n", 1, r"record: Input should be 'all' or a valid list, got 3"),
+    ("plant:\n  fmu: builtin\n  parameters: {R: -0.5}\n", 3,
+     r"plant\.parameters\.R: R = -0\.5 is outside the range \[0\.0, inf\] that FeedDrive\.fmu declares"),
+    ("events:\n  - {time: 1.0, target: plant.Jt, value: -1}\n", 2,
+     r"events\[0\]\.value: Jt = -1 is outside the range \[0\.0, inf\]"),
     ("nc:\n  program:\n    - rapid: {to: 0.1, accel: -1}\n", 3, r"nc\.program\[0\]\.rapid\.accel: .*greater than 0"),
 ])
 def test_each_mistake_gets_its_own_message_with_file_and_line(tmp_path, feeddrive_fmu, snippet, line, pattern):
