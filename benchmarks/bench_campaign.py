@@ -1,0 +1,78 @@
+"""Campaign throughput: runs per minute in this process, on a local process pool and on a Dask LocalCluster,
+and the wall time of the drift example.
+
+The same small campaign (short tool changes of the built-in plant, monitor in the loop, LS and IV
+re-estimates) runs three times into fresh out dirs; the ratios are against the serial run measured in
+the same invocation. The aggregates of the three must be identical (checked).
+
+    python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+from cosim.campaign import Campaign, run_campaign
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = {"name": "bench", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "builtin"},
+        "nc": {"program": [{"dwell": {"time": 0.02}},
+                           {"tool_change": {"position": 0.15, "v_max": 0.22, "accel": 0.8, "time": 0.02}}]},
+        "monitor": {"baseline": "nominal"}}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=8, help="runs in the campaign")
+    parser.add_argument("--workers", type=int, default=2, help="local processes and Dask workers")
+    parser.add_argument("--drift-motions", type=int, default=20, help="motions of the drift example (0: skip)")
+    args = parser.parse_args()
+    warnings.simplefilter("ignore")
+    from distributed import LocalCluster
+    from fmu_build import builtin_fmu
+
+    builtin_fmu()  # build outside the timings
+    campaign = Campaign(name="bench", base=BASE, seed=1, repetitions=args.runs,
+                        sweep={"plant.parameters.Cd": [1.3]}, run_options={"methods": ["ls", "iv"]})
+    times, aggregates = {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for mode in ("serial", "pool", "dask"):
+            out = Path(tmp, mode)
+            if mode == "dask":
+                with LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster:
+                    t = time.perf_counter()
+                    res = run_campaign(campaign, out, scheduler=cluster.scheduler_address, plots=False)
+                    times[mode] = time.perf_counter() - t
+            else:
+                t = time.perf_counter()
+                res = run_campaign(campaign, out, workers=1 if mode == "serial" else args.workers, plots=False)
+                times[mode] = time.perf_counter() - t
+            aggregates[mode] = res.aggregates
+            if res.failed:
+                print(f"{mode}: {len(res.failed)} runs failed: {res.failed[0]['reason']}", file=sys.stderr)
+                return 1
+    same = aggregates["pool"] == aggregates["serial"] == aggregates["dask"]
+    print(f"campaign of {args.runs} runs (2 s tool change, monitor, LS + IV), {args.workers} workers; "
+          f"aggregates identical: {same}")
+    print(f"{'mode':8} {'wall s':>8} {'runs/min':>9} {'speed-up':>9}")
+    for mode, t in times.items():
+        print(f"{mode:8} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f}")
+    if args.drift_motions:
+        sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
+        from drift import run_drift
+
+        with tempfile.TemporaryDirectory() as tmp:
+            t = time.perf_counter()
+            s = run_drift(Path(tmp), args.drift_motions, progress=False)
+            wall = time.perf_counter() - t
+        print(f"drift example: {s['motions']} motions in {wall:.1f} s ({wall / s['motions']:.2f} s/motion; "
+              f"500 motions ~ {500 * wall / s['motions'] / 60:.1f} min)")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,238 @@
+"""Excitation design: the slope of the rapid move's trapezoid that minimises the parameters' variance.
+
+The paper (section II.C) allows the monitor to adapt only the slope (acceleration) of the NC's
+trapezoidal speed profile: no PRBS, which would age the drive and does not fit in a tool change.
+For a move of given distance and top speed, each candidate acceleration ``a`` is scored by the
+Fisher information of the estimator's own regressions:
+
+1. simulate the noise-free closed-loop plant (``models.feed_drive()``, speed and current PI loops,
+   RK4 with ``substeps`` per sample) driven by the speed reference of the move at ``a``;
+2. build the regressions exactly as the estimator does (``estimator.estimate.prepare``: filter,
+   zero-forcing derivatives, samples with ``|w|`` below the speed threshold left out of the
+   equations with sign(w));
+3. predicted covariance of each equation's least-squares estimate, ``A^-1 Phi^T R Phi A^-1`` with
+   ``A = Phi^T Phi`` (the Fisher information of the regression) and ``R`` the autocovariance of the
+   equation error that the white sensor noises (voltage, current, speed) produce after the
+   estimator's filter and derivative; with white noise on the output only this is the textbook
+   ``sigma^2 (Phi^T Phi)^-1``, which underestimates the friction parameters' variance several times
+   because the tachometer noise enters eq. 5 differentiated. Jt, ft, Cd = theta_m K: relative
+   variances add (delta method, independent equations);
+4. criterion ``J(a) = sum_p (std_p / p)^2`` over R, L, K, Jt, ft, Cd (sum of squared relative
+   standard errors); candidates whose noise-free current or voltage reaches the drive's limits
+   (``i_max``, ``u_max``) are infeasible.
+
+The prediction is first order: it ignores the bias that noise in the regressors gives LS (IV
+removes it) and the noise of sign(w) near the excluded low speeds. ``cosim design --verify`` checks
+it with a small campaign.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from estimator.derivative import zero_forcing_derivative
+from estimator.errors import EstimatorInputError
+from estimator.estimate import EstimationOptions, MotionData, prepare
+from models import feed_drive
+
+MODEL = feed_drive()
+PHYSICAL = tuple(v.name for v in MODEL.parameters if v.kind == "physical" and not v.optional)
+
+
+def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float] | None = None,
+                         substeps: int = 10) -> dict[str, np.ndarray]:
+    """Noise-free closed-loop plant driven by a speed reference, no load torque.
+
+    Parameters
+    ----------
+    w_ref : ndarray, shape (n,)
+        Speed reference [rad/s] at ``t_k = k h``, linearly interpolated in between. (Held constant,
+        a ramp would become a staircase whose steps the cascade's proportional gains, Kp_i Kp_w ~
+        150 V per rad/s, turn into a 10 kHz voltage sawtooth of ~3 V that biases R and L.)
+    h : float
+        Sampling period [s].
+    params : mapping or None
+        Model parameters overriding the nominal ones.
+    substeps : int
+        RK4 substeps per sample.
+
+    Returns
+    -------
+    dict of str to ndarray, each shape (n + 1,)
+        The model outputs (``u``, ``u_ref``, ``i``, ``w``, ``theta``, ``x``, ``i_ref``) at
+        ``t_k = k h``, k = 0..n, from rest (the last reference value held over the final period).
+    """
+    w_ref = np.asarray(w_ref, dtype=float)
+    if w_ref.ndim != 1 or not np.all(np.isfinite(w_ref)):
+        raise EstimatorInputError(f"w_ref must be a finite 1-D array, got shape {w_ref.shape}")
+    nominal = MODEL.nominal()
+    unknown = sorted(set(params or {}) - set(nominal))
+    if unknown:
+        raise EstimatorInputError(f"unknown model parameters {unknown}")
+    p = np.array([(dict(nominal) | dict(params or {}))[v.name] for v in MODEL.parameters])
+    f = MODEL.rhs_function()
+    x, u0, u1, pp = (ca.SX.sym(n, len(v)) for n, v in
+                     (("x", MODEL.states), ("u0", MODEL.inputs), ("u1", MODEL.inputs), ("p", MODEL.parameters)))
+    dt = h / substeps
+    xs = x
+    for j in range(substeps):
+        ua, um, ub = (u0 + (u1 - u0) * (j + c) / substeps for c in (0.0, 0.5, 1.0))
+        k1 = f(xs, ua, pp)
+        k2 = f(xs + dt / 2 * k1, um, pp)
+        k3 = f(xs + dt / 2 * k2, um, pp)
+        k4 = f(xs + dt * k3, ub, pp)
+        xs = xs + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    n = len(w_ref)
+    U = np.zeros((len(MODEL.inputs), n + 1))
+    U[[v.name for v in MODEL.inputs].index("w_ref")] = np.append(w_ref, w_ref[-1])
+    P = np.tile(p, (n + 1, 1)).T
+    X = ca.Function("step", [x, u0, u1, pp], [xs]).mapaccum("rollout", n)(np.zeros(len(MODEL.states)), U[:, :-1],
+                                                                           U[:, 1:], P[:, :-1])
+    X = np.hstack([np.zeros((len(MODEL.states), 1)), np.asarray(X)])
+    Y = np.asarray(MODEL.output_function().map(n + 1)(X, U, P))
+    return {v.name: Y[k] for k, v in enumerate(MODEL.outputs)}
+
+
+def _error_gains(reg, theta: np.ndarray) -> dict[str, float]:
+    """Equation error ``y - Phi theta`` per unit of each signal (the regressions are linear in the signals
+    except sign(w), whose noise is negligible away from the excluded low speeds)."""
+    zero = {name: np.zeros(1) for name in reg.signals}
+    y0, P0 = reg.evaluate(zero)
+    gains = {}
+    for name in reg.signals:
+        if name != "sgn_w":
+            y1, P1 = reg.evaluate(zero | {name: np.ones(1)})
+            gains[name] = float((y1[0] - P1[0] @ theta) - (y0[0] - P0[0] @ theta))
+    return gains
+
+
+def _pipeline_responses(h: float, options: EstimationOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Impulse responses of the estimator's treatment of one signal: filtered, and filtered then
+    differentiated (zero-forcing), aligned as in ``estimator.estimate.prepare``."""
+    half = max(64, int(round(4.0 / (options.filter.cutoff_hz * h))))
+    x = np.zeros(2 * half + 1)
+    x[half] = 1.0
+    f = options.filter.apply({"x": x}, h)["x"]
+    d, valid = zero_forcing_derivative(f, h)
+    return f[valid], d
+
+
+def predicted_std(signals: Mapping[str, np.ndarray], h: float, noise: Mapping[str, float],
+                  options: EstimationOptions = EstimationOptions(),
+                  params: Mapping[str, float] | None = None) -> dict[str, float]:
+    """Predicted relative standard error of each physical parameter from one motion.
+
+    The least-squares estimate of each regression ``y = Phi theta`` (the estimator's own, on the
+    noise-free signals) has the covariance ``A^-1 Phi^T R Phi A^-1``, ``A = Phi^T Phi``, where ``R`` is
+    the autocovariance of the equation error that white sensor noise produces once it has gone
+    through the estimator's filter and zero-forcing derivative (voltage noise enters eq. 4 through u;
+    current noise through i and Di; speed noise through w and Dw, which dominates eq. 5). With white
+    noise on the output alone and no filter it is the textbook ``sigma^2 (Phi^T Phi)^-1``.
+
+    Parameters
+    ----------
+    signals : mapping with ``u`` [V], ``i`` [A], ``w`` [rad/s], each shape (n,)
+        Noise-free signals of the motion.
+    h : float
+        Sampling period [s].
+    noise : mapping with ``u`` [V], ``i`` [A] and optionally ``w`` [rad/s]
+        White noise std of the voltage, current and speed measurements at the sampling rate.
+    options : EstimationOptions
+        The estimator's options (filter, speed threshold).
+    params : mapping or None
+        True parameters (nominal by default), to turn theta_m = p / K into relative errors.
+
+    Returns
+    -------
+    dict of str to float
+        ``std_p / p`` for R, L, K, Jt, ft, Cd.
+    """
+    truth = MODEL.nominal() | dict(params or {})
+    prep = prepare(MotionData(h=h, u=signals["u"], i=signals["i"], w=signals["w"]), options)
+    g_f, g_d = _pipeline_responses(h, options)
+    rel_var: dict[str, float] = {}
+    for reg in prep.regressions:
+        scale = truth[reg.normaliser] if reg.normaliser else 1.0
+        theta = np.array([truth[name] / scale for name in reg.names])
+        gains = _error_gains(reg, theta)
+        acov = sum(noise.get(s, 0.0) ** 2 * np.correlate(g, g, "full")
+                   for s in ("u", "i", "w") if (g := gains.get(s, 0.0) * g_f + gains.get("D" + s, 0.0) * g_d).any())
+        _, Phi = reg.evaluate(prep.signals)
+        Phi = Phi * prep.rows[reg.equation][:, None]  # excluded samples contribute nothing
+        mid = len(acov) // 2
+        B = acov[mid] * Phi.T @ Phi
+        for k in range(1, min(mid, len(Phi) - 1) + 1):
+            C = Phi[:-k].T @ Phi[k:]
+            B += acov[mid + k] * (C + C.T)
+        A_inv = np.linalg.pinv(Phi.T @ Phi)
+        cov = A_inv @ B @ A_inv
+        for j, name in enumerate(reg.names):
+            rel_var[name] = cov[j, j] / theta[j] ** 2
+    for reg in prep.regressions:  # p = theta K: the relative variances add (independent equations)
+        if reg.normaliser:
+            for name in reg.names:
+                rel_var[name] += rel_var[reg.normaliser]
+    return {name: float(np.sqrt(rel_var[name])) for name in PHYSICAL if name in rel_var}
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One acceleration: ``rel_std`` per parameter, ``criterion`` = sum of squares, feasibility."""
+
+    accel: float
+    duration: float
+    rel_std: dict[str, float]
+    criterion: float
+    peak_current: float
+    peak_voltage: float
+    feasible: bool
+
+
+def design_acceleration(reference: Callable[[float], np.ndarray], accels: Sequence[float], h: float,
+                        noise: Mapping[str, float], options: EstimationOptions = EstimationOptions(),
+                        params: Mapping[str, float] | None = None) -> tuple[Candidate, list[Candidate]]:
+    """Score candidate accelerations and pick the feasible one with the smallest criterion.
+
+    Parameters
+    ----------
+    reference : callable
+        ``reference(accel) -> w_ref`` (ndarray (n,) [rad/s]): the motor speed reference of the
+        motion at that acceleration [m/s^2], sampled every ``h``.
+    accels : sequence of float
+        Candidate accelerations [m/s^2].
+    h : float
+        Sampling period [s].
+    noise : mapping with ``u`` [V], ``i`` [A] and optionally ``w`` [rad/s]
+        Measurement noise std.
+    options, params
+        As for ``predicted_std``.
+
+    Returns
+    -------
+    best : Candidate
+    candidates : list of Candidate
+        In the order of ``accels``.
+
+    Raises
+    ------
+    EstimatorInputError
+        When no candidate is feasible.
+    """
+    limits = MODEL.nominal() | dict(params or {})
+    candidates = []
+    for a in accels:
+        w_ref = reference(float(a))
+        sig = simulate_closed_loop(w_ref, h, params)
+        peak_i, peak_u = float(np.max(np.abs(sig["i"]))), float(np.max(np.abs(sig["u"])))
+        rel = predicted_std(sig, h, noise, options, params)
+        feasible = peak_i < 0.99 * limits["i_max"] and peak_u < 0.99 * limits["u_max"]
+        candidates.append(Candidate(float(a), len(w_ref) * h, rel, float(sum(v ** 2 for v in rel.values())),
+                                    peak_i, peak_u, feasible))
+    ok = [c for c in candidates if c.feasible]
+    if not ok:
+        raise EstimatorInputError(f"no candidate acceleration keeps the drive below i_max = {limits['i_max']} A "
+                                  f"and u_max = {limits['u_max']} V: try smaller accelerations")
+    return min(ok, key=lambda c: c.criterion), candidates

@@ -1,0 +1,215 @@
+"""Campaign machinery: expansion, executors (in-process, local pool, Dask LocalCluster), resume, failures,
+aggregates. The machinery tests use ``toy_run``, a pure-Python run function with known outcomes."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from cosim.campaign import Campaign, CampaignError, aggregate, expand, load_campaign, run_campaign
+from cosim.errors import ScenarioError
+
+NOMINAL = {"R": 0.6, "L": 4.0e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
+
+
+def toy_run(spec):
+    """A stand-in monitor with exact outcomes.
+
+    Truth: nominal parameters with the scenario's plant.parameters. Estimates: LS = truth (1 +/- 2 %,
+    sign alternating with the run index) with a +/-3 % CI; IV = truth (1 + 1 %) with a +/-0.5 % CI.
+    Diagnosis when Cd is more than 20 % above nominal; sensor fault when |offset of sensor 1| > 0.1 A.
+    """
+    s = spec.scenario
+    toy = s.get("toy", {})
+    if toy.get("log"):
+        with open(toy["log"], "a") as f:
+            f.write(spec.id + "\n")
+    if spec.index == toy.get("interrupt_at") and not Path(toy["log"] + ".interrupted").exists():
+        Path(toy["log"] + ".interrupted").touch()
+        raise KeyboardInterrupt
+    truth = NOMINAL | s["plant"].get("parameters", {})
+    if truth["Cd"] == toy.get("fail_if_Cd"):
+        raise RuntimeError("broken FMU: fmi2DoStep returned fmi2Error")
+    offset = s["sensors"]["current"][0]["offset"]
+    e_ls = 0.02 if spec.index % 2 == 0 else -0.02
+
+    def est(e, half):
+        return {p: {"value": v * (1 + e), "ci95": [v * (1 + e - half), v * (1 + e + half)]} for p, v in truth.items()}
+
+    plant = {p: truth[p] / NOMINAL[p] - 1 for p in truth if truth[p] != NOMINAL[p]}
+    motion = {"validated": True, "parameters": est(0.01, 0.005), "method": "iv",
+              "methods": {"ls": est(e_ls, 0.03), "iv": est(0.01, 0.005)},
+              "sensor_faults": [{"sensor": "Im1", "kind": "offset"}] if abs(offset) > 0.1 else [],
+              "diagnosis": [{"fault": "bearing or slide-way wear", "parameters": ["Cd"]}] if truth["Cd"] > 1.2 * 1.2 else []}
+    return {"truth": truth, "injected": {"plant": plant, "sensors": {"Im1": {"offset": offset}} if offset else {}},
+            "motions": [motion], "noise": float(np.random.default_rng(spec.seed).normal())}
+
+
+def toy_drift(spec):
+    """20 motions; Cd rises 2 %/motion from motion 5; the toy monitor diagnoses wear above +15 %."""
+    motions = []
+    for k in range(20):
+        truth = NOMINAL | {"Cd": 1.2 * (1 + 0.02 * max(0, k - 4))}
+        motions.append({"truth": truth, "validated": True, "sensor_faults": [],
+                        "parameters": {p: {"value": v, "ci95": [v, v]} for p, v in truth.items()},
+                        "diagnosis": [{"fault": "lack or ageing of lubricating oil", "parameters": ["Cd", "ft"]}]
+                        if truth["Cd"] > 1.2 * 1.15 else []})
+    return {"truth": NOMINAL, "injected": {}, "motions": motions}
+
+
+def campaign(tmp_path, **toy):
+    base = {"name": "toy", "plant": {"parameters": {"Cd": 1.2}},
+            "sensors": {"seed": 0, "current": [{"offset": 0.0, "noise": 0.05}, {"offset": 0.0, "noise": 0.05}]},
+            "toy": {"log": str(tmp_path / "executions.log")} | toy}
+    return Campaign.model_validate({
+        "name": "toy", "base": base, "seed": 7, "repetitions": 2, "root": str(tmp_path),
+        "sweep": {"plant.parameters.Cd": [1.2, 1.3, 1.5], "sensors.current[0].offset": [0.0, 0.2]},
+        "draw": {"sensors.current[1].noise": {"uniform": [0.02, 0.1]}},
+        "run": "test_campaign:toy_run"})
+
+
+def executions(tmp_path):
+    return (tmp_path / "executions.log").read_text().split()
+
+
+def test_expansion_is_deterministic_and_seeded(tmp_path):
+    c = campaign(tmp_path)
+    a, b = expand(c), expand(c)
+    assert [(s.id, s.seed, s.overrides) for s in a] == [(s.id, s.seed, s.overrides) for s in b]
+    assert len(a) == 3 * 2 * 2 and [s.index for s in a] == list(range(12))
+    assert [s.overrides["plant.parameters.Cd"] for s in a] == [1.2] * 4 + [1.3] * 4 + [1.5] * 4
+    assert [s.overrides["sensors.current[0].offset"] for s in a[:4]] == [0.0, 0.0, 0.2, 0.2]
+    assert len({s.seed for s in a}) == 12 and all(s.scenario["sensors"]["seed"] == s.seed for s in a)
+    noise = [s.scenario["sensors"]["current"][1]["noise"] for s in a]
+    assert all(0.02 <= x <= 0.1 for x in noise) and len(set(noise)) == 12
+    assert a[6].scenario["plant"]["parameters"]["Cd"] == 1.3 and a[6].scenario["sensors"]["current"][0]["offset"] == 0.2
+    other = expand(c.model_copy(update={"seed": 8}))
+    assert {s.seed for s in other}.isdisjoint({s.seed for s in a}) and [s.id for s in other] != [s.id for s in a]
+
+
+def test_aggregates_of_known_outcomes_are_exact(tmp_path):
+    res = run_campaign(campaign(tmp_path, fail_if_Cd=1.3), tmp_path / "out", plots=True)
+    rows = {r["fault_class"]: r for r in res.aggregates.detection}
+    # Cd 1.3 (+8 %) runs fail; Cd 1.5 (+25 %) is diagnosed; offset 0.2 A is always seen
+    assert rows["(failed)"]["runs"] == 4 and len(res.failed) == 4
+    assert all(r["reason"] == "RuntimeError: broken FMU: fmi2DoStep returned fmi2Error" for r in res.failed)
+    assert rows["healthy"]["runs"] == 2 and rows["healthy"]["false_alarm_rate"] == 0.0
+    assert (rows["plant:Cd"]["detection_rate"], rows["plant:Cd"]["isolation_rate"]) == (1.0, 1.0)
+    assert rows["sensor:Im1"]["detection_rate"] == 1.0 and rows["sensor:Im1"]["isolation_rate"] == 1.0
+    assert rows["plant:Cd & sensor:Im1"]["runs"] == 2 and rows["plant:Cd & sensor:Im1"]["mean_delay_motions"] == 0.0
+    est = {(r["parameter"], r["method"]): r for r in res.aggregates.estimation}
+    assert set(est) == {(p, m) for p in NOMINAL for m in ("ls", "iv")}
+    for p in NOMINAL:  # 4 finished runs without a sensor fault, LS errors +2 % and -2 % alternately, IV +1 %
+        assert est[p, "ls"]["n"] == 4 and est[p, "ls"]["bias_pct"] == pytest.approx(0, abs=1e-9)
+        assert est[p, "ls"]["rms_pct"] == pytest.approx(2.0, rel=1e-9) and est[p, "ls"]["coverage"] == 1.0
+        assert est[p, "iv"]["bias_pct"] == pytest.approx(1.0, rel=1e-9) and est[p, "iv"]["coverage"] == 0.0
+    csv_rows = (tmp_path / "out" / "detection.csv").read_text().splitlines()
+    assert csv_rows[0].startswith("fault_class,runs,detected") and len(csv_rows) == 1 + 5
+    assert (tmp_path / "out" / "plots" / "detection_rate.png").stat().st_size > 0
+    assert "plant:Cd" in res.aggregates.table()
+
+
+def test_drift_delay_and_isolation():
+    result = toy_drift(None)
+    agg = aggregate([{"status": "ok", "result": result, "index": 0}])
+    row = agg.detection[0]
+    # onset at motion 5 (+2 %); +15 % first exceeded at motion 12 (+16 %): delay 7 motions
+    assert row["fault_class"] == "plant:Cd" and row["mean_delay_motions"] == 7.0
+    assert (row["detection_rate"], row["isolation_rate"], row["false_alarm_rate"]) == (1.0, 1.0, 0.0)
+
+
+def test_interrupted_campaign_resumes_without_rerunning(tmp_path):
+    c = campaign(tmp_path, interrupt_at=5)
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(c, tmp_path / "out", plots=False)
+    first = executions(tmp_path)
+    assert len(first) == 6 and len(list((tmp_path / "out" / "runs").glob("*.json"))) == 5
+    res = run_campaign(c, tmp_path / "out", plots=False)
+    second = executions(tmp_path)[6:]
+    ids = [s.id for s in expand(c)]
+    assert second == ids[5:] and res.executed == 7 and len(res.records) == 12
+    assert run_campaign(c, tmp_path / "out", plots=False).executed == 0 and len(executions(tmp_path)) == 13
+
+
+def test_other_campaign_in_out_dir_is_refused(tmp_path):
+    run_campaign(campaign(tmp_path), tmp_path / "out", plots=False)
+    changed = campaign(tmp_path).model_copy(update={"seed": 1})
+    with pytest.raises(CampaignError, match="another campaign.*--overwrite"):
+        run_campaign(changed, tmp_path / "out", plots=False)
+    assert run_campaign(changed, tmp_path / "out", plots=False, overwrite=True).executed == 12
+
+
+@pytest.mark.slow
+def test_local_pool_and_dask_give_identical_aggregates(tmp_path):
+    from distributed import LocalCluster
+
+    c = campaign(tmp_path, fail_if_Cd=1.3)
+    serial = run_campaign(c, tmp_path / "serial", plots=False)
+    pool = run_campaign(c, tmp_path / "pool", workers=2, plots=False)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        dask = run_campaign(c, tmp_path / "dask", scheduler=cluster.scheduler_address, plots=False)
+    for other in (pool, dask):
+        assert other.aggregates == serial.aggregates
+        assert [(r["id"], r["status"], r["result"]) for r in other.records] == \
+               [(r["id"], r["status"], r["result"]) for r in serial.records]
+    assert len(executions(tmp_path)) == 36
+
+
+def test_campaign_file_errors_name_key_and_line(tmp_path):
+    (tmp_path / "base.yaml").write_text("name: b\nplant: {parameters: {Cd: 1.2}}\n")
+    good = {"name": "c", "base": "base.yaml", "sweep": {"plant.parameters.Cd": [1.2, 1.5]}}
+    cases = [
+        ({"sweeps": {}}, r"c\.yaml:5: sweeps: unknown key"),
+        ({"draw": {"plant.parameters.R": {"uniform": [1.0, 0.5]}}}, r":7: draw\.plant\.parameters\.R\.uniform: expected \[low, high\]"),
+        ({"draw": {"plant.parameters.R": {"uniform": [0, 1], "choice": [1]}}}, r":6: .*exactly one of uniform, normal, choice"),
+        ({"draw": {"plant.parameters.Cd": {"choice": [1]}}}, r":1: .*keys given twice .*plant\.parameters\.Cd"),
+        ({"sweep": {"plant..Cd": [1]}}, r":4: sweep\.plant\.\.Cd: not a dotted scenario key"),
+        ({"sweep": {"plant.parameters.Cd": []}}, r":4: sweep\.plant\.parameters\.Cd: expected a non-empty list"),
+        ({"base": "missing.yaml"}, r"c\.yaml:2: base: scenario file missing\.yaml not found"),
+        ({"repetitions": 0}, r":5: repetitions: Input should be greater than 0"),
+    ]
+    path = tmp_path / "c.yaml"
+    for change, pattern in cases:
+        path.write_text(yaml.safe_dump(good | change, sort_keys=False, default_flow_style=None))
+        with pytest.raises(CampaignError, match=pattern):
+            load_campaign(path)
+    path.write_text(yaml.safe_dump(good | {"sweep": {"sensors.current[3].offset": [0.1]}}))
+    with pytest.raises(CampaignError, match=r"campaign c: sensors\.current\[3\]\.offset: the base scenario has no sensors\.current$"):
+        expand(load_campaign(path))
+    path.write_text(yaml.safe_dump(good))
+    assert json.loads(json.dumps(load_campaign(tmp_path / "c.yaml").model_dump()))["name"] == "c"
+
+
+@pytest.mark.slow
+def test_cosimulation_campaign_tracks_cd_and_records_a_failing_fmu(tmp_path):
+    """The real run function on the built-in FMU: 2 s tool changes at Cd = 1.2 and 1.8 N.m, and the same
+    with an event making the electrical time constant L/R ~ 2e-8 s mid-run, far below the FMU's RK4
+    substep: the integration diverges and the FMU refuses the step with fmi2Error."""
+    base = {"name": "tiny", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "builtin"},
+            "nc": {"program": [{"dwell": {"time": 0.02}},
+                               {"tool_change": {"position": 0.15, "v_max": 0.22, "accel": 0.8, "time": 0.02}}]},
+            "monitor": {"baseline": "nominal"}}
+    c = Campaign.model_validate({"name": "tiny", "base": base, "seed": 3, "root": str(tmp_path),
+                                 "sweep": {"plant.parameters.Cd": [1.2, 1.8],
+                                           "events": [[], [{"time": 0.5, "target": "plant.L", "value": 1e-8}]]}})
+    bad = c.model_copy(update={"sweep": {"events": [[], [{"time": 0.5, "target": "plant.R", "value": -1.0}]]}})
+    with pytest.raises(ScenarioError, match=r"campaign run 00001-\w+ .*events\[0\]\.value"):
+        run_campaign(bad, tmp_path / "bad", plots=False)  # a bad scenario is found before anything runs
+    assert not list((tmp_path / "bad" / "runs").glob("*.json"))
+    res = run_campaign(c, tmp_path / "out", plots=False)
+    ok = [r for r in res.records if r["status"] == "ok"]
+    assert [r["overrides"]["events"] for r in ok] == [[], []] and len(res.failed) == 2
+    assert all(r["reason"].startswith("FMIError: plant: fmi2DoStep returned fmi2Error at t=0.5") and "non-finite" in r["reason"]
+               for r in res.failed), res.failed[0]["reason"]
+    for r in ok:
+        (motion,) = r["result"]["motions"]
+        cd = r["overrides"]["plant.parameters.Cd"]
+        assert motion["truth"]["Cd"] == cd and r["result"]["injected"]["plant"] == ({} if cd == 1.2 else {"Cd": pytest.approx(0.5)})
+        for method in ("ls", "iv"):  # dry friction estimated within 3 % from one 2 s motion
+            assert motion["methods"][method]["Cd"]["value"] == pytest.approx(cd, rel=0.03)
+    rows = {r["fault_class"]: r for r in res.aggregates.detection}
+    assert rows["plant:Cd"]["detection_rate"] == 1.0 and rows["plant:Cd"]["isolation_rate"] == 1.0
+    assert rows["(failed)"]["runs"] == 2
