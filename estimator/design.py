@@ -30,12 +30,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
-import casadi as ca
 import numpy as np
 
 from estimator.derivative import zero_forcing_derivative
 from estimator.errors import EstimatorInputError
 from estimator.estimate import EstimationOptions, MotionData, prepare
+from estimator.simulation import rk4_step
 from models import feed_drive
 
 MODEL = feed_drive()
@@ -73,26 +73,13 @@ def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float
     if unknown:
         raise EstimatorInputError(f"unknown model parameters {unknown}")
     p = np.array([(dict(nominal) | dict(params or {}))[v.name] for v in MODEL.parameters])
-    f = MODEL.rhs_function()
-    x, u0, u1, pp = (ca.SX.sym(n, len(v)) for n, v in
-                     (("x", MODEL.states), ("u0", MODEL.inputs), ("u1", MODEL.inputs), ("p", MODEL.parameters)))
-    dt = h / substeps
-    xs = x
-    for j in range(substeps):
-        ua, um, ub = (u0 + (u1 - u0) * (j + c) / substeps for c in (0.0, 0.5, 1.0))
-        k1 = f(xs, ua, pp)
-        k2 = f(xs + dt / 2 * k1, um, pp)
-        k3 = f(xs + dt / 2 * k2, um, pp)
-        k4 = f(xs + dt * k3, ub, pp)
-        xs = xs + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     n = len(w_ref)
     U = np.zeros((len(MODEL.inputs), n + 1))
     U[[v.name for v in MODEL.inputs].index("w_ref")] = np.append(w_ref, w_ref[-1])
-    P = np.tile(p, (n + 1, 1)).T
-    X = ca.Function("step", [x, u0, u1, pp], [xs]).mapaccum("rollout", n)(np.zeros(len(MODEL.states)), U[:, :-1],
-                                                                           U[:, 1:], P[:, :-1])
+    rollout = rk4_step(MODEL.rhs_function(), substeps).mapaccum("rollout", n, [0], [0])
+    X = rollout(np.zeros(len(MODEL.states)), np.vstack([U[:, :-1], U[:, 1:]]), p, h)
     X = np.hstack([np.zeros((len(MODEL.states), 1)), np.asarray(X)])
-    Y = np.asarray(MODEL.output_function().map(n + 1)(X, U, P))
+    Y = np.asarray(MODEL.output_function().map(n + 1)(X, U, np.tile(p, (n + 1, 1)).T))
     return {v.name: Y[k] for k, v in enumerate(MODEL.outputs)}
 
 

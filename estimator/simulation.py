@@ -54,13 +54,15 @@ def _ode(model, equations: tuple[str, ...], inputs: tuple[str, ...]):
     return ca.Function("ode", [ca.vertcat(*x), ca.vertcat(*s), ca.vertcat(*p)], [rhs]), tuple(states), phys, used
 
 
-@lru_cache(maxsize=32)
-def _rollout(model, equations: tuple[str, ...], inputs: tuple[str, ...], n: int, substeps: int):
-    """``F(x0, S (2 len(inputs), n-1), p, h) -> X (nx, n-1)``: RK4 from each sample to the next."""
-    f, states, _, _ = _ode(model, equations, inputs)
-    nx, ns = len(states), len(inputs)
-    x, s0, s1 = ca.SX.sym("x", nx), ca.SX.sym("s0", ns), ca.SX.sym("s1", ns)
-    p, h = ca.SX.sym("p", f.size1_in(2)), ca.SX.sym("h")
+def rk4_step(f: ca.Function, substeps: int) -> ca.Function:
+    """One sample period of classical RK4 for ``f(x, s, p) -> dx/dt``.
+
+    Returns ``step(x, [s0; s1], p, h) -> x(h)``: ``substeps`` RK4 substeps of ``h / substeps``, the
+    inputs s interpolated linearly from s0 to s1 across the period (a held input would turn a ramp
+    into a staircase, see ``models/feed_drive.py``).
+    """
+    x, p, h = ca.SX.sym("x", f.size1_in(0)), ca.SX.sym("p", f.size1_in(2)), ca.SX.sym("h")
+    s0, s1 = ca.SX.sym("s0", f.size1_in(1)), ca.SX.sym("s1", f.size1_in(1))
     dt = h / substeps
     xk = x
     for k in range(substeps):
@@ -70,8 +72,14 @@ def _rollout(model, equations: tuple[str, ...], inputs: tuple[str, ...], n: int,
         k3 = f(xk + dt / 2 * k2, (a + b) / 2, p)
         k4 = f(xk + dt * k3, b, p)
         xk = xk + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    step = ca.Function("step", [x, ca.vertcat(s0, s1), p, h], [xk])
-    return step.mapaccum("rollout", n - 1, [0], [0])
+    return ca.Function("step", [x, ca.vertcat(s0, s1), p, h], [xk])
+
+
+@lru_cache(maxsize=32)
+def _rollout(model, equations: tuple[str, ...], inputs: tuple[str, ...], n: int, substeps: int):
+    """``F(x0, S (2 len(inputs), n-1), p, h) -> X (nx, n-1)``: RK4 from each sample to the next."""
+    f = _ode(model, equations, inputs)[0]
+    return rk4_step(f, substeps).mapaccum("rollout", n - 1, [0], [0])
 
 
 def simulate(equations: tuple[str, ...], inputs: Mapping[str, np.ndarray], params: Mapping[str, float], h: float,
