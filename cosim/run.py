@@ -9,8 +9,9 @@ Files in ``out_dir``::
     plots/*.png              per high-speed motion: profiles and current residue (cosim.plots),
                              and the figures of components that draw their own (the monitor)
 
-The monitor's history (SQLite) is ``monitor.db`` of the scenario, by default ``history.sqlite``
-beside ``out_dir``: ``runs/history.sqlite`` for the CLI's default output directories.
+The monitor's history (SQLite) is ``monitor.db`` of the scenario; without it, ``cosim run`` uses
+``history.sqlite`` beside ``out_dir`` (``runs/history.sqlite`` for its default output directories) and
+other callers of ``run_scenario`` keep it in memory unless they pass ``default_history``.
 """
 from __future__ import annotations
 
@@ -31,8 +32,8 @@ from cosim.master import Master
 from cosim.scenario import Scenario, load_scenario
 
 OUTPUTS = ("signals.csv", "scenario.resolved.yaml", "report.json")
-#: The monitor's history file when the scenario names none: beside the run's output directory, so
-#: that successive ``cosim run`` into ``runs/`` continue one history (``runs/history.sqlite``).
+#: ``cosim run``'s history file when the scenario names none: beside the run's output directory, so
+#: that successive runs into ``runs/`` continue one history (``runs/history.sqlite``).
 DEFAULT_HISTORY = "history.sqlite"
 
 
@@ -67,7 +68,8 @@ class RunResult:
 
 
 def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: bool = False,
-                 overwrite: bool = False, plots: bool = True) -> RunResult:
+                 overwrite: bool = False, plots: bool = True, default_history: str | Path | None = None
+                 ) -> RunResult:
     """Run a scenario and write its output directory.
 
     Parameters
@@ -82,6 +84,9 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         Replace the files of an earlier run in a non-empty ``out_dir``.
     plots : bool
         Draw plots/*.png.
+    default_history : path or None
+        History file of a default monitor whose scenario names no ``monitor.db``; None keeps that
+        history in memory (nothing persists). ``cosim run`` passes ``history.sqlite`` beside ``out_dir``.
 
     Returns
     -------
@@ -111,7 +116,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
                               "status": "running", "versions": _versions(),
                               "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,
                                         "interface": scenario.plant.interface}}
-    scenario = _with_default_history(scenario, out_dir.resolve().parent / DEFAULT_HISTORY)
+    if default_history is not None:
+        scenario = _with_default_history(scenario, Path(default_history).resolve())
     master = Master.from_scenario(scenario)
     wall = _time.perf_counter()
     try:

@@ -12,7 +12,7 @@ import logging
 import sys
 from pathlib import Path
 
-from cosim.run import run_scenario
+from cosim.run import DEFAULT_HISTORY, run_scenario
 from cosim.scenario import load_scenario
 
 
@@ -37,8 +37,9 @@ def main(args: argparse.Namespace) -> int:
     handler.setFormatter(logging.Formatter("cosim run: %(name)s: %(levelname)s: %(message)s"))
     logging.basicConfig(level=logging.WARNING, handlers=[handler])
     scenario = load_scenario(args.scenario)
-    out = args.out or Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}"
-    result = run_scenario(scenario, out, progress=not args.no_progress, overwrite=args.overwrite)
+    out = args.out or _fresh_run_dir(Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}")
+    result = run_scenario(scenario, out, progress=not args.no_progress, overwrite=args.overwrite,
+                          default_history=Path(out).parent / DEFAULT_HISTORY)
     print(summary(result))
     return 0
 
@@ -57,3 +58,12 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
             lines.append(f"  motion {k}: {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
     lines.append(f"  files: signals.csv, scenario.resolved.yaml, report.json, {len(result.paths['plots'])} plots")
     return "\n".join(lines)
+
+
+def _fresh_run_dir(base: Path) -> Path:
+    """``base``, or ``base-2``, ``base-3``, ... when runs started in the same second."""
+    candidate, k = base, 1
+    while candidate.exists():
+        k += 1
+        candidate = base.with_name(f"{base.name}-{k}")
+    return candidate

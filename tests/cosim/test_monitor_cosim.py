@@ -28,16 +28,17 @@ TOOL_CHANGE = [{"dwell": {"time": 0.1}}, {"tool_change": {"position": 0.27, "v_m
 def test_two_runs_on_the_same_database_continue(tmp_path, feeddrive_fmu):
     """Run 1 healthy; run 2 with a current-sensor fault isolates it with run 1's validated R, L, K.
 
-    Neither scenario names a history file: the default is ``history.sqlite`` beside the out dirs."""
+    Neither scenario names a history file: ``default_history`` (what ``cosim run`` passes) is used."""
     db = tmp_path / "history.sqlite"
-    first = run_scenario(scenario("healthy", None, TOOL_CHANGE), tmp_path / "run1", plots=False)
+    first = run_scenario(scenario("healthy", None, TOOL_CHANGE), tmp_path / "run1", plots=False,
+                         default_history=db)
     (m1,) = first.report["motions"]
     assert m1["validated"] and m1["reference"] == "nominal" and m1["sensor_faults"] == []
     for name, truth in (("K", 1.05), ("Jt", 0.1), ("Cd", 1.2)):
         assert m1["parameters"][name]["value"] == pytest.approx(truth, rel=0.02), name
     faulty = scenario("im1-fault", None, TOOL_CHANGE,
                       sensors={"current": [{"gain": 1.03, "offset": 0.2}, {}]})
-    second = run_scenario(faulty, tmp_path / "run2", plots=False)
+    second = run_scenario(faulty, tmp_path / "run2", plots=False, default_history=db)
     (m2,) = second.report["motions"]
     assert m2["reference"] == "last validated" and m2["validated"]
     (fault,) = m2["sensor_faults"]

@@ -105,3 +105,18 @@ def test_info_lists_variables_and_checks_a_map(tmp_path, feeddrive_fmu, capsys):
     assert err.startswith(f"cosim info: error: {EXAMPLES / 'vendor_fmu.yaml'}:") and err.count("\n") == 0
     assert "plant.map.speed_ref.var: FMU 'FeedDrive.fmu' has no variable 'n_cmd'" in err
     assert main(["info", str(tmp_path / "none.fmu")]) == 2
+
+
+@pytest.mark.slow
+def test_successive_runs_continue_one_history_beside_the_out_dirs(tmp_path, feeddrive_fmu, monkeypatch, capsys):
+    """Without monitor.db, `cosim run` keeps the history in runs/history.sqlite: the 2nd run's motion is
+    checked against the 1st run's validated parameters, and `cosim history` finds both by default."""
+    monkeypatch.chdir(tmp_path)
+    for _ in range(2):
+        assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress"]) == 0
+    first, second = sorted((tmp_path / "runs").glob("tool-change-*"), key=lambda d: d.stat().st_mtime_ns)
+    references = [json.loads((d / "report.json").read_text())["motions"][0]["reference"] for d in (first, second)]
+    assert references == ["nominal", "last validated"]
+    capsys.readouterr()
+    assert main(["history"]) == 0
+    assert capsys.readouterr().out.startswith("axis X: 2 motion(s)")
