@@ -124,8 +124,9 @@ def table(results: list[dict]) -> str:
             lines.append(f"  {name:3} {p['value']:12.6g}  95 % CI [{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")
         if r["mismatch"]:
             m = r["mismatch"]
-            lines.append(f"  model check ({m['test']}): p = {m['p_value']:.3g}, "
-                         f"{'passed' if m['passed'] else 'MISMATCH'}")
+            worst = max(m["peak_rms_relative"].values())
+            lines.append(f"  model check: {'passed' if m['passed'] else 'MISMATCH'} (residue {m['test']} test "
+                         f"p = {m['p_value']:.3g}; worst 50 ms RMS {100 * worst:.2g} % of range)")
         for d in r["diagnosis"]:
             lines.append(f"  diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
         lines += [f"  note: {n}" for n in r["notes"]]
