@@ -69,7 +69,10 @@ class MonitorConfig(BaseModel):
         RMS output-error residue over the worst 50 ms (fraction of the signal's range) above which a residue
         that is not white Gaussian noise (Ljung-Box or burst test) is a mismatch.
     baseline : {"motions", "nominal"}
-        Healthy baseline: the first ``baseline_motions`` validated motions, or the model's nominal values.
+        Healthy baseline: the first ``baseline_motions`` validated motions without a diagnosis, or the
+        model's nominal values. While it is incomplete, each validated motion is diagnosed against the
+        healthy motions accepted so far (from the second validated motion on; the same test), and a
+        motion with a diagnosis is not added to it.
     baseline_motions : int
     min_relative_drift : float
         Smallest relative parameter change diagnosed.
@@ -155,13 +158,20 @@ class MonitorPipeline:
         self.baseline_sets = [b["parameters"] for b in history.baseline(axis, config.baseline_motions)]
         self.recent = [r["parameters"] for r in history.recent_validated(axis, self.diagnosis_options.trend_motions)]
 
+    @property
+    def building(self) -> bool:
+        """True while the healthy baseline has fewer than ``baseline_motions`` motions."""
+        return self.config.baseline == "motions" and len(self.baseline_sets) < self.config.baseline_motions
+
     def baseline(self) -> dict | None:
-        """The healthy baseline (name -> (value, std)), or None while it is being built."""
+        """The healthy reference (name -> (value, std)) a validated motion is diagnosed against.
+
+        The nominal values, or the mean of the healthy baseline motions; while that baseline is being
+        built, the mean of the healthy motions accepted so far (None before the first one).
+        """
         if self.config.baseline == "nominal":
             return {k: (v, 0.0) for k, v in self.nominal.items()}
-        if len(self.baseline_sets) < self.config.baseline_motions:
-            return None
-        return make_baseline(self.baseline_sets)
+        return make_baseline(self.baseline_sets) if self.baseline_sets else None
 
     def process(self, signals: Mapping[str, np.ndarray | None], h: float, start: float, motion: int,
                 time: float, scenario: str = "") -> MotionTrace:
@@ -234,16 +244,19 @@ class MonitorPipeline:
         if not result["validated"]:
             return
         current = result["parameters"]
-        baseline = self.baseline()
-        if baseline is None:
-            result["notes"].append(f"healthy baseline: motion {len(self.baseline_sets) + 1} of "
-                                   f"{self.config.baseline_motions}")
-        else:
-            result["diagnosis"] = [d.to_dict() for d in diagnose(current, baseline, self.last_validated, self.recent,
+        reference = self.baseline()
+        if reference is not None:
+            result["diagnosis"] = [d.to_dict() for d in diagnose(current, reference, self.last_validated, self.recent,
                                                                  self.diagnosis_options)]
+        if self.building:
+            k, n = len(self.baseline_sets), self.config.baseline_motions
+            if result["diagnosis"]:  # a worn axis must not become the healthy reference
+                result["notes"].append(f"healthy baseline incomplete ({k} of {n}): drift diagnosed against the "
+                                       f"{k} healthy motion(s) so far; not added to the baseline")
+            else:
+                self.baseline_sets.append(current)
+                result["notes"].append(f"healthy baseline: motion {k + 1} of {n}")
         self.last_validated = current
-        if len(self.baseline_sets) < self.config.baseline_motions:
-            self.baseline_sets.append(current)
         self.recent = (self.recent + [current])[-self.diagnosis_options.trend_motions:]
 
 

@@ -2,7 +2,9 @@
 
 Each VALIDATED parameter set theta_j is compared with
 
-* a healthy baseline (the mean of the first N validated motions, or nominal values), and
+* a healthy baseline (the mean of the first N validated motions that had no diagnosis, or nominal
+  values; while fewer than N exist, the mean of those so far, so a worn axis is diagnosed, and kept out
+  of the baseline, from the second validated motion on), and
 * the last validated set theta_{j-1} (a sudden change),
 
 in standard errors that combine both uncertainties: ``z = (theta_j - theta_ref) / sqrt(s_j^2 + s_ref^2)``.

@@ -68,6 +68,7 @@ CREATE TABLE IF NOT EXISTS diagnoses (
     motion_id INTEGER NOT NULL REFERENCES motions (id) ON DELETE CASCADE,
     fault TEXT NOT NULL, parameters TEXT NOT NULL, evidence TEXT NOT NULL
 );
+CREATE INDEX IF NOT EXISTS diagnoses_motion ON diagnoses (motion_id);
 """
 
 
@@ -202,11 +203,12 @@ class History:
             out[mid][name] = {"value": value, "std": std, "ci95": [lo, hi]}
         return out
 
-    def _validated(self, axis: str, order: str, n: int | None) -> list[dict]:
+    def _validated(self, axis: str, order: str, n: int | None, healthy: bool = False) -> list[dict]:
         limit = "" if n is None else f" LIMIT {int(n)}"
+        undiagnosed = " AND NOT EXISTS (SELECT 1 FROM diagnoses WHERE motion_id = motions.id)" if healthy else ""
         rows = self._db.execute(
-            f'SELECT id, motion, time, start, "end", method FROM motions WHERE axis = ? AND validated = 1 '
-            f"ORDER BY id {order}{limit}", (axis,)).fetchall()
+            f'SELECT id, motion, time, start, "end", method FROM motions WHERE axis = ? AND validated = 1'
+            f"{undiagnosed} ORDER BY id {order}{limit}", (axis,)).fetchall()
         params = self._parameters([r[0] for r in rows])
         return [{"id": r[0], "motion": r[1], "time": r[2], "start": r[3], "end": r[4], "method": r[5],
                  "parameters": params[r[0]]} for r in rows]
@@ -217,8 +219,9 @@ class History:
         return rows[0] if rows else None
 
     def baseline(self, axis: str, n: int) -> list[dict]:
-        """The first ``n`` validated motions of ``axis``, oldest first (fewer when fewer exist)."""
-        return self._validated(axis, "ASC", n)
+        """The healthy baseline: the first ``n`` validated motions of ``axis`` that had no diagnosis, oldest
+        first (fewer when fewer exist). A motion diagnosed while the baseline was being built is skipped."""
+        return self._validated(axis, "ASC", n, healthy=True)
 
     def recent_validated(self, axis: str, n: int) -> list[dict]:
         """The last ``n`` validated motions of ``axis``, oldest first."""

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cosim.errors import ScenarioError
-from cosim.monitor import MEASUREMENTS, Monitor, MonitorConfig
+from cosim.monitor import MEASUREMENTS, Monitor, MonitorConfig, centred_speed
 from estimator.history import History
 
 _spec = importlib.util.spec_from_file_location(
@@ -138,6 +138,25 @@ def test_identification_request_by_motions_and_by_age():
     end = int(round(IDLE / H)) + n  # the step at which the motion's end is seen
     rise = int(np.argmax(np.array(request[end + 1:]) > 0)) + end + 1
     assert rise - end == pytest.approx(0.02 / H, abs=2)
+
+
+def test_centred_encoder_speed_is_exact_on_a_quadratic_angle_without_delay():
+    """theta = a t^2 / 2 + w0 t (constant acceleration a): the centred difference over 2 k h is exactly
+    the speed a t + w0; a backward difference over the same window gives the speed k h earlier (delay
+    k h = half the window), i.e. low by a k h during the ramp."""
+    a, w0, window = 184.0, 3.0, 1e-3
+    k = 5  # window / (2 h)
+    t = H * np.arange(2000)
+    theta = a * t**2 / 2 + w0 * t
+    fallback = np.full(t.size, -1.0)
+    w = centred_speed(theta, fallback, H, window)
+    np.testing.assert_allclose(w[k:-k], a * t[k:-k] + w0, rtol=1e-9)
+    np.testing.assert_array_equal(w[:k], fallback[:k])
+    np.testing.assert_array_equal(w[-k:], fallback[-k:])
+    backward = (theta[2 * k:] - theta[:-2 * k]) / (2 * k * H)  # at sample 2k.., the sensors' w_enc
+    np.testing.assert_allclose(backward - (a * t[2 * k:] + w0), -a * k * H, rtol=1e-6)
+    # too short for one centred window: the fallback everywhere
+    np.testing.assert_array_equal(centred_speed(theta[:2 * k], fallback[:2 * k], H, window), fallback[:2 * k])
 
 
 def test_config_errors_name_the_key():

@@ -33,20 +33,19 @@ def result(k, validated=True, **extra):
 def test_round_trip_and_read_back(tmp_path):
     db = tmp_path / "h.sqlite"
     with History(db) as h:
-        ids = [h.record("X", result(1), "s1", time=100.0), h.record("X", result(2, validated=False), "s1", time=110.0),
+        ids = [h.record("X", result(1, diagnosis=[]), "s1", time=100.0), h.record("X", result(2, validated=False), "s1", time=110.0),
                h.record("Y", result(3), "s2", time=115.0), h.record("X", result(4), "s1", time=120.0)]
     assert ids == [1, 2, 3, 4]
     with History(db) as h:  # a second instance reads what the first wrote
         last = h.last_validated("X")
         assert last["id"] == 4 and last["motion"] == 4 and last["time"] == 120.0
         assert last["parameters"]["K"] == {"value": 3.004, "std": 0.03, "ci95": [2.984, 3.024]}
-        assert [b["motion"] for b in h.baseline("X", 5)] == [1, 4]
-        assert [b["motion"] for b in h.baseline("X", 1)] == [1]
+        assert [b["motion"] for b in h.baseline("X", 5)] == [1]  # motion 4 had a diagnosis: not healthy
         assert [b["motion"] for b in h.recent_validated("X", 1)] == [4]
         assert h.last_validated("Z") is None and h.axes() == ["X", "Y"]
         stored = h.motions("X")
         assert [m["motion"] for m in stored] == [1, 2, 4]
-        assert stored[1]["validated"] is False and stored[0] == {**result(1), "id": 1, "axis": "X",
+        assert stored[1]["validated"] is False and stored[0] == {**result(1, diagnosis=[]), "id": 1, "axis": "X",
                                                                    "scenario": "s1", "time": 100.0}
     con = sqlite3.connect(db)
     assert con.execute("SELECT COUNT(*) FROM parameters").fetchone()[0] == 4 * len(NAMES)
@@ -54,6 +53,22 @@ def test_round_trip_and_read_back(tmp_path):
         == ("Im1", "offset", 0.22, 0.2)
     assert json.loads(con.execute("SELECT parameters FROM diagnoses WHERE motion_id = 3").fetchone()[0]) == ["R"]
     assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+
+
+def test_baseline_skips_diagnosed_and_invalid_motions(tmp_path):
+    """The healthy baseline is the first n validated motions WITHOUT a diagnosis; theta_{j-1} and the
+    trend still see the diagnosed ones (they are validated)."""
+    db = tmp_path / "h.sqlite"
+    with History(db) as h:
+        for k, kw in enumerate(({}, {"diagnosis": result(0)["diagnosis"]}, {"validated": False}, {}, {}), start=1):
+            h.record("X", result(k, **({"diagnosis": []} | kw)), time=10.0 * k)
+        h.record("Y", result(6, diagnosis=[]), time=60.0)
+    with History(db) as h:  # read back by a new connection, as a monitor does at setup
+        assert [b["motion"] for b in h.baseline("X", 2)] == [1, 4]
+        assert [b["motion"] for b in h.baseline("X", 5)] == [1, 4, 5]
+        assert h.baseline("X", 3)[1]["parameters"]["Cd"]["value"] == 6.004
+        assert [b["motion"] for b in h.recent_validated("X", 3)] == [2, 4, 5]
+        assert h.last_validated("X")["motion"] == 5 and [b["motion"] for b in h.baseline("Y", 3)] == [6]
 
 
 def test_identification_age(tmp_path):

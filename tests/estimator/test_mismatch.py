@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from scipy import stats
+
 from estimator.errors import EstimatorInputError
 from estimator.estimate import MotionData, estimate_motion
 from estimator.mismatch import check_model, residue_check
@@ -62,6 +64,64 @@ def test_whiteness_and_size_rules():
     assert coloured.rms_relative == pytest.approx(np.sqrt(np.mean(slow**2)) / np.ptp(w + slow), rel=1e-12)
     assert not coloured.passed
     assert residue_check("speed", w + 0.1 * slow, w, H, 1e-3, 50.0, 10, 0.01).passed  # coloured but small
+
+
+N, SIGMA, BLOCK = 40000, 0.05, 200  # 4 s at 10 kHz; white residue std; samples per 50 Hz block
+W = 70 * np.sin(np.linspace(0, 6, N))  # simulated speed [rad/s]
+
+
+def test_burst_test_catches_a_short_burst_that_ljung_box_misses():
+    """White residue, plus one 50 ms burst of k standard errors of a block mean (2.5 blocks of 20 ms).
+
+    Without it both tests pass; with it the burst test rejects every seed while Ljung-Box, which sums
+    autocorrelations over the whole motion, still passes nearly always. burst_z is the largest of the
+    two fully covered block means over the robust scale: k + E[max of 2 N(0, 1)] = k + 1/sqrt(pi) on
+    average, and burst_p the Sidak p-value of the largest of 200 block means."""
+    k, alpha, sb = 6.0, 1e-3, SIGMA / np.sqrt(BLOCK)
+    z, ljung_box_passed = [], 0
+    for seed in range(20):
+        r = SIGMA * np.random.default_rng(seed).standard_normal(N)
+        white = residue_check("speed", W + r, W, H, alpha, 50.0, 10, 1e-4)
+        assert white.p_value >= alpha and white.burst_p >= alpha and white.passed
+        r[20000:20500] += k * sb  # starts on a block boundary
+        burst = residue_check("speed", W + r, W, H, alpha, 50.0, 10, 1e-4)
+        assert burst.burst_p < alpha and not burst.passed  # not white, and above rms_tol = 1e-4 of the range
+        assert burst.burst_p == pytest.approx(N // BLOCK * 2 * stats.norm.sf(burst.burst_z), rel=1e-3)
+        z.append(burst.burst_z)
+        ljung_box_passed += burst.p_value >= alpha
+    assert ljung_box_passed >= 18
+    assert np.mean(z) == pytest.approx(k + 1 / np.sqrt(np.pi), abs=0.5)
+
+
+@pytest.mark.parametrize("length_s, expected", [(0.05, 1.0), (0.0125, 0.5), (0.2, 1.0)])
+def test_worst_window_rms_of_a_known_burst(length_s, expected):
+    """A burst of amplitude A on a zero residue: the worst 50 ms window holds min(length, 50 ms) of it,
+    so its RMS is A sqrt(min(length, 50 ms) / 50 ms); the whole-motion RMS is A sqrt(length / 4 s)."""
+    amplitude, start = 0.7, 15000
+    r = np.zeros(N)
+    r[start:start + int(round(length_s / H))] = amplitude
+    c = residue_check("speed", W + r, W, H, 1e-3, 50.0, 10, 0.01)
+    span = np.ptp(W + r)
+    assert c.peak_rms_relative == pytest.approx(amplitude * expected / span, rel=1e-9)
+    assert c.rms_relative == pytest.approx(amplitude * np.sqrt(length_s / (N * H)) / span, rel=1e-9)
+
+
+def test_edge_s_leaves_the_ends_out():
+    """A large burst in the first 50 ms (a filter transient) and a small one mid-motion: with edge_s = 0.1 s
+    the worst window and the burst test see only the small one."""
+    big, small, sb = 2.0, 0.1, SIGMA / np.sqrt(BLOCK)
+    r = SIGMA * np.random.default_rng(3).standard_normal(N)
+    r[:500] += big
+    exact = np.zeros(N)
+    exact[:500], exact[20000:20500] = big, small
+    for edge_s, amplitude in ((0.0, big), (0.1, small)):
+        peak = residue_check("speed", W + exact, W, H, 1e-3, 50.0, 10, 0.01, edge_s=edge_s).peak_rms_relative
+        assert peak == pytest.approx(amplitude / np.ptp(W + exact), rel=1e-9)
+        c = residue_check("speed", W + r, W, H, 1e-3, 50.0, 10, 0.01, edge_s=edge_s)
+        if edge_s:
+            assert c.burst_p > 1e-3 and c.burst_z < 4
+        else:
+            assert c.burst_z == pytest.approx(big / sb, rel=0.15) and c.burst_p < 1e-100
 
 
 def test_bad_input_is_named():

@@ -1,7 +1,8 @@
 """Measurement validation on the real plant model with injected sensor faults (EQUATIONS.md section 6).
 
-The plant is the closed-loop CasADi feed-drive model (RK4, 1e-5 s substeps, 10 kHz output) following
-a round-trip trapezoid 0 -> +70 -> 0 -> -70 -> 0 rad/s, interpolated linearly inside each step.
+The plant is the closed-loop CasADi feed-drive model (``estimator.design.simulate_closed_loop``: RK4,
+1e-5 s substeps, 10 kHz output) following a round-trip trapezoid 0 -> +70 -> 0 -> -70 -> 0 rad/s,
+interpolated linearly inside each step; parameter steps during a motion use the same RK4 rollout.
 Sensors apply eq. 9 (gain, offset, white noise) to its true signals; the encoder is quantised to
 10000 counts/rev and differentiated. ``plant_motion`` and ``measure`` are loaded (by path) by the
 other monitor tests.
@@ -10,12 +11,13 @@ from __future__ import annotations
 
 import functools
 
-import casadi as ca
 import numpy as np
 import pytest
 
+from estimator.design import simulate_closed_loop
 from estimator.errors import EstimatorInputError
 from estimator.filtering import FilterSpec
+from estimator.simulation import rk4_step
 from estimator.validation import (ValidationOptions, gain_ratio, model_reference, noise_std, residue_test,
                                   validate_measurements)
 from models import feed_drive
@@ -25,6 +27,8 @@ ACCEL, W_MAX = 184.0, 70.0
 FILTER = FilterSpec(100.0)
 NOISE = {"Im1": 0.05, "Im2": 0.05, "u": 0.2, "u_ref": 0.2, "w_tach": 0.05}
 COUNTS = 10000  # 2500 lines x 4
+MODEL = feed_drive()
+NOMINAL = MODEL.nominal()
 
 
 def speed_reference(plateau: float = 0.8, rest: float = 0.1) -> np.ndarray:
@@ -39,36 +43,30 @@ def speed_reference(plateau: float = 0.8, rest: float = 0.1) -> np.ndarray:
     return np.concatenate(out)
 
 
-@functools.lru_cache(maxsize=4)
-def _stepper(n: int) -> ca.Function:
-    m = feed_drive()
-    f, g = m.rhs_function(), m.output_function()
-    x, u0, p = m.vectors()
-    u1 = ca.SX.sym("u1", u0.shape[0])
-    hs, xk = H / 10, x
-    for j in range(10):
-        ua, um, ub = (u0 + (u1 - u0) * (j + c) / 10 for c in (0.0, 0.5, 1.0))
-        k1 = f(xk, ua, p)
-        k2 = f(xk + hs / 2 * k1, um, p)
-        k3 = f(xk + hs / 2 * k2, um, p)
-        k4 = f(xk + hs * k3, ub, p)
-        xk = xk + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("step", [x, u0, u1, p], [xk, g(xk, u1, p)]).mapaccum("steps", n)
+def _with_steps(w_ref: np.ndarray, params: dict, steps: list) -> dict:
+    """The closed loop of ``simulate_closed_loop`` with parameter steps during the motion (which it holds
+    constant): the same RK4 rollout, one parameter column per sample."""
+    names = [v.name for v in MODEL.parameters]
+    n = w_ref.size
+    P = np.tile(np.array([(NOMINAL | params)[k] for k in names])[:, None], (1, n + 1))
+    for name, value, t_change in steps:
+        P[names.index(name), int(round(t_change / H)):] = value
+    U = np.zeros((len(MODEL.inputs), n + 1))
+    U[[v.name for v in MODEL.inputs].index("w_ref")] = np.append(w_ref, w_ref[-1])
+    rollout = rk4_step(MODEL.rhs_function(), 10).mapaccum("rollout", n, [0], [0])
+    X = np.hstack([np.zeros((len(MODEL.states), 1)),
+                   np.asarray(rollout(np.zeros(len(MODEL.states)), np.vstack([U[:, :-1], U[:, 1:]]), P[:, :-1], H))])
+    Y = np.asarray(MODEL.output_function().map(n + 1)(X, U, P))
+    return {v.name: Y[k] for k, v in enumerate(MODEL.outputs)}
 
 
 @functools.lru_cache(maxsize=16)
 def _plant(changes: tuple, plateau: float) -> dict:
-    m = feed_drive()
     w_ref = speed_reference(plateau)
-    n = w_ref.size
-    names = [v.name for v in m.parameters]
-    P = np.tile(np.array([m.nominal()[k] for k in names])[:, None], (1, n))
-    for name, value, t_change in changes:
-        P[names.index(name), int(round(t_change / H)):] = value
-    U = np.vstack([w_ref, np.zeros(n), np.zeros(n)])
-    U1 = np.hstack([U[:, 1:], U[:, -1:]])
-    _, Y = _stepper(n)(np.zeros(len(m.states)), U, U1, P)
-    y = dict(zip([o.name for o in m.outputs], np.asarray(Y)))
+    params = {name: value for name, value, t_change in changes if t_change <= 0}
+    steps = [c for c in changes if c[2] > 0]
+    out = _with_steps(w_ref, params, steps) if steps else simulate_closed_loop(w_ref, H, params)
+    y = {k: v[1:] for k, v in out.items()}  # y[k] at (k + 1) h, after the k-th step of the reference
     for v in y.values():
         v.setflags(write=False)
     return y
@@ -97,7 +95,6 @@ def measure(true: dict, seed: int, **faults: tuple[float, float]) -> dict:
     return out
 
 
-NOMINAL = feed_drive().nominal()
 ELECTRICAL = {k: NOMINAL[k] for k in ("R", "L", "K")}
 
 

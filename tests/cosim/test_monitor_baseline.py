@@ -1,0 +1,94 @@
+"""Diagnosis while the healthy baseline is being learnt (and kept out of it), across restarts.
+
+A worn axis (paper Table I: Cd +50 %, ft +75 %) seen while the baseline holds fewer than
+``baseline_motions`` healthy motions is diagnosed against the healthy motions accepted so far, with
+the usual drift test, and is not added to the baseline; the history's baseline skips it, so a monitor
+started later on the same database does not learn it either.
+
+Plant data: the closed-loop CasADi model with redundant sensors of tests/estimator/test_validation.py.
+"""
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from cosim.cli import main
+from cosim.monitor import MonitorConfig, MonitorPipeline
+from estimator.diagnosis import DiagnosisOptions
+from estimator.history import History
+
+_spec = importlib.util.spec_from_file_location(
+    "validation_plant", Path(__file__).parents[1] / "estimator" / "test_validation.py")
+plant = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(plant)
+H = plant.H
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+WEAR = {"bearing or slide-way wear", "lack or ageing of lubricating oil"}
+CD, FT = plant.NOMINAL["Cd"], plant.NOMINAL["ft"]
+WORN = (("Cd", 1.5 * CD, 0.0), ("ft", 1.75 * FT, 0.0))
+
+
+def process(pipeline: MonitorPipeline, motion: int, changes=()) -> dict:
+    signals = plant.measure(plant.plant_motion(changes), seed=40 + motion)
+    return pipeline.process(signals, H, 0.0, motion, time=1000.0 * motion).result
+
+
+def assert_wear(result: dict) -> None:
+    """Wear / lubrication from Cd and ft, each sized against the healthy reference."""
+    assert result["validated"] and {d["fault"] for d in result["diagnosis"]} == WEAR
+    for d in result["diagnosis"]:
+        assert d["parameters"] == ["Cd", "ft"]
+        for ev, truth in zip(d["evidence"], (0.5, 0.75)):
+            assert ev["relative_change"] == pytest.approx(truth, abs=0.03)
+            assert ev["z_baseline"] > DiagnosisOptions().z_crit
+
+
+def test_worn_motion_during_baseline_is_diagnosed_and_kept_out(tmp_path):
+    db = tmp_path / "history.sqlite"
+    config = MonitorConfig(db=str(db), baseline_motions=3)
+    with History(db) as history:
+        pipe = MonitorPipeline(config, history, "X")
+        first = process(pipe, 1)
+        assert first["diagnosis"] == [] and "healthy baseline: motion 1 of 3" in first["notes"]
+        worn = process(pipe, 2, WORN)
+        assert_wear(worn)
+        assert ("healthy baseline incomplete (1 of 3): drift diagnosed against the 1 healthy motion(s) so far; "
+                "not added to the baseline") in worn["notes"]
+        assert len(pipe.baseline_sets) == 1 and pipe.last_validated is worn["parameters"]  # theta_{j-1} is worn
+    with History(db) as history:  # a restart reads the same memory back from SQLite
+        pipe = MonitorPipeline(config, history, "X")
+        assert pipe.baseline_sets == [first["parameters"]] and pipe.last_validated == worn["parameters"]
+        # still worn: unchanged against theta_{j-1}, but diagnosed against the healthy motion
+        again = process(pipe, 3, WORN)
+        assert_wear(again)
+        for d in again["diagnosis"]:
+            assert all(abs(ev["relative_change"]) > 0.4 and abs(ev["z_last"]) < 5 for ev in d["evidence"])
+        # a healthy motion after the worn ones joins the baseline (no drift against the healthy reference)
+        healthy = process(pipe, 4)
+        assert healthy["diagnosis"] == [] and "healthy baseline: motion 2 of 3" in healthy["notes"]
+        assert [b["motion"] for b in history.baseline("X", 3)] == [1, 4]
+
+
+@pytest.mark.slow
+def test_cosim_run_tool_change_then_worn_axis(tmp_path, monkeypatch, feeddrive_fmu, capsys):
+    """The user's case: ``cosim run`` of the two examples on the default history runs/history.sqlite."""
+    monkeypatch.chdir(tmp_path)
+    for name in ("tool_change", "worn_axis", "tool_change"):
+        assert main(["run", str(EXAMPLES / f"{name}.yaml"), "--no-progress"]) == 0
+    capsys.readouterr()
+    reports = {p.parent.name: json.loads(p.read_text())["motions"] for p in Path("runs").glob("*/report.json")}
+    healthy, again = (reports[k][0] for k in sorted(k for k in reports if k.startswith("tool-change")))
+    (worn,) = next(m for k, m in reports.items() if k.startswith("worn-axis"))
+    assert healthy["validated"] and healthy["diagnosis"] == []
+    assert worn["validated"] and {d["fault"] for d in worn["diagnosis"]} == WEAR
+    for d in worn["diagnosis"]:  # the plant: Cd 1.2 -> 1.8 N m (+50 %), ft 0.02 -> 0.035 N m s/rad (+75 %)
+        assert [ev["relative_change"] for ev in d["evidence"]] == pytest.approx([0.5, 0.75], abs=0.03)
+    assert any("not added to the baseline" in n for n in worn["notes"])
+    assert again["diagnosis"] == [] and "healthy baseline: motion 2 of 3" in again["notes"]
+    with History("runs/history.sqlite") as history:
+        stored = history.motions("X")
+        assert [m["scenario"] for m in stored] == ["tool-change", "worn-axis", "tool-change"]
+        assert [b["id"] for b in history.baseline("X", 3)] == [stored[0]["id"], stored[2]["id"]]
