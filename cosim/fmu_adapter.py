@@ -12,6 +12,12 @@ log messages go to the logger ``cosim.fmu.<name>``; the last one is kept for the
 
 Per-step cost: the hot path calls the FMU's fmi2SetReal / fmi2DoStep / fmi2GetReal through ctypes
 with value-reference and value arrays allocated once in ``setup``.
+
+Input hold (``plant.input_hold``, Co-Simulation). ``zoh``: the FMU holds each input over the step.
+``foh``: after the values of step n the adapter also sets, with fmi2SetRealInputDerivatives, the
+slope ``(value_n - value_(n-1)) / h`` of every continuous input (0 at the first step), so that an FMU
+with ``canInterpolateInputs`` integrates step n with the linear extrapolation
+``u(t) = value_n + slope (t - t_n)``: a sampled ramp is a ramp again, not a staircase.
 """
 from __future__ import annotations
 
@@ -64,6 +70,7 @@ class FMUComponent(Component):
         self._unzip: str | None = None
         self._state = "new"  # new -> instantiated -> running -> failed / fatal -> terminated
         self._k = 0
+        self.input_hold = "zoh"  # the effective plant.input_hold, set in setup
 
     # -- the choke point ------------------------------------------------------------------------
     def _check(self, status: int, func: Any, args: tuple) -> int:
@@ -148,8 +155,14 @@ class FMUComponent(Component):
             self.get_outputs = self._get_outputs_identity
         self._c = fmu.component
         self._set_real, self._get_real = fmu.dll.fmi2SetReal, fmu.dll.fmi2GetReal
+        try:
+            self.input_hold = cfg.hold(md)
+        except ValueError as exc:
+            raise ScenarioError(f"{self.name}: plant.input_hold: {exc}") from None
         if cs:
             self._do_step = fmu.dll.fmi2DoStep
+            if self.input_hold == "foh":
+                self._start_foh(variables, in_vars)
         else:
             self._start_me(md, t0)
             self.step = self._step_me
@@ -168,6 +181,30 @@ class FMUComponent(Component):
     def step(self, n: int) -> None:
         c, h = self._c, self._h
         self._set_real(c, self._uvr, self._nu, self._u)
+        self._do_step(c, self._t0 + n * h, h, 1)
+        self._k = n + 1
+        self._get_real(c, self._yvr, self._ny, self._y)
+
+    def _start_foh(self, variables: dict, in_vars: list[str]) -> None:
+        cont = [k for k, name in enumerate(in_vars) if variables[name].variability == "continuous"]
+        self._foh = [(k, j) for j, k in enumerate(cont)]  # (input index, derivative index)
+        self._dvr = (ctypes.c_uint * len(cont))(*[self._uvr[k] for k in cont])
+        self._du = (ctypes.c_double * len(cont))()
+        self._order = (ctypes.c_int * len(cont))(*[1] * len(cont))
+        self._u_prev: list[float] | None = None  # the values of the previous step, from the first step on
+        self._set_derivatives = self._fmu.dll.fmi2SetRealInputDerivatives
+        self.step = self._step_foh
+
+    def _step_foh(self, n: int) -> None:
+        c, h, u, du, prev = self._c, self._h, self._u, self._du, self._u_prev
+        self._set_real(c, self._uvr, self._nu, u)
+        if prev is None:  # the first step has no previous value: slope 0
+            prev = self._u_prev = u[:]
+        for k, j in self._foh:
+            v = u[k]
+            du[j] = (v - prev[k]) / h
+            prev[k] = v
+        self._set_derivatives(c, self._dvr, len(du), self._order, du)
         self._do_step(c, self._t0 + n * h, h, 1)
         self._k = n + 1
         self._get_real(c, self._yvr, self._ny, self._y)
@@ -249,7 +286,7 @@ class FMUComponent(Component):
 
     def report(self) -> dict:
         cfg = self.config
-        return {"fmu": cfg.fmu, "sha256": cfg.sha256, "interface": cfg.interface,
+        return {"fmu": cfg.fmu, "sha256": cfg.sha256, "interface": cfg.interface, "input_hold": self.input_hold,
                 "map": {r: e.model_dump() for r, e in cfg.map.items()}, "last_log": self.last_log}
 
     def terminate(self) -> None:

@@ -26,6 +26,18 @@ system is only mildly stiff, so an implicit solver would cost a Newton iteration
 gain; RK4 also keeps the step a fixed sequence of generated expressions (deterministic, bit
 reproducible for fmi2GetFMUstate round trips). A larger model (smaller ``w_eps``, stiffer loops)
 needs a smaller ``cs_substep``, which is why it is an FMU parameter rather than a constant.
+
+Input interpolation (Co-Simulation, ``canInterpolateInputs="true"``). A master may give each
+continuous input a first time derivative with ``fmi2SetRealInputDerivatives`` (order 1 only). As
+FMI 2.0 (section 4.2.1) says, inputs and their derivatives are set with respect to the beginning of a
+communication step: ``fmi2DoStep(tc, h)`` integrates with ``u(t) = u + du (t - tc)``, evaluated at
+every RK4 stage time, where ``u`` is the input's value and ``du`` its derivative as last set. Like
+values, a derivative stays set until the next ``fmi2SetRealInputDerivatives`` on that input: a master
+interpolating linearly sets value and derivative before every step; ``fmi2SetReal`` leaves the
+derivative alone, and derivatives start at 0 (instantiation, ``fmi2Reset``), so a master that never
+sets one gets held inputs (zero-order hold), bit-identical to an FMU without interpolation.
+Derivatives are part of the FMU state (``fmi2GetFMUstate``). Model Exchange has none (the function
+returns fmi2Error there): its inputs are whatever the master sets at each time.
 """
 from __future__ import annotations
 
@@ -147,20 +159,23 @@ def fmu_variables(model: Model, cs_substep: float = DEFAULT_CS_SUBSTEP) -> list[
 
 
 def _casadi_functions(model: Model) -> list[ca.Function]:
-    """``<name>_rhs(x,u,p)``, ``<name>_out(x,u,p)`` (calculated outputs) and ``<name>_rk4(x,u,p,dt)``."""
+    """``<name>_rhs(x,u,p)``, ``<name>_out(x,u,p)`` (calculated outputs) and
+    ``<name>_rk4(x,u,du,p,dt,tau)``: one RK4 substep from ``tau`` to ``tau + dt`` [s after the
+    communication point] with the inputs ``u + du * t`` (first-order hold; ``du = 0``: held inputs)."""
     x, u, p = model.vectors()
     rhs = model.rhs_function(f"{model.name}_rhs")
     state_names = {v.name for v in model.states}
     y = model.output_expressions()
     calculated = [k for k, v in enumerate(model.outputs) if v.name not in state_names]
     out = ca.Function(f"{model.name}_out", [x, u, p], [y[calculated]], ["x", "u", "p"], ["y"])
-    dt = ca.SX.sym("dt")
-    k1 = rhs(x, u, p)
-    k2 = rhs(x + dt / 2 * k1, u, p)
-    k3 = rhs(x + dt / 2 * k2, u, p)
-    k4 = rhs(x + dt * k3, u, p)
-    rk4 = ca.Function(f"{model.name}_rk4", [x, u, p, dt], [x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)],
-                      ["x", "u", "p", "dt"], ["x_next"])
+    du = ca.SX.sym("du", u.numel())
+    dt, tau = ca.SX.sym("dt"), ca.SX.sym("tau")
+    k1 = rhs(x, u + du * tau, p)
+    k2 = rhs(x + dt / 2 * k1, u + du * (tau + dt / 2), p)
+    k3 = rhs(x + dt / 2 * k2, u + du * (tau + dt / 2), p)
+    k4 = rhs(x + dt * k3, u + du * (tau + dt), p)
+    rk4 = ca.Function(f"{model.name}_rk4", [x, u, du, p, dt, tau], [x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)],
+                      ["x", "u", "du", "p", "dt", "tau"], ["x_next"])
     return [rhs, out, rk4]
 
 
@@ -225,7 +240,8 @@ def _xml(model: Model, variables: list[FMUVariable]) -> str:
         "variableNamingConvention": "structured", "numberOfEventIndicators": "0"})
     state_ability = {"modelIdentifier": model.name, "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true"}
     ET.SubElement(root, "ModelExchange", {**state_ability, "completedIntegratorStepNotNeeded": "true"})
-    ET.SubElement(root, "CoSimulation", {**state_ability, "canHandleVariableCommunicationStepSize": "true"})
+    ET.SubElement(root, "CoSimulation", {**state_ability, "canHandleVariableCommunicationStepSize": "true",
+                                         "canInterpolateInputs": "true"})
     units = ET.SubElement(root, "UnitDefinitions")
     for unit in sorted({v.unit for v in variables}):
         ET.SubElement(units, "Unit", {"name": unit})

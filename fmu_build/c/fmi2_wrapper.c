@@ -6,7 +6,9 @@
  *   VR_X, VR_U, VR_P, VR_Y, VR_DX   start of each block in the flat real array r[NR]
  *   VR_CS_SUBSTEP               value reference of the fixed Co-Simulation substep [s]
  *   MODEL_GUID, MODEL_RHS, MODEL_OUT, MODEL_STEP (+ _WORK)   CasADi functions
- *       rhs(x, u, p) -> dx/dt,  out(x, u, p) -> y,  step(x, u, p, dt) -> x after one RK4 substep
+ *       rhs(x, u, p) -> dx/dt,  out(x, u, p) -> y,
+ *       step(x, u, du, p, dt, tau) -> x after one RK4 substep from tau to tau + dt (time since the
+ *       communication point) with the inputs u + du t
  *   VR_NAME[], VR_START[], VR_MIN[], VR_MIN_STRICT[], VR_MAX[], VR_KIND[]   per value reference;
  *       VR_KIND: 's' state, 'i' input, 't' tunable parameter, 'f' fixed parameter, 'c' calculated.
  *
@@ -17,6 +19,11 @@
  * Bad input (unknown value reference, non-finite value, value outside the model's bounds, setting a
  * fixed parameter after initialisation) returns fmi2Error with a log message and leaves the
  * instance unchanged and usable. A step that would produce a non-finite state is rolled back.
+ *
+ * Input interpolation (Co-Simulation): fmi2SetRealInputDerivatives sets du/dt (order 1) of continuous
+ * inputs; fmi2DoStep(tc, h) uses u(t) = u + du (t - tc), FMI 2.0's "with respect to the beginning of a
+ * communication step". A derivative stays until the next fmi2SetRealInputDerivatives on that input
+ * (fmi2SetReal keeps it), starts at 0, and is part of the FMU state.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -34,6 +41,7 @@ typedef enum { M_INSTANTIATED, M_INIT, M_STEP, M_EVENT, M_TERMINATED } Mode;
 /* Everything that fmi2GetFMUstate saves; plain data, so it serialises with memcpy. */
 typedef struct {
     double r[NR];
+    double du[NU]; /* first time derivatives of the inputs [unit/s], set with fmi2SetRealInputDerivatives */
     double time;
     Mode mode;
 } Snapshot;
@@ -67,19 +75,19 @@ static void log_error(Instance *c, const char *fmt, ...) {
         return fmi2Error;         \
     } while (0)
 
-static int eval(Instance *c, casadi_fn f, const double *x, const double *dt, double *out) {
-    c->arg[0] = x;
+/* f(x, u, p) of the current state and inputs into out */
+static void eval(Instance *c, casadi_fn f, double *out) {
+    c->arg[0] = c->s.r + VR_X;
     c->arg[1] = c->s.r + VR_U;
     c->arg[2] = c->s.r + VR_P;
-    c->arg[3] = dt;
     c->res[0] = out;
-    return f(c->arg, c->res, c->iw, c->w, 0);
+    f(c->arg, c->res, c->iw, c->w, 0);
 }
 
 static void update(Instance *c) {
     if (!c->dirty) return;
-    eval(c, MODEL_OUT, c->s.r + VR_X, NULL, c->s.r + VR_Y);
-    eval(c, MODEL_RHS, c->s.r + VR_X, NULL, c->s.r + VR_DX);
+    eval(c, MODEL_OUT, c->s.r + VR_Y);
+    eval(c, MODEL_RHS, c->s.r + VR_DX);
     c->dirty = 0;
 }
 
@@ -150,7 +158,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi2String
         return NULL;
     }
     casadi_work_fn works[] = {MODEL_RHS_WORK, MODEL_OUT_WORK, MODEL_STEP_WORK};
-    casadi_int n_arg = 4, n_res = 1, n_iw = 1, n_w = 1;
+    casadi_int n_arg = 6, n_res = 1, n_iw = 1, n_w = 1;
     for (size_t k = 0; k < sizeof works / sizeof works[0]; k++) {
         casadi_int a, r, iw, w;
         works[k](&a, &r, &iw, &w);
@@ -216,6 +224,7 @@ fmi2Status fmi2Terminate(fmi2Component comp) {
 fmi2Status fmi2Reset(fmi2Component comp) {
     Instance *c = comp;
     memcpy(c->s.r, VR_START, sizeof c->s.r);
+    memset(c->s.du, 0, sizeof c->s.du);
     c->s.time = 0.0;
     c->s.mode = M_INSTANTIATED;
     c->dirty = 1;
@@ -384,8 +393,20 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real nomina
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {
-    (void)vr; (void)nvr; (void)order; (void)value;
-    FAIL(comp, "fmi2SetRealInputDerivatives: not provided (canInterpolateInputs is false)");
+    Instance *c = comp;
+    const char *fn = "fmi2SetRealInputDerivatives";
+    if (c->type != fmi2CoSimulation) FAIL(c, "%s: a Co-Simulation function, this instance is Model Exchange", fn);
+    if (c->s.mode == M_TERMINATED) FAIL(c, "%s: called after fmi2Terminate", fn);
+    for (size_t k = 0; k < nvr; k++) { /* all or nothing */
+        if (vr[k] >= NR) FAIL(c, "%s: unknown value reference %u (this FMU has 0..%d)", fn, vr[k], NR - 1);
+        if (VR_KIND[vr[k]] != 'i') FAIL(c, "%s: %s is not an input", fn, VR_NAME[vr[k]]);
+        if (order[k] != 1)
+            FAIL(c, "%s: order %d for %s; this FMU interpolates inputs linearly (order 1 only)", fn, (int)order[k],
+                 VR_NAME[vr[k]]);
+        if (!isfinite(value[k])) FAIL(c, "%s: der(%s) = %g is not a finite number", fn, VR_NAME[vr[k]], value[k]);
+    }
+    for (size_t k = 0; k < nvr; k++) c->s.du[vr[k] - VR_U] = value[k];
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
@@ -405,11 +426,19 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
         FAIL(c, "fmi2DoStep: step size %g must be positive and finite", h);
     double n = ceil(h / c->s.r[VR_CS_SUBSTEP] - 1e-9);
     if (n < 1.0) n = 1.0;
-    double dt = h / n;
+    double dt = h / n, tau;
     double x[NX];
     memcpy(x, c->s.r + VR_X, sizeof x);
+    c->arg[0] = x;
+    c->arg[1] = c->s.r + VR_U;
+    c->arg[2] = c->s.du;
+    c->arg[3] = c->s.r + VR_P;
+    c->arg[4] = &dt;
+    c->arg[5] = &tau;
+    c->res[0] = c->xnext;
     for (long k = 0; k < (long)n; k++) {
-        eval(c, MODEL_STEP, x, &dt, c->xnext);
+        tau = k * dt; /* integer substep count: no accumulated rounding */
+        MODEL_STEP(c->arg, c->res, c->iw, c->w, 0);
         memcpy(x, c->xnext, sizeof x);
     }
     if (!all_finite(x, NX))

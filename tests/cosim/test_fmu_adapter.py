@@ -16,7 +16,7 @@ SCENARIO = """\
 name: adapter
 step: 1.0e-4
 stop_time: {stop}
-plant: {{fmu: builtin, interface: {interface}}}
+plant: {{fmu: builtin, interface: {interface}, input_hold: zoh}}
 sensors: {{seed: 1}}
 nc:
   program:
@@ -37,7 +37,8 @@ def test_co_simulation_and_model_exchange_agree(tmp_path, feeddrive_fmu):
     for name in ("plant.current", "plant.speed", "plant.voltage", "plant.position"):
         scale = np.abs(cs[name]).max()
         assert scale > 0
-        # CS: RK4 with 1e-5 s substeps; ME: CVode at rtol 1e-8, restarted at every input step
+        # CS: RK4 with 1e-5 s substeps; ME: CVode at rtol 1e-8, restarted at every input step; both
+        # hold the inputs over each step (ME has no input derivatives, so CS runs with input_hold zoh)
         np.testing.assert_allclose(me[name], cs[name], rtol=0, atol=1e-5 * scale, err_msg=name)
     assert abs(cs["plant.position"][-1] - 0.03) < 2e-5  # settling through the kv = 30 1/s position loop
 
@@ -126,3 +127,56 @@ def test_discard_and_fatal_stop_with_their_own_message(flaky_fmu, mode, cls, pat
             seen.append(plant.get_outputs()[0])
     plant.terminate()
     assert seen == [1.0, 3.0, 5.0]  # the input map 2 x + 1, then the failing step at t = 0.003 s
+
+
+def _direct_run(fmu, speed_refs, h, foh: bool) -> np.ndarray:
+    """The built-in plant driven straight through fmpy: w_ref = 2 x + 1 set before each step and, if
+    ``foh``, its slope (w_ref_n - w_ref_(n-1)) / h (0 at the first step); rows (u, i, w)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    md = read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    unzip = extract(str(fmu))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier)
+    slave.instantiate()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    rows, before = [], None
+    for n, x in enumerate(speed_refs):
+        value = 2.0 * x + 1.0
+        slave.setReal([vr["w_ref"]], [value])
+        if foh:
+            slave.setRealInputDerivatives([vr["w_ref"]], [1], [0.0 if before is None else (value - before) / h])
+        before = value
+        slave.doStep(n * h, h)
+        rows.append(slave.getReal([vr["u"], vr["i"], vr["w"]]))
+    slave.terminate()
+    slave.freeInstance()
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("hold", ["foh", "zoh"])
+def test_input_hold_sets_the_mapped_slope_of_each_step(feeddrive_fmu, hold):
+    """Through the role map w_ref = 2 speed_ref + 1: foh gives the FMU the slope of the mapped values,
+    (w_ref_n - w_ref_(n-1)) / h, 0 at the first step; zoh none. Same FMU calls, same numbers."""
+    h, steps = 1e-4, 300
+    speed_refs = [200.0 * (n * h) + 5e3 * (n * h) ** 2 for n in range(steps)]  # slope changes every step
+    cfg = load_scenario_plant(feeddrive_fmu).model_copy(update={"input_hold": hold})
+    cfg = cfg.model_copy(update={"map": {**cfg.map, "speed_ref": MapEntry(var="w_ref", scale=2.0, offset=1.0)}})
+    plant = FMUComponent("plant", cfg)
+    plant.setup(0.0, h, steps)
+    rows = []
+    try:
+        assert plant.input_hold == hold
+        for n, x in enumerate(speed_refs):
+            plant.set_inputs([x, 0.0])
+            plant.step(n)
+            out = dict(zip(plant.output_names, plant.get_outputs()))
+            rows.append([out["voltage"], out["current"], out["speed"]])
+    finally:
+        plant.terminate()
+    np.testing.assert_array_equal(np.array(rows), _direct_run(feeddrive_fmu, speed_refs, h, hold == "foh"))
+    other = _direct_run(feeddrive_fmu, speed_refs, h, hold != "foh")
+    assert np.abs(np.array(rows)[:, 0] - other[:, 0]).max() > 0.01  # the hold matters for u

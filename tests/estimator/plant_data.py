@@ -53,8 +53,9 @@ def add_noise(data: dict, snr_db: float, seed: int, names=("u", "i", "w")) -> di
 def fmu_closed_loop(fmu: str, h: float = H) -> dict[str, np.ndarray]:
     """Run the plant FMU (Co-Simulation, fmpy's ``simulate_fmu``) over the round trip, output every h.
 
-    The reference is held over each communication step, as the co-simulation master does; the drive's
-    reference input filter (``tau_ref``) keeps the sampled voltage free of the held steps.
+    fmpy holds the reference over each communication step (zero-order hold; its set_input_derivatives
+    option fails on this FMU's table in fmpy 0.3.32), which leaves R and L ~0.2 % low (see
+    tests/cosim/test_input_hold.py; the co-simulation master's default first-order hold has no such bias).
     """
     from fmpy import simulate_fmu
 

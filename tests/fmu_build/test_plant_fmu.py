@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from ctypes import c_double
+from ctypes import c_double, c_int, c_size_t, c_uint, c_void_p
 
 import numpy as np
 import pytest
@@ -259,3 +259,115 @@ def test_model_exchange_derivatives_are_the_paper_equations(instance):
     with pytest.raises(FMICallException):
         sim.fmu.setContinuousStates(x, 6)
     assert sim.log == ["fmi2SetContinuousStates: a state is not a finite number"]
+
+
+# -- input interpolation (Co-Simulation): fmi2SetRealInputDerivatives --------------------------------
+
+U_SLOPE = 200.0  # V/s: u_in ramps from U_STEP to 84 V over 0.3 s
+
+
+def open_loop_ramp_exact(t: np.ndarray) -> np.ndarray:
+    """Exact (i, w, theta) of the linear drive under u_in = U_STEP + U_SLOPE t; shape (len(t), 3).
+    The ramp is the augmented state (1, t): d(1)/dt = 0, dt/dt = 1."""
+    A = np.zeros((5, 5))
+    A[:3, :3] = [[-R / L, -K / L, 0], [K / Jt, -ft / Jt, 0], [0, 1, 0]]
+    A[0, 3:] = U_STEP / L, U_SLOPE / L
+    A[4, 3] = 1.0
+    return np.array([expm(A * tk) @ [0, 0, 0, 1, 0] for tk in t])[:, :3]
+
+
+def _ramp(sim, steps: int, derivative_every_step: bool = True, foh: bool = True) -> np.ndarray:
+    """Set u_in = U_STEP + U_SLOPE t_n before every step n (and its slope if ``foh``); rows (i, w, theta)."""
+    rows = []
+    for n in range(steps):
+        sim.set(u_in=U_STEP + U_SLOPE * n * H)
+        if foh and (derivative_every_step or n == 0):
+            sim.fmu.setRealInputDerivatives([sim.vr["u_in"]], [1], [U_SLOPE])
+        sim.fmu.doStep(n * H, H)
+        rows.append(sim.get("i", "w", "theta"))
+    return np.array(rows)
+
+
+def test_input_derivative_makes_a_ramp_exact(instance, feeddrive_fmu):
+    """u_in given by value + slope at each step: the analytic solution of the linear ODE with a ramp input
+    to 1e-6; the same values held over each step (no derivative) are off by the staircase, ~U_SLOPE h / 2."""
+    assert read_model_description(str(feeddrive_fmu)).coSimulation.canInterpolateInputs
+    steps = 3000
+    exact = open_loop_ramp_exact(np.arange(1, steps + 1) * H)
+    foh, zoh = _ramp(instance(**OPEN_LOOP), steps), _ramp(instance(**OPEN_LOOP), steps, foh=False)
+    for k, name in enumerate(("i", "w", "theta")):
+        assert max_rel_error(foh[:, k], exact[:, k]) < 1e-6, name
+        assert max_rel_error(zoh[:, k], exact[:, k]) > 1e-4, name
+
+
+def test_a_derivative_stays_set_until_the_next_derivative_call(instance):
+    """fmi2SetReal keeps the input's derivative (FMI 2.0: a value stays until its setter is called again):
+    one slope set before the first step gives the same run as setting it before every step."""
+    every, once = instance(**OPEN_LOOP), instance(**OPEN_LOOP)
+    np.testing.assert_array_equal(_ramp(once, 200, derivative_every_step=False), _ramp(every, 200))
+
+
+@pytest.mark.parametrize("serialize", [False, True])
+def test_fmu_state_holds_the_input_derivatives(instance, serialize):
+    sim = instance(**OPEN_LOOP)
+    _ramp(sim, 100)
+    state = sim.fmu.getFMUstate()
+    if serialize:
+        state = sim.fmu.deSerializeFMUstate(sim.fmu.serializeFMUstate(state))
+
+    def run() -> np.ndarray:  # value only: the slope comes from the state
+        rows = []
+        for n in range(100, 200):
+            sim.set(u_in=U_STEP + U_SLOPE * n * H)
+            sim.fmu.doStep(n * H, H)
+            rows.append(sim.get("i", "w", "theta", "u"))
+        return np.array(rows)
+
+    first = run()
+    sim.fmu.setRealInputDerivatives([sim.vr["u_in"]], [1], [-5 * U_SLOPE])
+    sim.fmu.setFMUstate(state)
+    np.testing.assert_array_equal(run(), first)
+    sim.fmu.freeFMUstate(state)
+    np.testing.assert_allclose(first[:, 0], open_loop_ramp_exact(np.arange(101, 201) * H)[:, 0], rtol=1e-6)
+
+
+def test_reset_clears_the_input_derivatives(instance):
+    sim, clean = instance(**OPEN_LOOP), instance(**OPEN_LOOP)
+    sim.fmu.setRealInputDerivatives([sim.vr["u_in"], sim.vr["w_ref"]], [1, 1], [U_SLOPE, 3.0])
+    for s in (sim, clean):
+        s.fmu.reset()
+        s.fmu.setupExperiment(startTime=0.0)
+        s.set(**OPEN_LOOP)
+        s.fmu.enterInitializationMode()
+        s.fmu.exitInitializationMode()
+    np.testing.assert_array_equal(_trajectory(sim), _trajectory(clean))
+
+
+BAD_DERIVATIVES = [
+    ("u_in", 2, 1.0, "order 2 for u_in; this FMU interpolates inputs linearly (order 1 only)"),
+    ("u_in", 0, 1.0, "order 0 for u_in; this FMU interpolates inputs linearly (order 1 only)"),
+    ("R", 1, 1.0, "R is not an input"),
+    ("u", 1, 1.0, "u is not an input"),
+    ("w_ref", 1, math.nan, "der(w_ref) = nan is not a finite number"),
+    ("Tl", 1, -math.inf, "der(Tl) = -inf is not a finite number"),
+    (9999, 1, 1.0, "unknown value reference 9999 (this FMU has 0..{last})"),
+]
+
+
+@pytest.mark.parametrize("name,order,value,message", BAD_DERIVATIVES)
+def test_bad_input_derivative_is_rejected_with_a_log_message_and_no_effect(instance, name, order, value, message):
+    clean, sim = instance(**OPEN_LOOP), instance(**OPEN_LOOP)
+    good = [sim.vr["u_in"]]  # all or nothing: the good entry before the bad one is not applied either
+    vr = name if isinstance(name, int) else sim.vr[name]
+    with pytest.raises(FMICallException, match="fmi2SetRealInputDerivatives failed with status 3"):
+        sim.fmu.setRealInputDerivatives(good + [vr], [1, order], [U_SLOPE, value])
+    assert sim.log == ["fmi2SetRealInputDerivatives: " + message.format(last=len(sim.vr) - 1)]
+    np.testing.assert_array_equal(_trajectory(sim), _trajectory(clean))
+
+
+def test_model_exchange_has_no_input_derivatives(instance):
+    sim = instance("me")  # fmpy's FMU2Model has no wrapper for this Co-Simulation function: call the symbol
+    status = sim.fmu.dll.fmi2SetRealInputDerivatives(c_void_p(sim.fmu.component), (c_uint * 1)(sim.vr["u_in"]),
+                                                     c_size_t(1), (c_int * 1)(1), (c_double * 1)(1.0))
+    assert status == 3  # fmi2Error
+    assert sim.log == ["fmi2SetRealInputDerivatives: a Co-Simulation function, this instance is Model Exchange"]
