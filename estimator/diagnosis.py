@@ -11,9 +11,11 @@ in standard errors that combine both uncertainties: ``z = (theta_j - theta_ref) 
 A parameter has drifted when ``|z| > z_crit`` (two-sided level ``alpha``, default 1e-3: 3.29) AND the
 relative change exceeds ``min_relative`` (default 5 %): a significant but tiny change is not a fault.
 Drifted parameters are mapped to the faults of Table I whose sensitive parameters and direction of
-change explain them; a fault explaining a strict subset of what another explains is dropped (R and K
-both up -> motor heating, not also brush wear). Drifts that no fault explains are reported as
-``unexplained drift``. Directions (Table I gives none; physics does): wear and lack of oil raise the
+change explain them; a fault explaining a strict subset of what another explains is dropped (R up and
+K down -> motor heating, not also brush wear), and so is a fault with more contradictions (a
+precisely measured sensitive parameter that stayed put or moved the wrong way) than another fault
+explaining the same drifts (R up with K and L steady -> brush wear, not also motor heating). Drifts
+that no fault explains are reported as ``unexplained drift``. Directions (Table I gives none; physics does): wear and lack of oil raise the
 friction Cd, ft; a missing work-piece lowers Jt; brush wear and heating raise R; heating and
 demagnetisation lower K; L may move either way.
 
@@ -87,6 +89,7 @@ class Drift:
     z_last: float | None
     trend_per_motion: float | None
     significant: bool
+    std: float = float("nan")  # combined standard error of value - baseline
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -165,7 +168,8 @@ def drifts(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mappin
             continue
         v, s = _value_std(current[name], name)
         b, sb = _value_std(baseline[name], name)
-        z = (v - b) / max(np.hypot(s, sb), np.finfo(float).tiny)
+        std = max(float(np.hypot(s, sb)), np.finfo(float).tiny)
+        z = (v - b) / std
         rel = (v - b) / abs(b) if b != 0 else float("inf") * np.sign(v - b)
         z_last = None
         if last is not None and name in last:
@@ -176,8 +180,19 @@ def drifts(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mappin
         if len(series) >= 3 and b != 0:
             trend = float(np.polyfit(np.arange(len(series)), series, 1)[0] / abs(b))
         significant = abs(z) > options.z_crit and abs(rel) > options.min_rel(name)
-        out.append(Drift(name, v, b, float(rel), float(z), z_last, trend, bool(significant)))
+        out.append(Drift(name, v, b, float(rel), float(z), z_last, trend, bool(significant), std))
     return out
+
+
+def _contradicts(d: Drift | None, direction: int, options: DiagnosisOptions) -> bool:
+    """The parameter moved significantly against ``direction``, or stayed put although a change of
+    ``min_relative`` would have been significant (its resolution is good enough to tell)."""
+    if d is None:
+        return False
+    if d.significant:
+        return direction != 0 and np.sign(d.relative_change) != direction
+    z_at_min = options.min_rel(d.parameter) * abs(d.baseline) / d.std
+    return z_at_min > options.z_crit and abs(d.relative_change) < options.min_rel(d.parameter) / 2
 
 
 def diagnose(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mapping[str, Any] | None = None,
@@ -189,7 +204,8 @@ def diagnose(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mapp
     Table I cannot tell them apart, e.g. wear and lubrication), plus ``unexplained drift`` for the
     drifted parameters no fault explains; an empty list when nothing drifted.
     """
-    evidence = {d.parameter: d for d in drifts(current, baseline, last, recent, options) if d.significant}
+    all_drifts = {d.parameter: d for d in drifts(current, baseline, last, recent, options)}
+    evidence = {p: d for p, d in all_drifts.items() if d.significant}
     if not evidence:
         return []
     explains = {}
@@ -199,6 +215,12 @@ def diagnose(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mapp
         if hit:
             explains[fault] = hit
     kept = [f for f, hit in explains.items() if not any(hit < other for other in explains.values())]
+    # Sensitive parameters that were measured precisely and did not move (or moved the wrong way) speak
+    # against a fault: of the faults explaining the same drifts keep those with the fewest such
+    # contradictions (R up with K and L steady is brush wear, not motor heating).
+    against = {f: sum(_contradicts(all_drifts.get(p), want, options)
+                      for p, want in TABLE_I[f].items() if p not in explains[f]) for f in kept}
+    kept = [f for f in kept if not any(explains[g] >= explains[f] and against[g] < against[f] for g in kept)]
     out = [Diagnosis(f, tuple(sorted(explains[f])), tuple(evidence[p] for p in sorted(explains[f]))) for f in kept]
     rest = sorted(set(evidence) - set().union(*explains.values()))
     if rest:

@@ -68,13 +68,25 @@ def test_table_i_mapping_and_dominance():
         cur = {k: (v * change.get(k, 1.0), 0.001 * v) for k, v in TRUE.items()}
         return {d.fault: d.parameters for d in diagnose(cur, base)}
 
-    assert faults(R=1.2) == {"brush wear": ("R",), "motor heating": ("R",)}
+    # K and L measured to 0.1 % and steady: heating (R, L, K) is contradicted, brush wear is not
+    assert faults(R=1.2) == {"brush wear": ("R",)}
     assert faults(R=1.2, K=0.9) == {"motor heating": ("K", "R")}
-    assert faults(K=0.9) == {"motor heating": ("K",), "demagnetisation": ("K",)}
-    assert faults(L=1.2, K=0.9) == {"motor heating": ("K", "L"), "demagnetisation": ("K", "L")}
+    # R steady: demagnetisation, not heating
+    assert faults(K=0.9) == {"demagnetisation": ("K",)}
+    assert faults(L=1.2, K=0.9) == {"demagnetisation": ("K", "L")}
+    # K rising is against heating's direction: brush wear alone explains R, K is unexplained
+    assert faults(R=1.2, K=1.1) == {"brush wear": ("R",), UNEXPLAINED: ("K",)}
     assert faults(Jt=1.3) == {UNEXPLAINED: ("Jt",)}  # more inertia is not a missing work-piece
     assert faults(Cd=0.8) == {UNEXPLAINED: ("Cd",)}
     assert faults(R=1.02) == {}  # significant (20 standard errors) but below 5 %
+
+
+def test_an_imprecise_steady_parameter_contradicts_nothing():
+    """With R known only to 5 % (a 5 % change would be 0.7 standard errors), a steady R cannot rule
+    out motor heating: K down stays ambiguous between heating and demagnetisation."""
+    base = {k: (v, (0.05 if k == "R" else 0.001) * v) for k, v in TRUE.items()}
+    cur = {k: (v * (0.9 if k == "K" else 1.0), (0.05 if k == "R" else 0.001) * v) for k, v in TRUE.items()}
+    assert {d.fault for d in diagnose(cur, base)} == {"motor heating", "demagnetisation"}
 
 
 def test_drift_evidence_numbers():
