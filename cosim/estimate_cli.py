@@ -21,7 +21,7 @@ import sys
 import numpy as np
 
 from cosim.errors import InputError
-from cosim.recorded import load_recording
+from cosim.recorded import add_recording_arguments, load_recording, mapped_roles, pairs
 from estimator import (
     EstimationOptions,
     EstimatorInputError,
@@ -30,55 +30,31 @@ from estimator import (
     NotEnoughExcitation,
     estimate_motion,
 )
-from estimator.segmentation import MODES, segment
+from estimator.segmentation import segment
 from models import feed_drive
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
          "state": None}
 
 
-def _pairs(items: list[str], what: str) -> dict[str, str]:
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise InputError(f"{what} {item!r}: expected NAME=VALUE")
-        out[key.strip()] = value.strip()
-    return out
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help="CSV file with a header row")
-    parser.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",
-                        help=f"column of a role ({', '.join(ROLES)}); repeat for each role")
-    parser.add_argument("--sample-time", type=float, default=None, metavar="H",
-                        help="sampling period [s] (needed without a time column)")
+    add_recording_arguments(parser, ROLES, EstimationOptions().filter.cutoff_hz)
     parser.add_argument("--known", action="append", default=[], metavar="NAME=VALUE",
                         help="a parameter known in advance, e.g. K=1.05 (mechanical equation only)")
     parser.add_argument("--offset", action="store_true", help="also estimate a constant torque offset T0")
-    parser.add_argument("--filter-cutoff", type=float, default=EstimationOptions().filter.cutoff_hz, metavar="HZ",
-                        help="cut-off of the identical low-pass filter [Hz] (default %(default)s)")
-    parser.add_argument("--segment", choices=MODES, default="auto",
-                        help="motions from the NC state or the speed profile (auto), the NC state (nc) "
-                             "or the whole record (none)")
-    parser.add_argument("--method", choices=("ls", "iv", "oe"), default="iv", help="estimator (default iv)")
-    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
 
 def main(args: argparse.Namespace) -> int:
-    role_map = _pairs(args.map, "--map")
-    unknown = sorted(set(role_map) - set(ROLES))
-    if unknown:
-        raise InputError(f"--map: unknown role(s) {unknown}; roles are {list(ROLES)}")
+    roles = mapped_roles(args, ROLES)
     known = {}
-    for name, value in _pairs(args.known, "--known").items():
+    for name, value in pairs(args.known, "--known").items():
         try:
             known[name] = float(value)
         except ValueError:
             raise InputError(f"--known {name}={value!r}: expected a number") from None
     options = EstimationOptions(method=args.method, filter=FilterSpec(args.filter_cutoff), known=known,
                                 offset=args.offset)
-    rec = load_recording(args.data, role_map, args.sample_time)
+    rec = load_recording(args.data, roles, args.sample_time)
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     speed = sig.get("w")
     if speed is None and "position" in sig:

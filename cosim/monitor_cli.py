@@ -20,11 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from cosim.errors import InputError
-from cosim.estimate_cli import _pairs
 from cosim.history_cli import DEFAULT_DB
 from cosim.monitor import MonitorConfig, MonitorPipeline
-from cosim.recorded import load_recording
-from estimator.segmentation import MODES, segment
+from cosim.recorded import add_recording_arguments, load_recording, mapped_roles
+from estimator.segmentation import segment
 
 #: role -> monitor signal
 ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
@@ -32,31 +31,17 @@ ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help="CSV file with a header row")
-    parser.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",
-                        help=f"column of a role ({', '.join(ROLES)}); repeat for each role")
-    parser.add_argument("--sample-time", type=float, default=None, metavar="H",
-                        help="sampling period [s] (needed without a time column)")
+    add_recording_arguments(parser, ROLES, MonitorConfig().filter_cutoff_hz)
     parser.add_argument("--db", default=DEFAULT_DB, help=f"SQLite history file (default: {DEFAULT_DB})")
     parser.add_argument("--axis", default="X", help="machine/axis id in the history (default X)")
-    parser.add_argument("--segment", choices=MODES, default="auto",
-                        help="motions from the NC state or the speed profile (auto), the NC state (nc) "
-                             "or the whole record (none)")
-    parser.add_argument("--method", choices=("ls", "iv", "oe"), default="iv", help="estimator (default iv)")
-    parser.add_argument("--filter-cutoff", type=float, default=MonitorConfig().filter_cutoff_hz, metavar="HZ",
-                        help="cut-off of the identical low-pass filter [Hz] (default %(default)s)")
     parser.add_argument("--plots", metavar="DIR", help="write the monitor plots of every motion into DIR")
     parser.add_argument("--overwrite", action="store_true", help="replace existing plot files")
-    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
 
 def main(args: argparse.Namespace) -> int:
     from estimator.history import History
 
-    role_map = _pairs(args.map, "--map")
-    unknown = sorted(set(role_map) - set(ROLES))
-    if unknown:
-        raise InputError(f"--map: unknown role(s) {unknown}; roles are {list(ROLES)}")
+    role_map = mapped_roles(args, ROLES)
     missing = [r for r in ("voltage", "current1") if r not in role_map]
     if not {"speed", "position"} & set(role_map):
         missing.append("speed or position")

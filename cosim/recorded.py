@@ -6,15 +6,16 @@ A role map says which column plays which role, e.g. ``{"time": "time", "voltage"
 """
 from __future__ import annotations
 
+import argparse
 import csv
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
+from typing import Iterable, Mapping
 
 import numpy as np
 
-from cosim.errors import DataError
+from cosim.errors import DataError, InputError
 
 #: Fewest samples a recording must have.
 MIN_SAMPLES = 10
@@ -133,3 +134,45 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     if not signals:
         raise DataError(f"{path}: the role map names no signal besides time")
     return Recording(path, h, t0, signals, {k: v for k, v in columns.items() if k != "time"})
+
+
+# -- command-line plumbing shared by ``cosim estimate`` and ``cosim monitor`` --------------------------
+
+
+def pairs(items: list[str], what: str) -> dict[str, str]:
+    """``["a=b", ...]`` from repeated ``NAME=VALUE`` options; ``what`` names the option in errors."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise InputError(f"{what} {item!r}: expected NAME=VALUE")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str], filter_cutoff_hz: float) -> None:
+    """The data file, ``--map``, ``--sample-time``, ``--segment``, ``--method``, ``--filter-cutoff``, ``--json``."""
+    from estimator.segmentation import MODES
+
+    parser.add_argument("data", help="CSV file with a header row")
+    parser.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",
+                        help=f"column of a role ({', '.join(roles)}); repeat for each role")
+    parser.add_argument("--sample-time", type=float, default=None, metavar="H",
+                        help="sampling period [s] (needed without a time column)")
+    parser.add_argument("--segment", choices=MODES, default="auto",
+                        help="motions from the NC state or the speed profile (auto), the NC state (nc) "
+                             "or the whole record (none)")
+    parser.add_argument("--method", choices=("ls", "iv", "oe"), default="iv", help="estimator (default iv)")
+    parser.add_argument("--filter-cutoff", type=float, default=filter_cutoff_hz, metavar="HZ",
+                        help="cut-off of the identical low-pass filter [Hz] (default %(default)s)")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+
+def mapped_roles(args: argparse.Namespace, roles: Iterable[str]) -> dict[str, str]:
+    """The ``--map`` options as role -> column, refusing roles not in ``roles``."""
+    mapping = pairs(args.map, "--map")
+    unknown = sorted(set(mapping) - set(roles))
+    if unknown:
+        raise InputError(f"--map: unknown role(s) {unknown}; roles are {list(roles)}")
+    return mapping
+
