@@ -13,11 +13,12 @@ log messages go to the logger ``cosim.fmu.<name>``; the last one is kept for the
 Per-step cost: the hot path calls the FMU's fmi2SetReal / fmi2DoStep / fmi2GetReal through ctypes
 with value-reference and value arrays allocated once in ``setup``.
 
-Input hold (``plant.input_hold``, Co-Simulation). ``zoh``: the FMU holds each input over the step.
-``foh``: after the values of step n the adapter also sets, with fmi2SetRealInputDerivatives, the
-slope ``(value_n - value_(n-1)) / h`` of every continuous input (0 at the first step), so that an FMU
-with ``canInterpolateInputs`` integrates step n with the linear extrapolation
-``u(t) = value_n + slope (t - t_n)``: a sampled ramp is a ramp again, not a staircase.
+Input hold (``plant.input_hold``). ``zoh``: each input is held over the step. ``foh``: every continuous
+input follows the linear extrapolation ``u(t) = value_n + slope (t - t_n)`` over step n, with
+``slope = (value_n - value_(n-1)) / h`` (0 at the first step), so a sampled ramp is a ramp again, not a
+staircase. In Co-Simulation the adapter passes the slopes with fmi2SetRealInputDerivatives (the FMU
+must declare ``canInterpolateInputs``); in Model Exchange it sets u(t) itself at every right-hand-side
+evaluation of CVode, for any FMU.
 """
 from __future__ import annotations
 
@@ -53,6 +54,21 @@ class _HeldInputs:
 
     def apply(self, *args: Any, **kwargs: Any) -> None:
         pass
+
+
+class _RampedInputs:
+    """First-order hold in Model Exchange: ``apply(t)`` runs before each right-hand side and root function."""
+
+    def __init__(self, plant: "FMUComponent") -> None:
+        n = len(plant._foh)
+        self._plant, self._vr, self._values = plant, plant._dvr, (ctypes.c_double * n)()
+
+    def apply(self, t: float, *args: Any, **kwargs: Any) -> None:
+        p, values = self._plant, self._values
+        dt = t - p._ramp_start
+        for k, j in p._foh:
+            values[j] = p._u[k] + p._du[j] * dt
+        p._set_real(p._c, self._vr, len(values), values)
 
 
 class FMUComponent(Component):
@@ -159,10 +175,10 @@ class FMUComponent(Component):
             self.input_hold = cfg.hold(md)
         except ValueError as exc:
             raise ScenarioError(f"{self.name}: plant.input_hold: {exc}") from None
+        if self.input_hold == "foh":
+            self._start_foh(variables, in_vars)
         if cs:
             self._do_step = fmu.dll.fmi2DoStep
-            if self.input_hold == "foh":
-                self._start_foh(variables, in_vars)
         else:
             self._start_me(md, t0)
             self.step = self._step_me
@@ -192,19 +208,26 @@ class FMUComponent(Component):
         self._du = (ctypes.c_double * len(cont))()
         self._order = (ctypes.c_int * len(cont))(*[1] * len(cont))
         self._u_prev: list[float] | None = None  # the values of the previous step, from the first step on
-        self._set_derivatives = self._fmu.dll.fmi2SetRealInputDerivatives
-        self.step = self._step_foh
+        self._ramp_start = self._t0  # Model Exchange: t_n of the current ramp
+        if self.config.interface == "cs":
+            self._set_derivatives = self._fmu.dll.fmi2SetRealInputDerivatives
+            self.step = self._step_foh
 
-    def _step_foh(self, n: int) -> None:
-        c, h, u, du, prev = self._c, self._h, self._u, self._du, self._u_prev
-        self._set_real(c, self._uvr, self._nu, u)
-        if prev is None:  # the first step has no previous value: slope 0
+    def _update_slopes(self) -> None:
+        """``du <- (u_n - u_(n-1)) / h`` for the continuous inputs (0 at the first step)."""
+        u, du, prev, h = self._u, self._du, self._u_prev, self._h
+        if prev is None:
             prev = self._u_prev = u[:]
         for k, j in self._foh:
             v = u[k]
             du[j] = (v - prev[k]) / h
             prev[k] = v
-        self._set_derivatives(c, self._dvr, len(du), self._order, du)
+
+    def _step_foh(self, n: int) -> None:
+        c, h = self._c, self._h
+        self._set_real(c, self._uvr, self._nu, self._u)
+        self._update_slopes()
+        self._set_derivatives(c, self._dvr, len(self._du), self._order, self._du)
         self._do_step(c, self._t0 + n * h, h, 1)
         self._k = n + 1
         self._get_real(c, self._yvr, self._ny, self._y)
@@ -222,6 +245,7 @@ class FMUComponent(Component):
         class _CVode(CVodeSolver):
             def f(self, t, y, ydot, user_data):  # noqa: ANN001 - ctypes callback
                 try:
+                    self.input.apply(t)  # fmpy applies inputs in the root function only
                     return super().f(t, y, ydot, user_data)
                 except FMIError:  # recorded by the choke point; -1 makes CVode stop
                     return -1
@@ -234,7 +258,8 @@ class FMUComponent(Component):
                               get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
                               get_dx=fmu.getDerivatives, get_z=fmu.getEventIndicators,
                               get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
-                              input=_HeldInputs(), startTime=t0, maxStep=self._h,
+                              input=_RampedInputs(self) if self.input_hold == "foh" else _HeldInputs(),
+                              startTime=t0, maxStep=self._h,
                               relativeTolerance=self.config.tolerance)
 
     def _event_iteration(self) -> float | None:
@@ -251,7 +276,10 @@ class FMUComponent(Component):
         fmu, solver = self._fmu, self._solver
         t, t1 = self._t0 + n * self._h, self._t0 + (n + 1) * self._h
         self._set_real(self._c, self._uvr, self._nu, self._u)
-        solver.reset(t)  # inputs are piecewise constant per step: restart at each discontinuity
+        if self.input_hold == "foh":
+            self._update_slopes()
+            self._ramp_start = t
+        solver.reset(t)  # the inputs' value or slope changes at each step: restart at the discontinuity
         while t < t1 - 1e-9 * self._h:
             t_stop = t1 if self._next_event is None else min(t1, self._next_event)
             try:

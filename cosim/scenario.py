@@ -83,10 +83,11 @@ class PlantConfig(_Strict):
     start: dict[str, float] = {}
     map: dict[Role, MapEntry] = {}
     input_hold: Literal["foh", "zoh"] | None = Field(
-        None, description="how the plant sees its inputs between communication points (interface: cs). "
+        None, description="how the plant sees its inputs between communication points. "
         "foh: first-order hold, the value set at t_n plus the slope (value_n - value_(n-1)) / h given with "
-        "fmi2SetRealInputDerivatives, so a ramping speed reference stays a ramp inside each step (needs an "
-        "FMU declaring canInterpolateInputs, as the built-in plant does); zoh: each value held over the step, "
+        "fmi2SetRealInputDerivatives (interface cs, for an FMU declaring canInterpolateInputs, as the built-in "
+        "plant does) or set by the master inside CVode (interface me, any FMU), so a ramping speed reference "
+        "stays a ramp inside each step; zoh: each value held over the step, "
         "a staircase whose ripple biases the electrical estimates (R, L ~ -0.2 % on the built-in plant). "
         "Default: foh when the FMU supports it, else zoh")
 
@@ -96,14 +97,14 @@ class PlantConfig(_Strict):
         Raises
         ------
         ValueError
-            ``foh`` was asked for but the interface is Model Exchange or the FMU does not declare
-            ``canInterpolateInputs``; the message says what was expected.
+            ``foh`` was asked for in Co-Simulation but the FMU does not declare ``canInterpolateInputs``;
+            the message says what was expected.
         """
-        can = self.interface == "cs" and md.coSimulation is not None and bool(md.coSimulation.canInterpolateInputs)
+        # Model Exchange: the master integrates and interpolates the inputs itself
+        can = self.interface == "me" or (md.coSimulation is not None and bool(md.coSimulation.canInterpolateInputs))
         if self.input_hold == "foh" and not can:
-            why = ("interface me integrates the inputs as set (no input derivatives)" if self.interface == "me"
-                   else "the FMU does not declare canInterpolateInputs")
-            raise ValueError(f"input_hold foh is not available: {why}; expected zoh or no input_hold")
+            raise ValueError("input_hold foh is not available: the FMU does not declare canInterpolateInputs; "
+                             "expected zoh, no input_hold, or interface me")
         return self.input_hold or ("foh" if can else "zoh")
 
 
