@@ -5,7 +5,10 @@ with white noise at 30 dB SNR on u, i, w, sampled at 1 kHz and 10 kHz. For each 
 (best of ``--repeat``) ``estimate_motion`` with method ``ls`` (filter, derivatives, regressions,
 LS with covariance and the excitation check), ``iv`` (LS + iterated split-sample IV) and ``oe``
 (LS + IV + output error), and the baseline: one ``numpy.linalg.lstsq`` of the electrical regression
-(n x 3) on the same data. Targets at 10 kHz: LS <= 10 ms, IV <= 50 ms, OE <= 1 s.
+(n x 3) on the same data; and ``ls+val``: the monitor's measurement validation
+(``estimator.validation.validate_measurements`` on two current sensors, voltage and reference,
+tachometer and encoder) followed by LS. Targets at 10 kHz: LS with validation <= 10 ms, IV <= 50 ms,
+OE <= 1 s.
 
     python benchmarks/bench_estimator.py [--repeat 5]
 
@@ -23,10 +26,11 @@ import numpy as np
 from estimator import EstimationOptions, MotionData, estimate_motion
 from estimator.design import simulate_closed_loop
 from estimator.estimate import prepare
+from estimator.validation import validate_measurements
 
 CORNERS = np.cumsum([0, 0.1, 0.38, 0.9, 0.38, 0.3, 0.38, 0.9, 0.38, 0.28])
 LEVELS = [0, 0, 70, 70, 0, 0, -70, -70, 0, 0]
-TARGET_MS = {"ls": 10.0, "iv": 50.0, "oe": 1000.0}
+TARGET_MS = {"ls+val": 10.0, "iv": 50.0, "oe": 1000.0}
 
 
 def best(fn, repeat: int) -> float:
@@ -38,13 +42,19 @@ def best(fn, repeat: int) -> float:
     return min(times)
 
 
-def motion(h: float, seed: int = 0) -> MotionData:
+def motion(h: float, seed: int = 0) -> tuple[MotionData, dict[str, np.ndarray]]:
+    """The noisy motion, and the redundant measurements of it (a second, independently noisy sensor each)."""
     t = np.arange(int(round(CORNERS[-1] / h))) * h
     sig = simulate_closed_loop(np.interp(t, CORNERS, LEVELS), h)
     rng = np.random.default_rng(seed)
-    noisy = {k: sig[k] + rng.standard_normal(sig[k].size) * np.sqrt(np.mean(sig[k] ** 2)) / 10 ** 1.5
-             for k in ("u", "i", "w")}
-    return MotionData(h, **noisy)
+
+    def noisy(k: str) -> np.ndarray:
+        return sig[k] + rng.standard_normal(sig[k].size) * np.sqrt(np.mean(sig[k] ** 2)) / 10 ** 1.5
+
+    first = {k: noisy(k) for k in ("u", "i", "w")}
+    redundant = {"Im1": first["i"], "Im2": noisy("i"), "u": first["u"], "u_ref": noisy("u"),
+                 "w_tach": first["w"], "w_enc": noisy("w")}
+    return MotionData(h, **first), redundant
 
 
 def main() -> None:
@@ -53,18 +63,21 @@ def main() -> None:
     args = parser.parse_args()
     print(f"{'rate':>7} {'method':>6} {'ms/motion':>10} {'x lstsq':>9} {'target ms':>10}")
     for h in (1e-3, 1e-4):
-        data = motion(h)
+        data, redundant = motion(h)
         reg = prepare(data, EstimationOptions())
         elec = next(r for r in reg.regressions if r.equation == "electrical")
         y, Phi = elec.evaluate(reg.signals)
         base = best(lambda: np.linalg.lstsq(Phi, y, rcond=None), 5 * args.repeat)
         print(f"{1 / h:7.0f} {'lstsq':>6} {1e3 * base:10.3f} {1.0:9.1f} {'':>10}   (baseline, {len(y)} x 3)")
-        for method in ("ls", "iv", "oe"):
-            options = EstimationOptions(method=method)
-            estimate_motion(data, options)  # warm the caches (CasADi functions built once per length)
-            t = best(lambda: estimate_motion(data, options), args.repeat)
-            target = f"{TARGET_MS[method]:10.0f}" if h == 1e-4 else ""
-            print(f"{1 / h:7.0f} {method:>6} {1e3 * t:10.3f} {t / base:9.1f} {target:>10}")
+        runs = {method: (lambda o=EstimationOptions(method=method): estimate_motion(data, o))
+                for method in ("ls", "iv", "oe")}
+        spec = EstimationOptions().filter
+        runs["ls+val"] = lambda: (validate_measurements(redundant, h, None, spec), runs["ls"]())
+        for name in ("ls", "ls+val", "iv", "oe"):
+            runs[name]()  # warm the caches (CasADi functions built once per length)
+            t = best(runs[name], args.repeat)
+            target = f"{TARGET_MS[name]:10.0f}" if h == 1e-4 and name in TARGET_MS else ""
+            print(f"{1 / h:7.0f} {name:>6} {1e3 * t:10.3f} {t / base:9.1f} {target:>10}")
 
 
 if __name__ == "__main__":
