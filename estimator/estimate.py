@@ -103,6 +103,9 @@ class EstimationOptions:
         Samples with ``|w| <`` this [rad/s] are excluded from the equations that use sign(w) ...
     sign_guard : float
         ... and so are ``sign_guard / cutoff_hz`` seconds on either side of them (filter smearing).
+    edge_guard : float
+        ``edge_guard / cutoff_hz`` seconds at each end of the filtered motion (at its start only for a
+        causal filter) are dropped: the filter's start-up transient does not obey the model.
     iv_iterations, iv_tolerance : int, float
         IV iterations at most, and the relative parameter change that ends them.
     max_condition : float
@@ -121,6 +124,7 @@ class EstimationOptions:
     offset: bool = False
     speed_threshold: float = 2.0
     sign_guard: float = 2.0
+    edge_guard: float = 3.0
     iv_iterations: int = 10
     iv_tolerance: float = 1e-4
     max_condition: float = 1e4
@@ -287,6 +291,16 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
         if state in f:
             sig["D" + state], valid = zero_forcing_derivative(f[state], h)
     sig.update({k: v[PAST:len(v) - FUTURE] for k, v in f.items()})
+    # the filter's start-up (both ends for zero phase: sosfiltfilt pads with a mirror image that does
+    # not obey the model) would bias the fits: those samples are dropped, like the derivative's edges
+    edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
+    if edge:
+        keep = slice(edge, -edge if options.filter.zero_phase else None)
+        if len(sig["w"][keep]) < 10:
+            raise NotEnoughExcitation([v.name for v in PHYSICAL if not v.optional],
+                                      f"motion too short: {len(sig['w'])} samples, the filter's start-up "
+                                      f"needs {edge} at each end")
+        sig = {k: v[keep] for k, v in sig.items()}
     sig["sgn_w"] = np.sign(sig["w"])
     free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
     regressions, overrides = [], {}
@@ -449,10 +463,17 @@ def _check(result: MethodResult, options: EstimationOptions) -> None:
 
 def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
     """Ordinary least squares of every regression (eq. 4, 5)."""
-    fits = {}
-    for reg in p.regressions:
+    fits, refused = {}, []
+    for reg in p.regressions:  # every equation is checked, so a refusal names all it cannot identify
         y, Phi = reg.evaluate(_signals_for(p, reg))
-        fits[reg.equation] = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, options)
+        try:
+            fits[reg.equation] = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, options)
+        except NotEnoughExcitation as exc:
+            refused.append(exc)
+    if refused:
+        raise NotEnoughExcitation([n for exc in refused for n in exc.unidentifiable],
+                                  "; ".join(exc.reason for exc in refused),
+                                  max(exc.condition_number for exc in refused))
     res = _combine("ls", p, fits)
     _check(res, options)
     return res
