@@ -38,8 +38,8 @@ Run function protocol: ``fn(spec: RunSpec) -> dict`` (JSON-serialisable), shaped
                   "sensors": {"Im1": {"gain": 1.03, "offset": 0.0}}},
      "motions": [{"truth": {...},                     # optional: parameters at this motion (drifts)
                   "validated": true,
-                  "parameters": {"R": {"value": v, "ci95": [lo, hi]}, ...}, "method": "iv",
-                  "methods": {"ls": {"R": {...}}, "iv": {...}, "oe": {...}},   # optional
+                  "parameters": {"R": {"value": v, "ci95": [lo, hi]}, ...}, "method": "iv",  # the monitor's
+                  "methods": {"ls": {"R": {...}}, "iv": {...}, "oe": {...}},   # optional, on the recorded data
                   "sensor_faults": [{"sensor": "Im1", ...}],
                   "diagnosis": [{"fault": "brush wear", "parameters": ["R"], "evidence": ...}]}]}
 
@@ -457,6 +457,17 @@ def _local(run, specs, workers, on_done) -> None:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+def _check_scheduler(scheduler: str) -> None:
+    """Refuse a malformed or unresolvable scheduler address before anything is written."""
+    from distributed.comm.addressing import resolve_address
+
+    try:
+        resolve_address(scheduler)
+    except (ValueError, OSError) as exc:
+        raise CampaignError(f"--scheduler {scheduler}: {' '.join(str(exc).split())}; expected the address of a "
+                            "Dask scheduler, such as tcp://host:8786") from None
+
+
 def _dask(run, specs, scheduler, on_done) -> None:
     from distributed import Client
     from distributed import as_completed as dask_completed
@@ -519,6 +530,8 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
 
     if workers < 1:
         raise CampaignError(f"--workers: expected >= 1, got {workers}")
+    if scheduler:
+        _check_scheduler(scheduler)
     out = Path(out_dir)
     done = _open_store(campaign, out, overwrite)
     specs = expand(campaign, out)
@@ -555,6 +568,8 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
 
 
 # -- the co-simulation run function ----------------------------------------------------------------------
+#: sensor outputs ``run_cosim`` needs recorded
+RECORDED = ("u", "u_ref", "Im1", "Im2", "w_tach", "w_enc", "theta_enc")
 #: monitor keys copied into a campaign record (residues and notes stay in the run's report.json)
 MONITOR_KEYS = ("validated", "measurements_valid", "method", "parameters", "sensor_faults", "gain_ratio", "mismatch",
                 "diagnosis", "processing_s", "error")
@@ -573,15 +588,34 @@ def _injected(scenario: Any, truth: Mapping[str, float], nominal: Mapping[str, f
     return {"plant": plant, "sensors": sensors}
 
 
-def _estimates(signals: Mapping[str, np.ndarray], rows: slice, h: float, currents: list[str],
-               methods: list[str]) -> dict[str, dict]:
-    """LS / IV / OE estimates of one motion from the recorded measurements (mean of the given current sensors)."""
+#: recorded sensor signals of each quantity, in the monitor's pairs (speed: the encoder is handled apart)
+_QUANTITIES = {"u": ("u", "u_ref"), "i": ("Im1", "Im2"), "w": ("w_tach", "encoder")}
+
+
+def _estimates(signals: Mapping[str, np.ndarray], rows: slice, h: float, faulty: set[str], methods: list[str],
+               config: Any) -> dict[str, dict]:
+    """LS / IV / OE estimates of one motion from the recorded measurements, as the monitor forms them.
+
+    Each quantity is the mean of its sensors without an injected fault (the monitor's signal of a pair
+    that passes validation; the first sensor when both are faulty): ``u`` and ``u_ref``, ``Im1`` and
+    ``Im2``, the tachometer and the encoder speed centred over ``config.encoder_window_s``
+    (``cosim.monitor.centred_speed``). The filter and the speed threshold are the monitor's ``config``
+    (``cosim.monitor.MonitorConfig``), so that the table scores the estimator the monitor validates.
+    """
+    from cosim.monitor import centred_speed
     from estimator.estimate import EstimationOptions, MotionData, estimate_motion
 
-    i = np.mean([signals[f"sensors.{c}"][rows] for c in currents], axis=0)
-    data = MotionData(h=h, u=signals["sensors.u"][rows], i=i, w=signals["sensors.w_tach"][rows])
+    def measured(name: str) -> np.ndarray:
+        if name == "encoder":
+            return centred_speed(signals["sensors.theta_enc"][rows], signals["sensors.w_enc"][rows], h,
+                                 config.encoder_window_s)
+        return signals[f"sensors.{name}"][rows]
+
+    data = {q: np.mean([measured(c) for c in [c for c in pair if c not in faulty] or pair[:1]], axis=0)
+            for q, pair in _QUANTITIES.items()}
     method = next(m for m in ("oe", "iv", "ls") if m in methods)
-    est = estimate_motion(data, EstimationOptions(method=method))
+    est = estimate_motion(MotionData(h=h, **data), EstimationOptions(method=method, filter=config.filter,
+                                                                     speed_threshold=config.speed_threshold))
     return {m: {k: {"value": p.value, "ci95": list(p.ci95)} for k, p in getattr(est, m).parameters.items()}
             for m in methods if getattr(est, m) is not None}
 
@@ -600,15 +634,18 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
     """The default run function: one co-simulation (``cosim.run.run_scenario``) and its per-motion results.
 
     For each high-speed motion (NC ``state == 1``, one ``motion`` index): the true parameters at its
-    start (the scenario's plant parameters with the plant events due by then), the monitor's result
-    when the scenario has a monitor, and the estimates of every method in ``spec.options["methods"]``
-    (default ``["ls", "iv"]``; add ``"oe"`` for the output-error refinement) computed from the recorded
-    measurements, with the current of the sensors without an injected fault (their mean), so that each
-    method can be compared with the truth whatever the monitor's own method.
+    start (the scenario's plant parameters with the plant events applied by its first step: an event
+    applied at step n changes the plant over [t_n, ...), although the plant outputs show it from
+    t_(n+1) on), the monitor's result when the scenario has a monitor, and the estimates of every method
+    in ``spec.options["methods"]`` (default ``["ls", "iv"]``; add ``"oe"`` for the output-error
+    refinement) computed from the recorded measurements with the monitor's signals and filter (see
+    ``_estimates``), so that each method can be compared with the truth whatever the monitor's own method.
 
-    Needs the signals ``nc.state``, ``nc.motion``, ``sensors.u``, ``sensors.Im1``, ``sensors.Im2``,
-    ``sensors.w_tach`` recorded (the default ``record: all``).
+    Needs the signals ``nc.state``, ``nc.motion`` and ``sensors.<name>`` for every name in ``RECORDED``
+    recorded (the default ``record: all``).
     """
+    from cosim.master import event_step
+    from cosim.monitor import MonitorConfig
     from cosim.run import run_scenario
 
     methods = _methods(spec)
@@ -618,13 +655,16 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
     nominal = feed_drive().nominal(("physical",))
     nominal = {p: nominal[p] for p in PHYSICAL}
     truth0 = nominal | {k: float(v) for k, v in scenario.plant.parameters.items() if k in nominal}
-    events = sorted((e.time, e.target.partition(".")[2], float(e.value)) for e in scenario.events
+    t0 = float(res.time[0])
+    # (step at which the event applies, parameter, value), the master's rule
+    events = sorted((event_step(e.time, t0, scenario.step), e.target.partition(".")[2], float(e.value))
+                    for e in scenario.events
                     if e.target.startswith("plant.") and e.target.partition(".")[2] in nominal)
     final = truth0 | {p: v for _, p, v in events}
     injected = _injected(scenario, final, nominal)
-    currents = [c for c in ("Im1", "Im2") if c not in injected["sensors"]] or ["Im1"]
-    missing = [k for k in ("nc.state", "nc.motion", "sensors.u", "sensors.Im1", "sensors.Im2", "sensors.w_tach")
-               if k not in res.signals]
+    config = scenario.monitor.config if isinstance(getattr(scenario.monitor, "config", None), MonitorConfig) \
+        else MonitorConfig()
+    missing = [k for k in ("nc.state", "nc.motion") + tuple(f"sensors.{c}" for c in RECORDED) if k not in res.signals]
     if missing:
         raise CampaignError(f"run {spec.id}: the scenario does not record {missing} (use record: all)")
     state, motion = res.signals["nc.state"], res.signals["nc.motion"]
@@ -634,12 +674,12 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
         idx = np.flatnonzero((state == 1) & (motion == k))
         rows = slice(int(idx[0]), int(idx[-1]) + 1)
         start = float(res.time[rows.start])
-        truth = truth0 | {p: v for t, p, v in events if t <= start}
+        truth = truth0 | {p: v for n, p, v in events if n <= rows.start}
         entry: dict[str, Any] = {"motion": int(k), "start": start, "end": float(res.time[rows.stop - 1]),
                                  "truth": truth, "validated": None, "parameters": {}, "sensor_faults": [],
                                  "diagnosis": []}
         try:
-            entry["methods"] = _estimates(res.signals, rows, scenario.step, currents, methods)
+            entry["methods"] = _estimates(res.signals, rows, scenario.step, set(injected["sensors"]), methods, config)
         except ValueError as exc:  # not enough excitation in this motion: no numbers, the reason kept
             entry["methods"], entry["estimation_error"] = {}, " ".join(str(exc).split())
         entry |= {key: monitor[k][key] for key in MONITOR_KEYS if key in monitor.get(k, {})}
@@ -772,7 +812,8 @@ def aggregate(records: list[dict]) -> Aggregates:
       from the first motion), over the detecting runs.
 
     Estimation (per physical parameter and method, over every motion not marked ``validated: false``
-    of the finished runs without an injected sensor fault):
+    of the finished runs without an injected sensor fault; method ``monitor``: the parameters of the
+    motions the monitor validated):
     relative error ``e = (value - truth) / truth``; ``bias_pct`` = 100 mean(e), ``rms_pct`` =
     100 sqrt(mean(e^2)), ``coverage`` = fraction of motions whose ``ci95`` holds the truth.
 
@@ -795,7 +836,10 @@ def aggregate(records: list[dict]) -> Aggregates:
         for motion, truth in zip(result.get("motions", []), _truths(result)):
             if motion.get("validated") is False:
                 continue
-            methods = motion.get("methods") or {motion.get("method", "ls"): motion.get("parameters") or {}}
+            # the methods scored on the recorded signals, and the parameters the monitor validated
+            methods = dict(motion.get("methods") or {})
+            if motion.get("validated") and motion.get("parameters"):
+                methods["monitor"] = motion["parameters"]
             for method, params in methods.items():
                 for name, est in (params or {}).items():
                     if name in truth and truth[name] != 0 and est.get("value") is not None:
@@ -874,7 +918,7 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> lis
             np.quantile(xs, np.linspace(0, 1, 7))[:-1], np.quantile(xs, np.linspace(0, 1, 7))[1:]]
         colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
         for c, name in enumerate(PHYSICAL):
-            for method, style in zip(METHODS, ("o-", "s--", "^:")):
+            for method, style in zip(METHODS + ("monitor",), ("o-", "s--", "^:", "d-.")):
                 centres, rms = [], []
                 for lo, hi in edges:
                     rows = aggregate([r for r, x in zip(ok, xs) if lo <= x <= hi]).estimation

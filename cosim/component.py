@@ -25,7 +25,10 @@ plant position read by the NC or the monitor's identification request).
 
 Timed events: an event at time ``te`` takes effect at the first grid point ``t_n >= te`` (with a
 tolerance of 1e-9 h, so an event exactly on the grid is not postponed), before ``set_inputs`` of
-step n; the new value holds for [t_n, ...) until the next event on the same target.
+step n; the new value holds for [t_n, ...) until the next event on the same target. For a component
+whose outputs at t_n come from step n-1 (the plant; the sensors, whose sample at t_n was measured in
+step n-1), an event at t_n first shows in the outputs at t_(n+1): a sensor fault at t_n changes the
+samples from t_(n+1) on, a plant parameter changed at t_n acts over [t_n, t_(n+1)] and shows from t_(n+1).
 
 Ports are plain sequences of floats in a fixed order, not dicts, so that the per-step cost stays
 small (the master's loop runs 10^4 to 10^5 times per simulated second).

@@ -28,7 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--accel", help="candidate accelerations [m/s^2], comma-separated "
                                         "(default 0.2, 0.3, ..., 2.0)")
     parser.add_argument("--verify", type=int, default=0, metavar="N",
-                        help="check with a campaign of N runs at the default and at the chosen slope")
+                        help="check with a campaign of N >= 2 runs at the default and at the chosen slope "
+                             "(the measured spread needs two)")
     parser.add_argument("--workers", type=int, default=1, help="worker processes of the --verify campaign")
     parser.add_argument("--out", type=Path, help="out dir of the --verify campaign (default campaigns/design-<name>)")
 
@@ -65,6 +66,11 @@ def main(args: argparse.Namespace) -> int:
     from cosim.scenario import load_scenario
     from estimator.design import PHYSICAL, design_acceleration
 
+    # checked now, not after the whole design sweep
+    if args.verify < 0 or args.verify == 1:
+        raise InputError(f"--verify: expected 0 (no check) or a number of runs >= 2 per slope, got {args.verify}")
+    if args.workers < 1:
+        raise InputError(f"--workers: expected >= 1, got {args.workers}")
     scenario = load_scenario(args.scenario)
     items = [k for k, line in enumerate(scenario.nc.program) if line.move[0] in ("rapid", "tool_change")]
     item = items[0] if args.item is None and items else args.item

@@ -35,10 +35,12 @@ def main(args: argparse.Namespace) -> int:
     if not db.is_file():  # reading must not create an empty database
         raise InputError(f"history database {db} does not exist")
     with History(db) as history:
-        axes = [args.axis] if args.axis else history.axes()
+        held = history.axes()
+        axes = [args.axis] if args.axis else held
         motions = {axis: history.motions(axis) for axis in axes}
     if args.axis and not motions[args.axis]:
-        raise InputError(f"history database {db}: no motion for axis {args.axis!r} (axes: {', '.join(axes) or 'none'})")
+        raise InputError(f"history database {db}: no motion for axis {args.axis!r} (axes in the file: "
+                         f"{', '.join(held) or 'none'})")
     if args.plot is not None:
         from cosim.monitor_plots import plot_trends
 

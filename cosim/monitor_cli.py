@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -55,9 +56,7 @@ def main(args: argparse.Namespace) -> int:
     segments = segment(args.segment, rec.n, rec.h, sig["w_tach"], rec.signals.get("state"))
     if not segments:
         raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
-    plots = Path(args.plots) if args.plots else None
-    if plots is not None and not args.overwrite and any(plots.glob("monitor_*.png")):
-        raise InputError(f"plot folder {plots} already holds monitor plots; use --overwrite to replace them")
+    plots = _plot_folder(args.plots, args.overwrite) if args.plots else None
     config = MonitorConfig(axis=args.axis, scenario=str(rec.path), db=args.db, method=args.method,
                            filter_cutoff_hz=args.filter_cutoff)
     end_clock = rec.path.stat().st_mtime - (rec.n - 1) * rec.h  # machine time of sample 0
@@ -82,6 +81,24 @@ def main(args: argparse.Namespace) -> int:
     else:
         print(table(results))
     return 0
+
+
+def _plot_folder(name: str, overwrite: bool) -> Path:
+    """The ``--plots`` folder, created now: a plot step failing after the history was written would store
+    the motions twice when the command is run again."""
+    plots = Path(name)
+    if plots.exists() and not plots.is_dir():
+        raise InputError(f"--plots {plots}: is a file; expected a folder for the plots")
+    try:
+        plots.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--plots {plots}: cannot create the plot folder ({exc.strerror or exc}); "
+                         "expected a writable folder") from None
+    if not os.access(plots, os.W_OK | os.X_OK):
+        raise InputError(f"--plots {plots}: the plot folder is not writable")
+    if not overwrite and any(plots.glob("monitor_*.png")):
+        raise InputError(f"--plots {plots}: the folder already holds monitor plots; use --overwrite to replace them")
+    return plots
 
 
 def _jsonable(x):  # noqa: ANN001, ANN202 - numpy scalars in the results

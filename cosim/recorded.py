@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -76,7 +77,7 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     Raises
     ------
     cosim.errors.DataError
-        Missing file or column, non-numeric or NaN value, non-monotonic or non-uniform time,
+        Missing file or column, not UTF-8, non-numeric or NaN value, non-monotonic or non-uniform time,
         too few samples; the message names the file and the column.
     """
     path = Path(path)
@@ -84,8 +85,13 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
         raise DataError(f"{path}: no such file")
     if sample_time is not None and not sample_time > 0:
         raise DataError(f"{path}: sample time must be > 0 s, got {sample_time}")
-    with path.open(newline="") as f:
-        rows = list(csv.reader(f))
+    raw = path.read_bytes()
+    try:  # utf-8-sig: a byte-order mark (spreadsheet exports) must not end up in the first header
+        rows = list(csv.reader(io.StringIO(raw.decode("utf-8-sig"), newline="")))
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise DataError(f"{path}: line {line}: byte 0x{exc.object[exc.start]:02x} is not UTF-8; "
+                        "expected a UTF-8 CSV file") from None
     if not rows:
         raise DataError(f"{path}: empty file, expected a header row")
     header = [h.strip() for h in rows[0]]

@@ -31,8 +31,9 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
 from cosim.errors import ScenarioError
-from cosim.nc import NCConfig
-from cosim.sensors import SensorsConfig
+from cosim.master import SETTLING
+from cosim.nc import NCConfig, plan_program
+from cosim.sensors import ChannelConfig, SensorsConfig
 
 Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
 INPUT_ROLES = ("speed_ref", "load")
@@ -249,6 +250,15 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     scenario._source = source
     scenario._lines = lines
     scenario._base_dir = base_dir
+    # the master runs ceil(stop / step) steps: a longer step would be one step past the stop time, no motion sampled
+    if scenario.stop_time is not None:
+        stop, what = scenario.stop_time, "stop_time"
+    else:
+        stop = plan_program(scenario.nc)[-1][0] + SETTLING
+        what = f"the default stop time: the NC program + {SETTLING:g} s"
+    if scenario.step > stop:
+        raise scenario.error(("step",), f"{scenario.step:g} s is longer than the run ({stop:g} s, {what}); "
+                                        "expected a communication step <= the stop time")
     plant, md = _resolve_plant(scenario)
     _check_events(scenario, md)
     return scenario.model_copy(update={"plant": plant})
@@ -317,6 +327,27 @@ def fmi_version(path: Path) -> str:
         raise ValueError(f"not an FMU (a zip file with a modelDescription.xml): {exc}") from None
 
 
+def model_description(path: Path) -> Any:
+    """fmpy's validated model description of an FMU.
+
+    Raises
+    ------
+    ValueError
+        The modelDescription.xml fails fmpy's validation; the message gives its first problem.
+    """
+    from fmpy import read_model_description
+    from fmpy.model_description import ValidationError as FMIValidationError
+
+    try:
+        return read_model_description(str(path))
+    except FMIValidationError as exc:
+        problems = [" ".join(str(p).split()) for p in exc.problems] or ["(no detail)"]
+        more = f" (and {len(problems) - 1} more problem{'s' * (len(problems) > 2)})" if len(problems) > 1 else ""
+        raise ValueError(f"invalid modelDescription.xml: {problems[0]}{more}") from None
+    except Exception as exc:  # fmpy raises a bare Exception for other malformed content (types, variabilities)
+        raise ValueError(f"invalid modelDescription.xml: {' '.join(str(exc).split())}") from None
+
+
 def sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
@@ -351,8 +382,6 @@ def check_map(md: Any, role_map: Mapping[str, MapEntry], fmu_name: str) -> list[
 
 
 def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
-    from fmpy import read_model_description
-
     p = s.plant
     if p.fmu in BUILTIN_PLANTS:
         from fmu_build import builtin_fmu
@@ -375,7 +404,10 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     if p.sha256 and p.sha256 != digest:
         raise s.error(("plant", "sha256"), f"{path.name} has sha256 {digest}, expected {p.sha256} "
                                            "(the FMU changed since the scenario was resolved)")
-    md = read_model_description(str(path))
+    try:
+        md = model_description(path)
+    except ValueError as exc:
+        raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
     if (md.coSimulation if p.interface == "cs" else md.modelExchange) is None:
         kind = {"cs": "Co-Simulation", "me": "Model Exchange"}[p.interface]
         raise s.error(("plant", "interface"), f"{path.name} does not support {kind}; expected interface "
@@ -432,6 +464,23 @@ def _check_events(s: Scenario, md: Any) -> None:
             if not isinstance(ev.value, float):
                 raise s.error(("events", k, "value"), f"expected a number for plant.{param}, got {ev.value!r}")
             _check_range(s, ("events", k, "value"), v, ev.value, "the plant FMU")
+        elif comp == "sensors":
+            _check_sensor_event(s, k, param, ev.value)
+        elif comp == "nc" or (comp == "monitor" and s.monitor.class_ == DEFAULT_MONITOR):
+            raise s.error(("events", k, "target"), f"{comp!r} accepts no events; expected a target on plant, "
+                                                   "sensors or a user component")
+
+
+def _check_sensor_event(s: Scenario, k: int, name: str, value: float | str) -> None:
+    """``sensors.<channel>.<field>`` with the channels and fields ``SensorsComponent.set_parameter`` accepts."""
+    channels, fields = tuple(s.sensors.channels()), tuple(ChannelConfig.model_fields)
+    channel, _, field = name.partition(".")
+    if channel not in channels or field not in fields:
+        raise s.error(("events", k, "target"), f"sensors.{name}: expected sensors.<channel>.<field> with channel "
+                                               f"in {', '.join(channels)} and field in {', '.join(fields)}")
+    if not isinstance(value, float) or not math.isfinite(value) or (field == "noise" and value < 0):
+        raise s.error(("events", k, "value"), f"expected a finite number{' >= 0' * (field == 'noise')} for "
+                                              f"sensors.{name}, got {value!r}")
 
 
 # -- error messages ------------------------------------------------------------------------------

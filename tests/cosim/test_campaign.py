@@ -101,11 +101,14 @@ def test_aggregates_of_known_outcomes_are_exact(tmp_path):
     assert rows["sensor:Im1"]["detection_rate"] == 1.0 and rows["sensor:Im1"]["isolation_rate"] == 1.0
     assert rows["plant:Cd & sensor:Im1"]["runs"] == 2 and rows["plant:Cd & sensor:Im1"]["mean_delay_motions"] == 0.0
     est = {(r["parameter"], r["method"]): r for r in res.aggregates.estimation}
-    assert set(est) == {(p, m) for p in NOMINAL for m in ("ls", "iv")}
+    assert set(est) == {(p, m) for p in NOMINAL for m in ("ls", "iv", "monitor")}
     for p in NOMINAL:  # 4 finished runs without a sensor fault, LS errors +2 % and -2 % alternately, IV +1 %
         assert est[p, "ls"]["n"] == 4 and est[p, "ls"]["bias_pct"] == pytest.approx(0, abs=1e-9)
         assert est[p, "ls"]["rms_pct"] == pytest.approx(2.0, rel=1e-9) and est[p, "ls"]["coverage"] == 1.0
         assert est[p, "iv"]["bias_pct"] == pytest.approx(1.0, rel=1e-9) and est[p, "iv"]["coverage"] == 0.0
+        # the monitor's validated parameters, scored apart: +1 % with a +/-0.5 % CI
+        assert est[p, "monitor"]["n"] == 4 and est[p, "monitor"]["bias_pct"] == pytest.approx(1.0, rel=1e-9)
+        assert est[p, "monitor"]["coverage"] == 0.0
     csv_rows = (tmp_path / "out" / "detection.csv").read_text().splitlines()
     assert csv_rows[0].startswith("fault_class,runs,detected") and len(csv_rows) == 1 + 5
     assert (tmp_path / "out" / "plots" / "detection_rate.png").stat().st_size > 0

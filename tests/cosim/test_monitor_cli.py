@@ -78,3 +78,18 @@ def test_plots_and_errors(recording, tmp_path, capsys):
     assert "unknown role(s) ['volt']" in capsys.readouterr().err
     assert main(["monitor", str(recording), *MAP[:-4], "--map", "current2=nope", "--db", db]) == 2
     assert "column 'nope'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("blocker", ["file", "parent_file"])
+def test_unusable_plot_folder_is_refused_before_the_history_is_written(recording, tmp_path, capsys, blocker):
+    """A plot step failing after the history was written would store the motions twice on a re-run."""
+    (tmp_path / "taken").write_text("not a folder")
+    plots = tmp_path / "taken" / ("" if blocker == "file" else "p")
+    db = tmp_path / "h.sqlite"
+    assert main(["monitor", str(recording), *MAP, "--db", str(db), "--plots", str(plots)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--plots {plots}:" in err
+    assert not db.exists()  # nothing stored: running it again with a good folder stores each motion once
+    assert main(["monitor", str(recording), *MAP, "--db", str(db), "--plots", str(tmp_path / "ok")]) == 0
+    with History(db) as h:
+        assert [m["motion"] for m in h.motions("X")] == [1, 2]
