@@ -127,8 +127,10 @@ def table(results: list[dict]) -> str:
         if r["mismatch"]:
             m = r["mismatch"]
             worst = max(m["peak_rms_relative"].values())
-            lines.append(f"  model check: {'passed' if m['passed'] else 'MISMATCH'} (residue {m['test']} test "
-                         f"p = {m['p_value']:.3g}; worst 50 ms RMS {100 * worst:.2g} % of range)")
+            decided = ("coloured residue (whiteness p = {p:.3g}) but small" if m["test"] == "size"
+                       else f"{m['test']} test p = {{p:.3g}}").format(p=m["p_value"])
+            lines.append(f"  model check: {'passed' if m['passed'] else 'MISMATCH'} ({decided}; worst 50 ms "
+                         f"RMS {100 * worst:.2g} % of range)")
         for d in r["diagnosis"]:
             lines.append(f"  diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
         lines += [f"  note: {n}" for n in r["notes"]]

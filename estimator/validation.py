@@ -362,9 +362,11 @@ def isolate(x1f: np.ndarray, x2f: np.ndarray, reference: np.ndarray, names: tupl
     fits = []
     for name, x in zip(names, (x1f, x2f)):
         res = sm.OLS(x[sl], X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
-        (a, b), ((alo, ahi), (blo, bhi)) = res.params, res.conf_int(0.05)
-        gain = not alo <= 1.0 <= ahi and abs(a - 1.0) > options.gain_tol
-        offset = not blo <= 0.0 <= bhi and abs(b) > options.offset_tol * span
+        (a, b), ((alo, ahi), (blo, bhi)) = res.params, res.conf_int(0.05)  # reported: 95 % intervals
+        # decided at the level of every other test (alpha), not at the reported intervals' 5 %
+        (tlo_a, thi_a), (tlo_b, thi_b) = res.conf_int(options.alpha)
+        gain = not tlo_a <= 1.0 <= thi_a and abs(a - 1.0) > options.gain_tol
+        offset = not tlo_b <= 0.0 <= thi_b and abs(b) > options.offset_tol * span
         err = float(np.sqrt(np.mean(((a - 1.0) * ref + b) ** 2)))
         fits.append(SensorFit(name, float(a), (float(alo), float(ahi)), float(b), (float(blo), float(bhi)),
                               bool(gain or offset), KINDS[int(offset) + 2 * int(gain)], err))

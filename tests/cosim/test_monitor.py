@@ -68,7 +68,7 @@ def test_healthy_then_sensor_offset(tmp_path):
         p = first["parameters"][name]
         assert p["value"] == pytest.approx(truth, rel=0.01), name
         assert p["ci95"][0] < p["value"] < p["ci95"][1]
-    assert first["mismatch"]["test"] == "ljung-box" and first["mismatch"]["passed"] is True
+    assert first["mismatch"]["test"] == "size" and first["mismatch"]["passed"] is True  # coloured, small
     assert first["gain_ratio"] == pytest.approx(1.0, abs=2e-3)
     assert first["processing_s"] > 0 and first["diagnosis"] == []
     # motion 2: Im1 offset isolated against the model with motion 1's validated R, L, K; Im2 trusted

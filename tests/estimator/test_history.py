@@ -118,34 +118,44 @@ WRITER = textwrap.dedent("""
     k = 0
     while True:
         k += 1
+        print("begin", k, flush=True)
         h.record("X", result(k, notes=["x" * 2_000_000]))   # 2 MB per motion: writes take a while
-        print(k, flush=True)
+        print("done", k, flush=True)
 """)
 
 
 @pytest.mark.slow
 def test_sigkill_during_writes_leaves_a_consistent_database(tmp_path):
-    """A writer killed mid-write: integrity_check ok, every motion complete, no half-written one."""
+    """A writer killed right after it announced a write: integrity_check ok, every stored motion complete,
+    and the motion being written either entirely there or entirely absent. At least one of the rounds
+    must have killed it mid-write (that motion absent), or the test proved nothing."""
     db = tmp_path / "h.sqlite"
     code = WRITER.format(tests=os.path.dirname(__file__), db=str(db))
-    for round_ in range(3):
-        before = len(History(db).motions()) if db.exists() else 0
+    mid_write = 0
+    for round_ in range(4):
         proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
-        for _ in range(2 + round_):  # let some writes complete, then kill at a varying point of the next
-            assert proc.stdout.readline(), "writer died"
-        time.sleep(0.005 * (round_ + 1))
+        done = 0
+        while True:  # let 1 + round_ writes complete, then kill as soon as the next one begins
+            word, k = proc.stdout.readline().split()
+            if word == "done":
+                done += 1
+            elif done > round_:
+                break
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait()
         proc.stdout.close()
         con = sqlite3.connect(db)
         assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
         n = con.execute("SELECT COUNT(*) FROM motions").fetchone()[0]
-        assert n >= before + 2 + round_
         assert con.execute("SELECT COUNT(*) FROM parameters").fetchone()[0] == n * len(NAMES)
         assert con.execute("SELECT COUNT(*) FROM sensor_faults").fetchone()[0] == n
         assert con.execute("SELECT COUNT(*) FROM diagnoses").fetchone()[0] == n
         con.close()
         with History(db) as h:
+            stored = [m["motion"] for m in h.motions()]  # in write order; each writer counts from 1
             for m in h.motions():
                 assert len(m["notes"][0]) == 2_000_000
                 assert m["parameters"] == result(m["motion"])["parameters"]
+        assert stored[-1] in (int(k) - 1, int(k))  # the motion being written: all or nothing
+        mid_write += stored[-1] == int(k) - 1
+    assert mid_write >= 1
