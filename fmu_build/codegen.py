@@ -16,7 +16,11 @@ The C wrapper (``fmu_build/c/fmi2_wrapper.c``) reads this layout from the genera
 ``fmu_model.h``, so a second model needs no C changes.
 
 Integration (Co-Simulation). ``fmi2DoStep`` splits a communication step h into
-``n = ceil(h / cs_substep - 1e-9)`` equal substeps of the classical explicit RK4 method. The fastest
+``n = ceil(h / cs_substep - 1e-9)`` equal substeps of the classical explicit RK4 method.
+``cs_substep`` is at least ``MIN_CS_SUBSTEP`` = 1 ns (the FMU's ``min``; below that the substep count
+of any useful step overflows) and a step needing more than ``MAX_SUBSTEPS`` = 1e7 substeps (~1 s of
+CPU) is refused with fmi2Error and a log message naming h, cs_substep and the cap, rather than hang
+the master or overflow the count: split such a step or raise ``cs_substep``. The fastest
 modes of the feed drive are the smoothed dry friction near w = 0, ``Cd / (Jt w_eps)`` ~ 1.2e4 1/s,
 and the 500 Hz current loop, ``2 pi 500`` ~ 3.1e3 1/s (the electrical pole R/L is 150 1/s). RK4 is
 stable for real eigenvalues with ``|lambda dt| < 2.78``: at the default ``cs_substep = 1e-5`` s the
@@ -38,6 +42,15 @@ derivative alone, and derivatives start at 0 (instantiation, ``fmi2Reset``), so 
 sets one gets held inputs (zero-order hold), bit-identical to an FMU without interpolation.
 Derivatives are part of the FMU state (``fmi2GetFMUstate``). Model Exchange has none (the function
 returns fmi2Error there): its inputs are whatever the master sets at each time.
+
+FMI contract (details in the wrapper's header comment). The wrapper enforces the FMI 2.0 state
+machines of both interfaces: a call in a mode where the standard does not allow it, or on the other
+interface type, returns fmi2Error with a log message naming the function and the mode and changes
+nothing; only ``fmi2Reset`` leaves the terminated state. Calculated outputs and derivatives that
+evaluate to non-finite numbers (finite but huge inputs) are fmi2Error, not values. Serialised FMU
+states start with a header (magic, GUID, size, interface type) that is checked together with every
+value; restoring a state restores values, input derivatives and time but keeps the instance's mode,
+and after initialisation refuses a state with other fixed parameters.
 """
 from __future__ import annotations
 
@@ -56,6 +69,10 @@ from models import Model
 
 #: Default RK4 substep of the Co-Simulation interface [s]; see the module docstring.
 DEFAULT_CS_SUBSTEP = 1e-5
+#: Smallest allowed ``cs_substep`` [s] (the FMU variable's ``min``).
+MIN_CS_SUBSTEP = 1e-9
+#: Most RK4 substeps one ``fmi2DoStep`` may take; a longer step is refused with fmi2Error.
+MAX_SUBSTEPS = 10_000_000
 
 WRAPPER_SOURCE = Path(__file__).parent / "c" / "fmi2_wrapper.c"
 _GUID_PLACEHOLDER = "@GUID@"
@@ -122,10 +139,11 @@ def fmu_variables(model: Model, cs_substep: float = DEFAULT_CS_SUBSTEP) -> list[
     Raises
     ------
     FMUBuildInputError
-        ``cs_substep`` is not a positive finite number.
+        ``cs_substep`` is not a finite number of seconds >= ``MIN_CS_SUBSTEP``.
     """
-    if not (cs_substep > 0 and math.isfinite(cs_substep)):
-        raise FMUBuildInputError(f"cs_substep must be a positive number of seconds, got {cs_substep!r}")
+    if not (cs_substep >= MIN_CS_SUBSTEP and math.isfinite(cs_substep)):
+        raise FMUBuildInputError(f"cs_substep must be a positive number of seconds >= {MIN_CS_SUBSTEP:g}, "
+                                 f"got {cs_substep!r}")
     out: list[FMUVariable] = []
 
     def add(**kw) -> FMUVariable:
@@ -145,8 +163,8 @@ def fmu_variables(model: Model, cs_substep: float = DEFAULT_CS_SUBSTEP) -> list[
             causality="parameter", variability="tunable" if v.tunable else "fixed", start=v.nominal,
             lower=v.lower, lower_strict=v.lower_strict, upper=v.upper)
     add(name="cs_substep", kind="f", unit="s", causality="parameter", variability="fixed",
-        description="Co-Simulation RK4 substep (fmi2DoStep uses ceil(h/cs_substep) equal substeps)",
-        start=cs_substep, lower=0.0, lower_strict=True)
+        description=f"Co-Simulation RK4 substep (fmi2DoStep uses ceil(h/cs_substep) equal substeps, "
+                    f"at most {MAX_SUBSTEPS:.0e})", start=cs_substep, lower=MIN_CS_SUBSTEP)
     state_names = {v.name for v in model.states}
     for v in model.outputs:
         if v.name not in state_names:
@@ -207,7 +225,7 @@ def _model_header(model: Model, variables: list[FMUVariable], casadi_header: str
         f"#define NX {nx}", f"#define NU {nu}", f"#define NP {npar}", f"#define NY {ny}",
         "#define NR (2 * NX + NU + NP + NY)",
         "#define VR_X 0", "#define VR_U NX", "#define VR_P (VR_U + NU)", "#define VR_Y (VR_P + NP)",
-        "#define VR_DX (VR_Y + NY)", f"#define VR_CS_SUBSTEP {substep}",
+        "#define VR_DX (VR_Y + NY)", f"#define VR_CS_SUBSTEP {substep}", f"#define MAX_SUBSTEPS {MAX_SUBSTEPS}",
     ]
     for role in ("rhs", "out", "rk4"):
         macro = "STEP" if role == "rk4" else role.upper()

@@ -5,6 +5,7 @@
  *   NX, NU, NP, NY, NR          counts: states, inputs, parameters, calculated outputs, all reals
  *   VR_X, VR_U, VR_P, VR_Y, VR_DX   start of each block in the flat real array r[NR]
  *   VR_CS_SUBSTEP               value reference of the fixed Co-Simulation substep [s]
+ *   MAX_SUBSTEPS                most RK4 substeps one fmi2DoStep may take
  *   MODEL_GUID, MODEL_RHS, MODEL_OUT, MODEL_STEP (+ _WORK)   CasADi functions
  *       rhs(x, u, p) -> dx/dt,  out(x, u, p) -> y,
  *       step(x, u, du, p, dt, tau) -> x after one RK4 substep from tau to tau + dt (time since the
@@ -16,9 +17,26 @@
  *   [VR_X, VR_U)  states        [VR_U, VR_P)  inputs        [VR_P, VR_Y)  parameters
  *   [VR_Y, VR_DX) calculated outputs                        [VR_DX, NR)   state derivatives
  *
- * Bad input (unknown value reference, non-finite value, value outside the model's bounds, setting a
- * fixed parameter after initialisation) returns fmi2Error with a log message and leaves the
- * instance unchanged and usable. A step that would produce a non-finite state is rolled back.
+ * State machine (FMI 2.0, sections 3.2.3 and 4.2.4): every function checks the instance's interface
+ * type and mode (instantiated, initialization, step (Co-Simulation), event and continuous-time (Model
+ * Exchange), terminated). A call that is not allowed returns fmi2Error with a log message naming the
+ * function and the mode, and changes nothing. fmi2SetReal follows the standard's per-variable rules:
+ * states and fixed parameters only before fmi2ExitInitializationMode, tunable parameters not in
+ * continuous-time mode, inputs always. fmi2Reset returns to the instantiated state from any mode.
+ *
+ * Bad input (unknown value reference, non-finite value, value outside the model's bounds) returns
+ * fmi2Error with a log message and leaves the instance unchanged and usable: there is no separate
+ * error state, the master may retry or restore an FMU state. A step that would produce a non-finite
+ * state is rolled back; a calculated output or derivative that evaluates to a non-finite number is
+ * refused with fmi2Error (inputs or parameters beyond the model's numeric range).
+ *
+ * FMU states (fmi2GetFMUstate etc.) hold the values (states, inputs, parameters), the input
+ * derivatives and the time, behind a header (magic, model GUID, size, interface type). Restoring a
+ * state restores those; the mode is not part of it: the instance stays in its mode, so a state taken
+ * in initialization mode restored in step mode continues stepping from those values. A state is
+ * refused (fmi2Error, instance unchanged) when its header does not match this model and interface,
+ * when a value is non-finite or out of bounds, and after initialisation when it has different fixed
+ * parameters (they are fixed for the run; fmi2Reset to change them).
  *
  * Input interpolation (Co-Simulation): fmi2SetRealInputDerivatives sets du/dt (order 1) of continuous
  * inputs; fmi2DoStep(tc, h) uses u(t) = u + du (t - tc), FMI 2.0's "with respect to the beginning of a
@@ -27,6 +45,7 @@
  */
 #include <math.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -36,18 +55,35 @@
 typedef int (*casadi_fn)(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem);
 typedef int (*casadi_work_fn)(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 
-typedef enum { M_INSTANTIATED, M_INIT, M_STEP, M_EVENT, M_TERMINATED } Mode;
+/* Modes are bits so that a function's allowed modes are one mask. */
+typedef enum { M_INSTANTIATED = 1, M_INIT = 2, M_STEP = 4, M_EVENT = 8, M_CT = 16, M_TERMINATED = 32 } Mode;
+#define M_ALIVE (M_INSTANTIATED | M_INIT | M_STEP | M_EVENT | M_CT | M_TERMINATED)
+#define M_GET (M_INIT | M_STEP | M_EVENT | M_CT | M_TERMINATED)
+static const char *const MODE_NAME[] = {"the instantiated state", "initialization mode", "step mode", "event mode",
+                                        "continuous-time mode", "the terminated state"};
 
-/* Everything that fmi2GetFMUstate saves; plain data, so it serialises with memcpy. */
+typedef enum { ANY, CS_ONLY, ME_ONLY } Interface;
+
+/* The values an FMU state restores; plain data. */
 typedef struct {
     double r[NR];
     double du[NU]; /* first time derivatives of the inputs [unit/s], set with fmi2SetRealInputDerivatives */
     double time;
-    Mode mode;
+} Values;
+
+#define SNAPSHOT_MAGIC "FDFMU2S"
+/* An FMU state: header + values, serialised with memcpy (same platform and binary). */
+typedef struct {
+    char magic[8];
+    char guid[sizeof MODEL_GUID];
+    uint64_t size;
+    int32_t type; /* fmi2Type of the instance it was taken from */
+    Values v;
 } Snapshot;
 
 typedef struct {
-    Snapshot s;
+    Values v;
+    Mode mode;
     int dirty; /* calculated outputs and derivatives are out of date */
     fmi2Type type;
     char name[128];
@@ -75,20 +111,55 @@ static void log_error(Instance *c, const char *fmt, ...) {
         return fmi2Error;         \
     } while (0)
 
+static const char *mode_name(Mode m) {
+    for (int k = 0; k < 6; k++)
+        if ((unsigned)m == 1u << k) return MODE_NAME[k];
+    return "an unknown mode";
+}
+
+/* Is fn allowed on this instance's interface type and in its mode? Logs the reason when not. */
+static int allowed(Instance *c, const char *fn, unsigned modes, Interface iface) {
+    if (!c) return 0;
+    int cs = c->type == fmi2CoSimulation;
+    if ((iface == CS_ONLY && !cs) || (iface == ME_ONLY && cs)) {
+        log_error(c, "%s: a %s function, this instance is %s", fn, cs ? "Model Exchange" : "Co-Simulation",
+                  cs ? "Co-Simulation" : "Model Exchange");
+        return 0;
+    }
+    if (c->mode & modes) return 1;
+    char list[160] = "";
+    for (int k = 0; k < 6; k++)
+        if (modes & (1u << k))
+            snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", *list ? ", " : "", MODE_NAME[k]);
+    log_error(c, "%s: not allowed in %s (allowed in %s)", fn, mode_name(c->mode), list);
+    return 0;
+}
+
+#define REQUIRE(fn, modes, iface) \
+    if (!allowed(c, fn, modes, iface)) return fmi2Error
+
 /* f(x, u, p) of the current state and inputs into out */
 static void eval(Instance *c, casadi_fn f, double *out) {
-    c->arg[0] = c->s.r + VR_X;
-    c->arg[1] = c->s.r + VR_U;
-    c->arg[2] = c->s.r + VR_P;
+    c->arg[0] = c->v.r + VR_X;
+    c->arg[1] = c->v.r + VR_U;
+    c->arg[2] = c->v.r + VR_P;
     c->res[0] = out;
     f(c->arg, c->res, c->iw, c->w, 0);
 }
 
 static void update(Instance *c) {
     if (!c->dirty) return;
-    eval(c, MODEL_OUT, c->s.r + VR_Y);
-    eval(c, MODEL_RHS, c->s.r + VR_DX);
+    eval(c, MODEL_OUT, c->v.r + VR_Y);
+    eval(c, MODEL_RHS, c->v.r + VR_DX);
     c->dirty = 0;
+}
+
+/* A calculated value is finite, or the call that would return it fails with a message. */
+static int calculated_finite(Instance *c, const char *fn, fmi2ValueReference vr) {
+    if (isfinite(c->v.r[vr])) return 1;
+    log_error(c, "%s: %s = %g at t = %g s is not a finite number (inputs or parameters beyond the model's "
+              "numeric range)", fn, VR_NAME[vr], c->v.r[vr], c->v.time);
+    return 0;
 }
 
 static int all_finite(const double *v, size_t n) {
@@ -97,29 +168,9 @@ static int all_finite(const double *v, size_t n) {
     return 1;
 }
 
-/* Checks one assignment r[vr] = v; returns 0 and logs the reason when it is refused. */
-static int check_set(Instance *c, fmi2ValueReference vr, double v) {
-    const char *fn = "fmi2SetReal";
-    if (vr >= NR) {
-        log_error(c, "%s: unknown value reference %u (this FMU has 0..%d)", fn, vr, NR - 1);
-        return 0;
-    }
+/* v is finite and inside the bounds of vr; logs the reason when not. */
+static int check_value(Instance *c, const char *fn, fmi2ValueReference vr, double v) {
     const char *name = VR_NAME[vr];
-    char kind = VR_KIND[vr];
-    int before_init = c->s.mode == M_INSTANTIATED || c->s.mode == M_INIT;
-    if (kind == 'c') {
-        log_error(c, "%s: %s is calculated by the FMU and cannot be set", fn, name);
-        return 0;
-    }
-    if ((kind == 's' || kind == 'f') && !before_init) {
-        log_error(c, "%s: %s can only be set before the end of initialisation%s", fn, name,
-                  kind == 's' ? " (use fmi2SetContinuousStates in Model Exchange)" : " (fixed parameter)");
-        return 0;
-    }
-    if (c->s.mode == M_TERMINATED) {
-        log_error(c, "%s: %s cannot be set after fmi2Terminate", fn, name);
-        return 0;
-    }
     if (!isfinite(v)) {
         log_error(c, "%s: %s = %g is not a finite number", fn, name, v);
         return 0;
@@ -136,13 +187,83 @@ static int check_set(Instance *c, fmi2ValueReference vr, double v) {
     return 1;
 }
 
+/* Checks one assignment r[vr] = v against FMI 2.0's rules for the current mode; 0 and a log if refused. */
+static int check_set(Instance *c, fmi2ValueReference vr, double v) {
+    const char *fn = "fmi2SetReal";
+    if (vr >= NR) {
+        log_error(c, "%s: unknown value reference %u (this FMU has 0..%d)", fn, vr, NR - 1);
+        return 0;
+    }
+    const char *name = VR_NAME[vr];
+    char kind = VR_KIND[vr];
+    if (kind == 'c') {
+        log_error(c, "%s: %s is calculated by the FMU and cannot be set", fn, name);
+        return 0;
+    }
+    if ((kind == 's' || kind == 'f') && !(c->mode & (M_INSTANTIATED | M_INIT))) {
+        log_error(c, "%s: %s can only be set before the end of initialisation%s", fn, name,
+                  kind == 's' ? " (use fmi2SetContinuousStates in Model Exchange)" : " (fixed parameter)");
+        return 0;
+    }
+    if (kind == 't' && c->mode == M_CT) {
+        log_error(c, "%s: %s is a parameter: continuous-time mode takes inputs only (call fmi2EnterEventMode first)",
+                  fn, name);
+        return 0;
+    }
+    return check_value(c, fn, vr, v);
+}
+
+/* Header and values of a state before it is accepted (values are checked like fmi2SetReal; states only
+ * for finiteness, since integration may carry them past their nominal bounds). */
+static int check_snapshot(Instance *c, const char *fn, const Snapshot *s) {
+    if (memcmp(s->magic, SNAPSHOT_MAGIC, sizeof s->magic) != 0) {
+        log_error(c, "%s: not an FMU state of this wrapper (bad header)", fn);
+        return 0;
+    }
+    if (memcmp(s->guid, MODEL_GUID, sizeof s->guid) != 0) {
+        log_error(c, "%s: the state belongs to model %.*s, this FMU is %s", fn, (int)sizeof s->guid - 1, s->guid,
+                  MODEL_GUID);
+        return 0;
+    }
+    if (s->size != sizeof(Snapshot)) {
+        log_error(c, "%s: the state has %llu bytes, this FMU's states have %zu", fn, (unsigned long long)s->size,
+                  sizeof(Snapshot));
+        return 0;
+    }
+    if (s->type != (int32_t)c->type) {
+        log_error(c, "%s: a %s state cannot be restored into a %s instance", fn,
+                  s->type == fmi2CoSimulation ? "Co-Simulation" : "Model Exchange",
+                  c->type == fmi2CoSimulation ? "Co-Simulation" : "Model Exchange");
+        return 0;
+    }
+    if (!isfinite(s->v.time)) {
+        log_error(c, "%s: time = %g is not a finite number", fn, s->v.time);
+        return 0;
+    }
+    for (fmi2ValueReference vr = 0; vr < NR; vr++) {
+        if (VR_KIND[vr] == 's' && !isfinite(s->v.r[vr])) {
+            log_error(c, "%s: %s = %g is not a finite number", fn, VR_NAME[vr], s->v.r[vr]);
+            return 0;
+        }
+        if (VR_KIND[vr] != 's' && VR_KIND[vr] != 'c' && !check_value(c, fn, vr, s->v.r[vr])) return 0;
+    }
+    for (int k = 0; k < NU; k++)
+        if (!isfinite(s->v.du[k])) {
+            log_error(c, "%s: der(%s) = %g is not a finite number", fn, VR_NAME[VR_U + k], s->v.du[k]);
+            return 0;
+        }
+    return 1;
+}
+
 /* ---- common functions ---------------------------------------------------------------------- */
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n, const fmi2String categories[]) {
-    (void)c; (void)loggingOn; (void)n; (void)categories;
+fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t n, const fmi2String categories[]) {
+    Instance *c = comp;
+    (void)loggingOn; (void)n; (void)categories;
+    REQUIRE("fmi2SetDebugLogging", M_ALIVE, ANY);
     return fmi2OK; /* only errors are logged, and they always are */
 }
 
@@ -155,6 +276,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi2String
     snprintf(tmp.name, sizeof tmp.name, "%s", instanceName ? instanceName : "?");
     if (!guid || strcmp(guid, MODEL_GUID) != 0) {
         log_error(&tmp, "fmi2Instantiate: GUID %s does not match this binary (%s)", guid ? guid : "NULL", MODEL_GUID);
+        return NULL;
+    }
+    if (type != fmi2CoSimulation && type != fmi2ModelExchange) {
+        log_error(&tmp, "fmi2Instantiate: unknown interface type %d", (int)type);
         return NULL;
     }
     casadi_work_fn works[] = {MODEL_RHS_WORK, MODEL_OUT_WORK, MODEL_STEP_WORK};
@@ -180,8 +305,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type type, fmi2String
         fmi2FreeInstance(c);
         return NULL;
     }
-    memcpy(c->s.r, VR_START, sizeof c->s.r);
-    c->s.mode = M_INSTANTIATED;
+    memcpy(c->v.r, VR_START, sizeof c->v.r);
+    c->mode = M_INSTANTIATED;
     c->dirty = 1;
     return c;
 }
@@ -199,110 +324,157 @@ void fmi2FreeInstance(fmi2Component comp) {
 
 fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
+    Instance *c = comp;
     (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
-    ((Instance *)comp)->s.time = startTime;
+    REQUIRE("fmi2SetupExperiment", M_INSTANTIATED, ANY);
+    if (!isfinite(startTime)) FAIL(c, "fmi2SetupExperiment: startTime = %g is not a finite number", startTime);
+    c->v.time = startTime;
     return fmi2OK;
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
-    ((Instance *)comp)->s.mode = M_INIT;
+    Instance *c = comp;
+    REQUIRE("fmi2EnterInitializationMode", M_INSTANTIATED, ANY);
+    c->mode = M_INIT;
     return fmi2OK;
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     Instance *c = comp;
-    c->s.mode = c->type == fmi2CoSimulation ? M_STEP : M_EVENT;
+    REQUIRE("fmi2ExitInitializationMode", M_INIT, ANY);
+    c->mode = c->type == fmi2CoSimulation ? M_STEP : M_EVENT;
     c->dirty = 1;
     return fmi2OK;
 }
 
 fmi2Status fmi2Terminate(fmi2Component comp) {
-    ((Instance *)comp)->s.mode = M_TERMINATED;
+    Instance *c = comp;
+    REQUIRE("fmi2Terminate", M_STEP | M_EVENT | M_CT, ANY);
+    c->mode = M_TERMINATED;
     return fmi2OK;
 }
 
 fmi2Status fmi2Reset(fmi2Component comp) {
     Instance *c = comp;
-    memcpy(c->s.r, VR_START, sizeof c->s.r);
-    memset(c->s.du, 0, sizeof c->s.du);
-    c->s.time = 0.0;
-    c->s.mode = M_INSTANTIATED;
+    REQUIRE("fmi2Reset", M_ALIVE, ANY);
+    memcpy(c->v.r, VR_START, sizeof c->v.r);
+    memset(c->v.du, 0, sizeof c->v.du);
+    c->v.time = 0.0;
+    c->mode = M_INSTANTIATED;
     c->dirty = 1;
     return fmi2OK;
 }
 
 fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
     Instance *c = comp;
+    REQUIRE("fmi2GetReal", M_GET, ANY);
     for (size_t k = 0; k < nvr; k++)
         if (vr[k] >= NR) FAIL(c, "fmi2GetReal: unknown value reference %u (this FMU has 0..%d)", vr[k], NR - 1);
     update(c);
-    for (size_t k = 0; k < nvr; k++) value[k] = c->s.r[vr[k]];
+    for (size_t k = 0; k < nvr; k++)
+        if (!calculated_finite(c, "fmi2GetReal", vr[k])) return fmi2Error;
+    for (size_t k = 0; k < nvr; k++) value[k] = c->v.r[vr[k]];
     return fmi2OK;
 }
 
 fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
     Instance *c = comp;
+    REQUIRE("fmi2SetReal", M_INSTANTIATED | M_INIT | M_STEP | M_EVENT | M_CT, ANY);
     for (size_t k = 0; k < nvr; k++) /* all or nothing */
         if (!check_set(c, vr[k], value[k])) return fmi2Error;
-    for (size_t k = 0; k < nvr; k++) c->s.r[vr[k]] = value[k];
+    for (size_t k = 0; k < nvr; k++) c->v.r[vr[k]] = value[k];
     c->dirty = 1;
     return fmi2OK;
 }
 
 /* This wrapper has Real variables only: any other type's value reference is unknown. */
-#define NO_VARIABLES(fn, T)                                                                           \
+#define NO_VARIABLES(fn, T, modes)                                                                    \
     fmi2Status fn(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, T value[]) {         \
+        Instance *c = comp;                                                                           \
         (void)value;                                                                                  \
+        REQUIRE(#fn, modes, ANY);                                                                     \
         if (nvr == 0) return fmi2OK;                                                                  \
-        FAIL(comp, "%s: unknown value reference %u (this FMU has Real variables only)", #fn, vr[0]);  \
+        FAIL(c, "%s: unknown value reference %u (this FMU has Real variables only)", #fn, vr[0]);     \
     }
-NO_VARIABLES(fmi2GetInteger, fmi2Integer)
-NO_VARIABLES(fmi2GetBoolean, fmi2Boolean)
-NO_VARIABLES(fmi2GetString, fmi2String)
-NO_VARIABLES(fmi2SetInteger, const fmi2Integer)
-NO_VARIABLES(fmi2SetBoolean, const fmi2Boolean)
-NO_VARIABLES(fmi2SetString, const fmi2String)
+#define M_SET_DISCRETE (M_INSTANTIATED | M_INIT | M_STEP | M_EVENT)
+NO_VARIABLES(fmi2GetInteger, fmi2Integer, M_GET)
+NO_VARIABLES(fmi2GetBoolean, fmi2Boolean, M_GET)
+NO_VARIABLES(fmi2GetString, fmi2String, M_GET)
+NO_VARIABLES(fmi2SetInteger, const fmi2Integer, M_SET_DISCRETE)
+NO_VARIABLES(fmi2SetBoolean, const fmi2Boolean, M_SET_DISCRETE)
+NO_VARIABLES(fmi2SetString, const fmi2String, M_SET_DISCRETE)
 
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *state) {
     Instance *c = comp;
+    REQUIRE("fmi2GetFMUstate", M_ALIVE, ANY);
     if (!*state) *state = c->cb->allocateMemory(1, sizeof(Snapshot));
     if (!*state) FAIL(c, "fmi2GetFMUstate: out of memory");
-    memcpy(*state, &c->s, sizeof(Snapshot));
+    Snapshot *s = *state;
+    memset(s, 0, sizeof *s); /* padding too: serialised bytes are reproducible */
+    memcpy(s->magic, SNAPSHOT_MAGIC, sizeof s->magic);
+    memcpy(s->guid, MODEL_GUID, sizeof s->guid);
+    s->size = sizeof *s;
+    s->type = (int32_t)c->type;
+    s->v = c->v;
     return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
     Instance *c = comp;
-    if (!state) FAIL(c, "fmi2SetFMUstate: NULL state");
-    memcpy(&c->s, state, sizeof(Snapshot));
+    const char *fn = "fmi2SetFMUstate";
+    REQUIRE(fn, M_ALIVE, ANY);
+    if (!state) FAIL(c, "%s: NULL state", fn);
+    const Snapshot *s = state;
+    if (!check_snapshot(c, fn, s)) return fmi2Error;
+    if (!(c->mode & (M_INSTANTIATED | M_INIT)))
+        for (fmi2ValueReference vr = VR_P; vr < VR_Y; vr++)
+            if (VR_KIND[vr] == 'f' && s->v.r[vr] != c->v.r[vr])
+                FAIL(c, "%s: the state has %s = %g, this run fixed it at %g in initialisation (fmi2Reset to change it)",
+                     fn, VR_NAME[vr], s->v.r[vr], c->v.r[vr]);
+    c->v = s->v;
     c->dirty = 1;
     return fmi2OK;
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *state) {
-    if (state && *state) ((Instance *)comp)->cb->freeMemory(*state);
+    Instance *c = comp;
+    REQUIRE("fmi2FreeFMUstate", M_ALIVE, ANY);
+    if (state && *state) c->cb->freeMemory(*state);
     if (state) *state = NULL;
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate state, size_t *size) {
-    (void)comp; (void)state;
+    Instance *c = comp;
+    (void)state;
+    REQUIRE("fmi2SerializedFMUstateSize", M_ALIVE, ANY);
     *size = sizeof(Snapshot);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
-    if (size != sizeof(Snapshot)) FAIL(comp, "fmi2SerializeFMUstate: buffer size %zu does not match %zu", size, sizeof(Snapshot));
+    Instance *c = comp;
+    REQUIRE("fmi2SerializeFMUstate", M_ALIVE, ANY);
+    if (!state) FAIL(c, "fmi2SerializeFMUstate: NULL state");
+    if (size != sizeof(Snapshot))
+        FAIL(c, "fmi2SerializeFMUstate: buffer size %zu does not match %zu", size, sizeof(Snapshot));
     memcpy(bytes, state, size);
     return fmi2OK;
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state) {
+    Instance *c = comp;
+    const char *fn = "fmi2DeSerializeFMUstate";
+    REQUIRE(fn, M_ALIVE, ANY);
     if (size != sizeof(Snapshot))
-        FAIL(comp, "fmi2DeSerializeFMUstate: %zu bytes were not serialised by this FMU (%zu expected)", size, sizeof(Snapshot));
-    fmi2Status status = fmi2GetFMUstate(comp, state); /* allocates when needed */
-    if (status == fmi2OK) memcpy(*state, bytes, size);
-    return status;
+        FAIL(c, "%s: %zu bytes were not serialised by this FMU (its states have %zu bytes)", fn, size, sizeof(Snapshot));
+    Snapshot s; /* bytes may be unaligned */
+    memcpy(&s, bytes, size);
+    if (!check_snapshot(c, fn, &s)) return fmi2Error;
+    if (!*state) *state = c->cb->allocateMemory(1, sizeof(Snapshot));
+    if (!*state) FAIL(c, "%s: out of memory", fn);
+    memcpy(*state, &s, size);
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueReference vUnknown[], size_t nUnknown,
@@ -315,12 +487,15 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueRefer
 /* ---- Model Exchange ------------------------------------------------------------------------ */
 
 fmi2Status fmi2EnterEventMode(fmi2Component comp) {
-    ((Instance *)comp)->s.mode = M_EVENT;
+    Instance *c = comp;
+    REQUIRE("fmi2EnterEventMode", M_EVENT | M_CT, ME_ONLY);
+    c->mode = M_EVENT;
     return fmi2OK;
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
-    (void)comp;
+    Instance *c = comp;
+    REQUIRE("fmi2NewDiscreteStates", M_EVENT, ME_ONLY);
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
     info->nominalsOfContinuousStatesChanged = fmi2False;
@@ -331,20 +506,27 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
 }
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component comp) {
-    ((Instance *)comp)->s.mode = M_STEP;
+    Instance *c = comp;
+    REQUIRE("fmi2EnterContinuousTimeMode", M_EVENT, ME_ONLY);
+    c->mode = M_CT;
     return fmi2OK;
 }
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
-    (void)comp; (void)noSetFMUStatePriorToCurrentPoint;
+    Instance *c = comp;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    REQUIRE("fmi2CompletedIntegratorStep", M_CT, ME_ONLY);
     *enterEventMode = fmi2False;
     *terminateSimulation = fmi2False;
     return fmi2OK;
 }
 
 fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
-    ((Instance *)comp)->s.time = time;
+    Instance *c = comp;
+    REQUIRE("fmi2SetTime", M_EVENT | M_CT, ME_ONLY);
+    if (!isfinite(time)) FAIL(c, "fmi2SetTime: time = %g is not a finite number", time);
+    c->v.time = time;
     return fmi2OK;
 }
 
@@ -353,38 +535,49 @@ static fmi2Status check_nx(Instance *c, const char *fn, size_t nx) {
     return fmi2OK;
 }
 
+#define M_ME_GET (M_INIT | M_EVENT | M_CT | M_TERMINATED)
+
 fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
     Instance *c = comp;
+    REQUIRE("fmi2SetContinuousStates", M_CT, ME_ONLY);
     if (check_nx(c, "fmi2SetContinuousStates", nx) != fmi2OK) return fmi2Error;
     if (!all_finite(x, nx)) FAIL(c, "fmi2SetContinuousStates: a state is not a finite number");
-    memcpy(c->s.r + VR_X, x, sizeof(double) * NX);
+    memcpy(c->v.r + VR_X, x, sizeof(double) * NX);
     c->dirty = 1;
     return fmi2OK;
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real dx[], size_t nx) {
     Instance *c = comp;
+    REQUIRE("fmi2GetDerivatives", M_EVENT | M_CT | M_TERMINATED, ME_ONLY);
     if (check_nx(c, "fmi2GetDerivatives", nx) != fmi2OK) return fmi2Error;
     update(c);
-    memcpy(dx, c->s.r + VR_DX, sizeof(double) * NX);
+    for (fmi2ValueReference vr = VR_DX; vr < NR; vr++)
+        if (!calculated_finite(c, "fmi2GetDerivatives", vr)) return fmi2Error;
+    memcpy(dx, c->v.r + VR_DX, sizeof(double) * NX);
     return fmi2OK;
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real indicators[], size_t ni) {
+    Instance *c = comp;
     (void)indicators;
-    if (ni != 0) FAIL(comp, "fmi2GetEventIndicators: called with %zu indicators, this FMU has none", ni);
+    REQUIRE("fmi2GetEventIndicators", M_ME_GET, ME_ONLY);
+    if (ni != 0) FAIL(c, "fmi2GetEventIndicators: called with %zu indicators, this FMU has none", ni);
     return fmi2OK;
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) {
     Instance *c = comp;
+    REQUIRE("fmi2GetContinuousStates", M_ME_GET, ME_ONLY);
     if (check_nx(c, "fmi2GetContinuousStates", nx) != fmi2OK) return fmi2Error;
-    memcpy(x, c->s.r + VR_X, sizeof(double) * NX);
+    memcpy(x, c->v.r + VR_X, sizeof(double) * NX);
     return fmi2OK;
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real nominals[], size_t nx) {
-    if (check_nx(comp, "fmi2GetNominalsOfContinuousStates", nx) != fmi2OK) return fmi2Error;
+    Instance *c = comp;
+    REQUIRE("fmi2GetNominalsOfContinuousStates", M_INSTANTIATED | M_EVENT | M_CT | M_TERMINATED, ME_ONLY);
+    if (check_nx(c, "fmi2GetNominalsOfContinuousStates", nx) != fmi2OK) return fmi2Error;
     for (size_t k = 0; k < nx; k++) nominals[k] = 1.0;
     return fmi2OK;
 }
@@ -395,8 +588,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
                                        const fmi2Integer order[], const fmi2Real value[]) {
     Instance *c = comp;
     const char *fn = "fmi2SetRealInputDerivatives";
-    if (c->type != fmi2CoSimulation) FAIL(c, "%s: a Co-Simulation function, this instance is Model Exchange", fn);
-    if (c->s.mode == M_TERMINATED) FAIL(c, "%s: called after fmi2Terminate", fn);
+    REQUIRE(fn, M_INSTANTIATED | M_INIT | M_STEP, CS_ONLY);
     for (size_t k = 0; k < nvr; k++) { /* all or nothing */
         if (vr[k] >= NR) FAIL(c, "%s: unknown value reference %u (this FMU has 0..%d)", fn, vr[k], NR - 1);
         if (VR_KIND[vr[k]] != 'i') FAIL(c, "%s: %s is not an input", fn, VR_NAME[vr[k]]);
@@ -405,7 +597,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
                  VR_NAME[vr[k]]);
         if (!isfinite(value[k])) FAIL(c, "%s: der(%s) = %g is not a finite number", fn, VR_NAME[vr[k]], value[k]);
     }
-    for (size_t k = 0; k < nvr; k++) c->s.du[vr[k] - VR_U] = value[k];
+    for (size_t k = 0; k < nvr; k++) c->v.du[vr[k] - VR_U] = value[k];
     return fmi2OK;
 }
 
@@ -415,24 +607,29 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
     FAIL(comp, "fmi2GetRealOutputDerivatives: not provided (maxOutputDerivativeOrder is 0)");
 }
 
-/* n = ceil(h / cs_substep) equal RK4 substeps. Communication steps arrive as differences of grid
- * points, so h may exceed a multiple of the substep by rounding: the 1e-9 keeps that from adding a
- * substep. */
+/* n = ceil(h / cs_substep) equal RK4 substeps, at most MAX_SUBSTEPS. Communication steps arrive as
+ * differences of grid points, so h may exceed a multiple of the substep by rounding: the 1e-9 keeps
+ * that from adding a substep. */
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
-    (void)noSetFMUStatePriorToCurrentPoint;
     Instance *c = comp;
-    if (c->s.mode != M_STEP) FAIL(c, "fmi2DoStep: called outside step mode");
+    (void)noSetFMUStatePriorToCurrentPoint;
+    REQUIRE("fmi2DoStep", M_STEP, CS_ONLY);
+    if (!isfinite(t)) FAIL(c, "fmi2DoStep: communication point %g is not a finite number", t);
     if (!(h > 0.0) || !isfinite(h))
         FAIL(c, "fmi2DoStep: step size %g must be positive and finite", h);
-    double n = ceil(h / c->s.r[VR_CS_SUBSTEP] - 1e-9);
+    double substep = c->v.r[VR_CS_SUBSTEP];
+    double n = ceil(h / substep - 1e-9);
     if (n < 1.0) n = 1.0;
+    if (!(n <= MAX_SUBSTEPS))
+        FAIL(c, "fmi2DoStep: h = %g s with cs_substep = %g s needs %.6g RK4 substeps, more than the cap of %d per "
+             "step; use shorter communication steps or a larger cs_substep", h, substep, n, MAX_SUBSTEPS);
     double dt = h / n, tau;
     double x[NX];
-    memcpy(x, c->s.r + VR_X, sizeof x);
+    memcpy(x, c->v.r + VR_X, sizeof x);
     c->arg[0] = x;
-    c->arg[1] = c->s.r + VR_U;
-    c->arg[2] = c->s.du;
-    c->arg[3] = c->s.r + VR_P;
+    c->arg[1] = c->v.r + VR_U;
+    c->arg[2] = c->v.du;
+    c->arg[3] = c->v.r + VR_P;
     c->arg[4] = &dt;
     c->arg[5] = &tau;
     c->res[0] = c->xnext;
@@ -443,8 +640,8 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
     }
     if (!all_finite(x, NX))
         FAIL(c, "fmi2DoStep: the state became non-finite in [%g, %g] s; step rejected, state unchanged", t, t + h);
-    memcpy(c->s.r + VR_X, x, sizeof x);
-    c->s.time = t + h;
+    memcpy(c->v.r + VR_X, x, sizeof x);
+    c->v.time = t + h;
     c->dirty = 1;
     return fmi2OK;
 }

@@ -39,14 +39,17 @@ def instance(fmu_dir: str) -> Iterator[Callable[..., Instance]]:
     """Factory ``instance(kind="cs" | "me", init=True, **start_values)`` -> ``Instance`` at t = 0,
     initialised unless ``init`` is False (then still in the instantiated state)."""
     made: list[Instance] = []
+    logs: dict[str, list[str]] = {}  # by instance name: fmpy's logger proxy is one global, the last one added
 
     def make(kind: str = "cs", init: bool = True, **start: float) -> Instance:
         md = read_model_description(fmu_dir)
         cls, ident = (FMU2Slave, md.coSimulation) if kind == "cs" else (FMU2Model, md.modelExchange)
-        fmu = cls(guid=md.guid, unzipDirectory=fmu_dir, modelIdentifier=ident.modelIdentifier, instanceName=kind)
-        inst = Instance(fmu, {v.name: v.valueReference for v in md.modelVariables})
+        name = f"{kind}{len(made)}"
+        fmu = cls(guid=md.guid, unzipDirectory=fmu_dir, modelIdentifier=ident.modelIdentifier, instanceName=name)
+        inst = Instance(fmu, {v.name: v.valueReference for v in md.modelVariables}, logs.setdefault(name, []))
         callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(lambda env, name, status, cat, msg: inst.log.append(msg.decode()))
+        callbacks.logger = fmi2CallbackLoggerTYPE(
+            lambda env, instance_name, status, cat, msg: logs[instance_name.decode()].append(msg.decode()))
         callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         addLoggerProxy(byref(callbacks))  # formats the variadic message in C
@@ -63,6 +66,5 @@ def instance(fmu_dir: str) -> Iterator[Callable[..., Instance]]:
         return inst
 
     yield make
-    for inst in made:
-        inst.fmu.terminate()
+    for inst in made:  # fmi2FreeInstance is allowed in every mode (tests leave instances in any of them)
         inst.fmu.freeInstance()
