@@ -56,6 +56,14 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
             params = m.get("parameters") or {}
             text = " ".join(f"{p}={v['value']:.4g}" for p, v in params.items() if isinstance(v, dict) and "value" in v)
             lines.append(f"  motion {k}: {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
+            for f in m.get("sensor_faults") or []:
+                lines.append(f"    sensor fault: {f['sensor']} {f['kind']} (gain {f['gain']:.4g}, offset {f['offset']:.4g})")
+            if isinstance(m.get("mismatch"), dict) and not m["mismatch"].get("passed", True):
+                lines.append(f"    model mismatch ({m['mismatch']['test']} test): parameters not validated")
+            for d in m.get("diagnosis") or []:
+                lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
+            if m.get("error"):
+                lines.append(f"    {m['error']}")
     lines.append(f"  files: signals.csv, scenario.resolved.yaml, report.json, {len(result.paths['plots'])} plots")
     return "\n".join(lines)
 

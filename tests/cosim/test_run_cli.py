@@ -120,3 +120,15 @@ def test_successive_runs_continue_one_history_beside_the_out_dirs(tmp_path, feed
     capsys.readouterr()
     assert main(["history"]) == 0
     assert capsys.readouterr().out.startswith("axis X: 2 motion(s)")
+
+
+@pytest.mark.slow
+def test_summary_names_the_sensor_fault(tmp_path, feeddrive_fmu, capsys):
+    """examples/current_sensor_fault.yaml: Im1 gain 1.03 and offset 0.2 A from the 2nd tool change."""
+    out = tmp_path / "run"
+    assert main(["run", str(EXAMPLES / "current_sensor_fault.yaml"), "--out", str(out), "--no-progress"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    faults = [ln.strip() for ln in lines if "sensor fault:" in ln]
+    assert len(faults) == 1 and faults[0].startswith("sensor fault: Im1 gain+offset (gain 1.03, offset 0.2")
+    assert lines.index(next(ln for ln in lines if ln.startswith("  motion 2:"))) < lines.index(
+        next(ln for ln in lines if "sensor fault:" in ln))
