@@ -66,8 +66,9 @@ class MonitorConfig(BaseModel):
     window_s, gain_tol, offset_tol : float
         Residue windows [s]; sensor gain error [relative] and offset [fraction of range] that count as faults.
     mismatch_rms_tol : float
-        RMS output-error residue over the worst 50 ms (fraction of the signal's range) above which a residue
-        that is not white Gaussian noise (Ljung-Box or burst test) is a mismatch.
+        RMS output-error residue in a 50 ms window, beyond what the estimate's uncertainty band allows
+        (fraction of the signal's range), above which a residue that is not white Gaussian noise
+        (Ljung-Box or burst test) is a mismatch; see estimator/mismatch.py.
     baseline : {"motions", "nominal"}
         Healthy baseline: the first ``baseline_motions`` validated motions without a diagnosis, or the
         model's nominal values. While it is incomplete, each validated motion is diagnosed against the
@@ -233,7 +234,8 @@ class MonitorPipeline:
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95)} for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
         mismatch = check_model(v.u, v.i, v.w, h, {k: p.value for k, p in params.items()}, self.config.filter,
-                               self.config.alpha, rms_tol=self.config.mismatch_rms_tol)
+                               self.config.alpha, rms_tol=self.config.mismatch_rms_tol, covariance=est.covariance,
+                               names=est.names)
         trace.mismatch = mismatch
         result["mismatch"] = mismatch.to_dict()
         result["validated"] = bool(v.valid and mismatch.passed)

@@ -1,7 +1,7 @@
 """Model validation (paper IV.B.3): healthy motions pass, a fault appearing during the motion fails.
 
-Plant data from the closed-loop CasADi model (see test_validation.py), parameters from the
-estimator on the validated signals, as the monitor does.
+Plant data from the closed-loop CasADi model (see test_validation.py), parameters and their covariance
+from the estimator on the validated signals, as the monitor does.
 """
 import importlib.util
 from pathlib import Path
@@ -13,7 +13,9 @@ from scipy import stats
 
 from estimator.errors import EstimatorInputError
 from estimator.estimate import MotionData, estimate_motion
-from estimator.mismatch import check_model, residue_check
+from estimator.mismatch import USES, check_model, residue_check, uncertainty_band, window_rms
+from estimator.simulation import simulate_speed
+from estimator.validation import model_reference
 
 # the plant data of test_validation.py, loaded by path (test folders are not packages)
 _spec = importlib.util.spec_from_file_location("validation_plant", Path(__file__).with_name("test_validation.py"))
@@ -21,12 +23,16 @@ _plant = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_plant)
 FILTER, H, measure, plant_motion, validate = (_plant.FILTER, _plant.H, _plant.measure, _plant.plant_motion,
                                              _plant.validate)
+TRUTH = {k: v for k, v in _plant.NOMINAL.items() if k in ("R", "L", "K", "Jt", "ft", "Cd")}
+C_SPEED, C_CURRENT = np.sqrt(stats.chi2.isf(1e-3, 4)), np.sqrt(stats.chi2.isf(1e-3, 3))  # K Jt ft Cd; R L K
 
 
-def checked(changes=(), seed=1):
+def checked(changes=(), seed=1, band=False):
     v = validate(measure(plant_motion(changes), seed))
     est = estimate_motion(MotionData(H, v.u, v.i, v.w))
-    return est, check_model(v.u, v.i, v.w, H, {k: p.value for k, p in est.parameters.items()}, FILTER)
+    uncertainty = {"covariance": est.covariance, "names": est.names} if band else {}
+    return est, check_model(v.u, v.i, v.w, H, {k: p.value for k, p in est.parameters.items()}, FILTER,
+                            **uncertainty)
 
 
 def test_healthy_motion_passes():
@@ -40,12 +46,37 @@ def test_healthy_motion_passes():
     assert set(d) >= {"test", "statistic", "p_value", "passed"} and d["passed"] is True
 
 
-def test_friction_step_during_the_motion_is_a_mismatch():
-    """Cd doubles at 1.6 s (between the two plateaus): one model cannot explain both halves."""
-    est, res = checked((("Cd", 2.4, 1.6),))
+def test_healthy_motion_passes_within_its_band():
+    """With the covariance: the band factors are sqrt(chi2_p^-1(1 - alpha)) for the 4 speed and 3 current
+    parameters, and the effect of the actual parameter error (simulation with the plant's values minus
+    simulation with the estimate) stays within c times the band's RMS in every 50 ms window (the
+    Cauchy-Schwarz bound of the module docstring)."""
+    v = validate(measure(plant_motion(), 1))
+    est, res = checked(band=True)
+    assert res.passed and res.test == "size" and res.p_value < 1e-3
+    truth = check_model(v.u, v.i, v.w, H, TRUTH, FILTER)
+    for name, c in (("speed", C_SPEED), ("current", C_CURRENT)):
+        check = res.checks[name]
+        assert check.band_factor == pytest.approx(c, rel=1e-12)
+        assert check.excess_relative <= check.peak_rms_relative < 0.1 * res.rms_tol
+        assert np.all(check.band[500:] > 0)  # 0 at t0 for the speed: the simulation starts from the measured w
+        effect = window_rms((truth.checks[name].simulated - check.simulated)[500:-500], 500)
+        assert np.max(effect / window_rms(check.band[500:-500], 500)) < c
+    d = res.to_dict()
+    assert d["band_factor"] == {"speed": pytest.approx(C_SPEED), "current": pytest.approx(C_CURRENT)}
+    assert d["statistic"] == max(d["excess_relative"].values())
+    assert set(d["band_relative"]) == {"speed", "current"}
+
+
+@pytest.mark.parametrize("band", [False, True])
+def test_friction_step_during_the_motion_is_a_mismatch(band):
+    """Cd doubles at 1.6 s (between the two plateaus): one model cannot explain both halves, with or
+    without the uncertainty band (the residue beyond the band is still 5.7 % of the range)."""
+    est, res = checked((("Cd", 2.4, 1.6),), band=band)
     assert not res.passed
     speed = res.checks["speed"]
     assert not speed.passed and speed.p_value < 1e-3 and speed.rms_relative > 0.03
+    assert speed.excess_relative > 4 * res.rms_tol
     assert res.checks["current"].passed  # the electrical part is unaffected
     assert res.p_value == speed.p_value and res.statistic == speed.statistic
     # the residue grows after the step: far larger in the second half than in the first
@@ -127,9 +158,75 @@ def test_edge_s_leaves_the_ends_out():
             assert c.burst_z == pytest.approx(big / sb, rel=0.15) and c.burst_p < 1e-100
 
 
+def test_the_band_widens_the_size_rule_by_c_times_its_rms():
+    """A coloured residue of A = 1.5 % of the range over 50 ms and a constant band B: the worst window's
+    excess is exactly (A - c B) / range; accepted when that is below rms_tol, rejected without the band."""
+    r = np.zeros(N)
+    r[20000:20500] = amplitude = 0.015 * np.ptp(W)
+    span = np.ptp(W + r)
+    for c, band_rms, passed in ((4.0, 0.002 * span, True), (4.0, 0.001 * span, False), (0.0, 0.002 * span, False)):
+        check = residue_check("speed", W + r, W, H, 1e-3, 50.0, 10, 0.01, band=np.full(N, band_rms), band_factor=c)
+        assert check.burst_p < 1e-3  # not white: the size rule decides
+        assert check.excess_relative == pytest.approx((amplitude - c * band_rms) / span, rel=1e-9)
+        assert check.band_relative == pytest.approx(band_rms / span, rel=1e-9)
+        assert check.peak_rms_relative == pytest.approx(amplitude / span, rel=1e-9)
+        assert check.passed is passed
+    plain = residue_check("speed", W + r, W, H, 1e-3, 50.0, 10, 0.01)
+    assert not plain.passed and plain.band is None and plain.band_relative == 0.0
+    assert plain.excess_relative == plain.peak_rms_relative
+
+
+def test_band_of_a_linear_model_is_exact():
+    """y(t) = a t + b t^2 (c unused): sigma(t)^2 = t^2 Saa + 2 t^3 Sab + t^4 Sbb, whatever the correlation,
+    also for a singular covariance (a and b perfectly correlated: one axis, rank 1)."""
+    t = np.linspace(0.0, 2.0, 201)
+
+    def simulate(p):
+        return p["a"] * t + p["b"] * t**2
+
+    theta = {"a": 1.0, "b": -0.5, "c": 3.0}
+    for cov, rank in ((np.array([[0.04, -0.01, 0.5], [-0.01, 0.09, 0.2], [0.5, 0.2, 9.0]]), 2),
+                      (np.array([[0.04, 0.06, 0.0], [0.06, 0.09, 0.0], [0.0, 0.0, 9.0]]), 1)):
+        band, k = uncertainty_band(simulate, theta, ("a", "b", "c"), cov, ("a", "b"))
+        expected = np.sqrt(t**2 * cov[0, 0] + 2 * t**3 * cov[0, 1] + t**4 * cov[1, 1])
+        assert k == rank and band == pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
+@pytest.mark.parametrize("signal", ["speed", "current"])
+def test_band_matches_the_spread_of_simulations(signal):
+    """Second engine: 300 simulations with parameters drawn from N(theta, Sigma) (the estimator's own
+    estimate and covariance, healthy motion) have, in every 50 ms window, the RMS standard deviation of
+    the finite-difference band within 20 % (5 times the 4 % sampling error of a standard deviation from
+    300 draws; the windows see different combinations of the parameters), and over the whole motion
+    within 8 %."""
+    v = validate(measure(plant_motion(), 1))
+    est = estimate_motion(MotionData(H, v.u, v.i, v.w))
+    f = FILTER.apply({"u": v.u, "i": v.i, "w": v.w}, H)
+
+    def simulate(p):
+        if signal == "current":
+            return model_reference("current", f, H, p)
+        return simulate_speed(f["i"], p, H, w0=float(f["w"][0]), step=5e-4, w_eps=0.01)
+
+    values = {k: p.value for k, p in est.parameters.items()}
+    band, _ = uncertainty_band(simulate, values, est.names, est.covariance, USES[signal])
+    draws = np.random.default_rng(5).multivariate_normal(est.result.values, est.covariance, 300)
+    spread = np.std([simulate(dict(zip(est.names, d))) for d in draws], axis=0, ddof=1)
+    ratio = window_rms(spread[500:-500], 500) / window_rms(band[500:-500], 500)
+    assert np.all(np.abs(ratio - 1) < 0.2)
+    assert np.sqrt(np.mean(spread**2) / np.mean(band**2)) == pytest.approx(1.0, abs=0.08)
+
+
 def test_bad_input_is_named():
     y = plant_motion()
     with pytest.raises(EstimatorInputError, match="Cd"):
         check_model(y["u"], y["i"], y["w"], H, {"R": 0.6, "L": 4e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02}, FILTER)
     with pytest.raises(EstimatorInputError, match="blocks"):
         residue_check("speed", np.ones(1000), np.zeros(1000), H, 1e-3, 50.0, 10, 0.01)
+    with pytest.raises(EstimatorInputError, match="band has shape"):
+        residue_check("speed", W, W, H, 1e-3, 50.0, 10, 0.01, band=np.ones(10), band_factor=4.0)
+    for cov, names, match in ((np.eye(6), None, "covariance"), (np.eye(5), tuple(TRUTH), r"\(p, p\)"),
+                              (np.full((6, 6), np.nan), tuple(TRUTH), "finite"),
+                              (np.eye(7), (*TRUTH, "T0"), r"names \['T0'\]")):
+        with pytest.raises(EstimatorInputError, match=match):
+            check_model(y["u"], y["i"], y["w"], H, TRUTH, FILTER, covariance=cov, names=names)
