@@ -16,7 +16,7 @@ import time
 import warnings
 from pathlib import Path
 
-from cosim.campaign import Campaign, run_campaign
+from feeddrive.cosim.campaign import Campaign, run_campaign
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = {"name": "bench", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "builtin"},
@@ -33,7 +33,8 @@ def main() -> int:
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     from distributed import LocalCluster
-    from fmu_build import builtin_fmu
+
+    from feeddrive.fmu_build import builtin_fmu
 
     builtin_fmu()  # build outside the timings
     campaign = Campaign(name="bench", base=BASE, seed=1, repetitions=args.runs,

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.master import Master
-from cosim.scenario import load_scenario
+from feeddrive.cosim.master import Master
+from feeddrive.cosim.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -23,10 +23,10 @@ import time
 
 import numpy as np
 
-from estimator import EstimationOptions, MotionData, estimate_motion
-from estimator.design import simulate_closed_loop
-from estimator.estimate import prepare
-from estimator.validation import validate_measurements
+from feeddrive.estimator import EstimationOptions, MotionData, estimate_motion
+from feeddrive.estimator.design import simulate_closed_loop
+from feeddrive.estimator.estimate import prepare
+from feeddrive.estimator.validation import validate_measurements
 
 CORNERS = np.cumsum([0, 0.1, 0.38, 0.9, 0.38, 0.3, 0.38, 0.9, 0.38, 0.28])
 LEVELS = [0, 0, 70, 70, 0, 0, -70, -70, 0, 0]
@@ -69,7 +69,7 @@ def main() -> None:
         y, Phi = elec.evaluate(reg.signals)
         base = best(lambda: np.linalg.lstsq(Phi, y, rcond=None), 5 * args.repeat)
         print(f"{1 / h:7.0f} {'lstsq':>6} {1e3 * base:10.3f} {1.0:9.1f} {'':>10}   (baseline, {len(y)} x 3)")
-        runs = {method: (lambda o=EstimationOptions(method=method): estimate_motion(data, o))
+        runs = {method: (lambda o=EstimationOptions(method=method): estimate_motion(data, o))  # noqa: B008
                 for method in ("ls", "iv", "oe")}
         spec = EstimationOptions().filter
         runs["ls+val"] = lambda: (validate_measurements(redundant, h, None, spec), runs["ls"]())

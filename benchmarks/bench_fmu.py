@@ -18,7 +18,7 @@ import numpy as np
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi2 import FMU2Slave
 
-from fmu_build import DEFAULT_CS_SUBSTEP, builtin_fmu
+from feeddrive.fmu_build import DEFAULT_CS_SUBSTEP, builtin_fmu
 
 
 def _slave(fmu_dir: str) -> tuple[FMU2Slave, dict[str, int]]:

@@ -37,9 +37,10 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
-from cosim.errors import ScenarioError
+from feeddrive.cosim.errors import ScenarioError
 
 
 class Component(ABC):
@@ -84,6 +85,21 @@ class Component(ABC):
         """Release resources. Called once, also after a failure; must not raise."""
 
 
+#: the project's packages before they moved under ``feeddrive`` (0.1): old scenarios are told the new name
+LEGACY_PACKAGES = ("cosim", "estimator", "models", "fmu_build")
+
+
+def legacy_hint(module_name: str) -> str:
+    """``"; write 'feeddrive.cosim.x' instead"`` when ``module_name`` is a module's pre-0.2 name, else ``""``."""
+    if module_name.split(".")[0] not in LEGACY_PACKAGES:
+        return ""
+    try:
+        importlib.import_module(f"feeddrive.{module_name}")
+    except ImportError:
+        return ""
+    return f"; the project's modules moved under feeddrive: write 'feeddrive.{module_name}' instead"
+
+
 def load_component_class(spec: str, where: str = "class") -> type[Component]:
     """Import ``package.module:ClassName`` and check that it is a ``Component``.
 
@@ -106,10 +122,10 @@ def load_component_class(spec: str, where: str = "class") -> type[Component]:
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise ScenarioError(f"{where}: cannot import module {module_name!r} ({exc})") from None
+        raise ScenarioError(f"{where}: cannot import module {module_name!r} ({exc}){legacy_hint(module_name)}") from None
     cls = getattr(module, class_name, None)
     if cls is None:
         raise ScenarioError(f"{where}: module {module_name!r} has no class {class_name!r}")
     if not (isinstance(cls, type) and issubclass(cls, Component)):
-        raise ScenarioError(f"{where}: {spec!r} is not a subclass of cosim.component.Component")
+        raise ScenarioError(f"{where}: {spec!r} is not a subclass of feeddrive.cosim.component.Component")
     return cls

@@ -5,6 +5,16 @@ The CLI maps ``InputError`` (and its subclasses) to exit status 2 with one line,
 """
 from __future__ import annotations
 
+from typing import Any
+
+
+def format_path(path: tuple[Any, ...]) -> str:
+    """``("nc", "program", 2, "rapid")`` -> ``nc.program[2].rapid``: a configuration key as users write it."""
+    text = ""
+    for part in path:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text
+
 
 class InputError(ValueError):
     """Bad user input: a scenario, a CSV, a mapping, a command-line option."""

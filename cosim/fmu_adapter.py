@@ -25,15 +25,22 @@ from __future__ import annotations
 import ctypes
 import logging
 import shutil
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from fmpy import calloc, extract, free, read_model_description
-from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (
+    FMU2Model,
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
 
-from cosim.component import Component
-from cosim.errors import FMIError, ScenarioError, SimulationError
-from cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, PlantConfig
+from feeddrive.cosim.component import Component
+from feeddrive.cosim.errors import FMIError, ScenarioError, SimulationError
+from feeddrive.cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, PlantConfig
 
 STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
 _LOG_LEVEL = (logging.DEBUG, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
@@ -59,7 +66,7 @@ class _HeldInputs:
 class _RampedInputs:
     """First-order hold in Model Exchange: ``apply(t)`` runs before each right-hand side and root function."""
 
-    def __init__(self, plant: "FMUComponent") -> None:
+    def __init__(self, plant: FMUComponent) -> None:
         n = len(plant._foh)
         self._plant, self._vr, self._values = plant, plant._dvr, (ctypes.c_double * n)()
 

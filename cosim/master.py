@@ -16,15 +16,17 @@ Default wiring of the standard components (by port name; a scenario's ``connecti
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from operator import itemgetter
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any
 
 from tqdm import tqdm
 
-from cosim.component import Component, load_component_class
-from cosim.errors import InputError, ScenarioError, SimulationError
-from cosim.recorder import Recorder
+from feeddrive.cosim.component import Component, load_component_class
+from feeddrive.cosim.errors import InputError, ScenarioError, SimulationError, format_path
+from feeddrive.cosim.nc import SETTLING
+from feeddrive.cosim.recorder import Recorder
 
 #: preferred source components of each standard component's inputs
 DEFAULT_SOURCES = {"plant": ("nc",), "nc": ("plant", "monitor"), "sensors": ("plant",), "monitor": ("sensors", "nc")}
@@ -32,8 +34,6 @@ DEFAULT_SOURCES = {"plant": ("nc",), "nc": ("plant", "monitor"), "sensors": ("pl
 DEFAULT_FALLBACKS = {"sensors.voltage_ref": "plant.voltage", "nc.request": 0.0}
 #: steps between progress-bar updates and recorder flushes
 BLOCK = 1000
-#: margin added to the NC program's duration for the default stop time [s]
-SETTLING = 0.3
 #: largest accepted difference between the NC's start and the plant's initial position [m]
 START_TOLERANCE = 1e-6
 
@@ -63,8 +63,6 @@ def default_connections(ports: Mapping[str, tuple[Sequence[str], Sequence[str]]]
 
 
 def _scenario_error(path: tuple, message: str) -> ScenarioError:
-    from cosim.scenario import format_path
-
     return ScenarioError(f"{format_path(path)}: {message}")
 
 
@@ -109,11 +107,11 @@ class Master:
         self._terminated: set[str] = set()
 
     @classmethod
-    def from_scenario(cls, scenario: Any) -> "Master":
+    def from_scenario(cls, scenario: Any) -> Master:
         """The standard components of a :class:`cosim.scenario.Scenario`, plus its user components."""
-        from cosim.fmu_adapter import FMUComponent
-        from cosim.nc import NCComponent
-        from cosim.sensors import SensorsComponent
+        from feeddrive.cosim.fmu_adapter import FMUComponent
+        from feeddrive.cosim.nc import NCComponent
+        from feeddrive.cosim.sensors import SensorsComponent
 
         nc = NCComponent("nc", scenario.nc)
         comps: list[tuple[str, Component]] = [("nc", nc), ("plant", FMUComponent("plant", scenario.plant)),
@@ -293,7 +291,7 @@ class Master:
         """Each component's ``report()`` (call after the run)."""
         return {n: c.report() for n, c in self.components.items()}
 
-    def __enter__(self) -> "Master":
+    def __enter__(self) -> Master:
         return self
 
     def __exit__(self, *exc: Any) -> None:

@@ -20,23 +20,24 @@ from __future__ import annotations
 
 import math
 import time as _time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Mapping, Sequence
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from cosim.component import Component
-from cosim.errors import ScenarioError
-from cosim.nc import describe_validation_error
-from estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
-from estimator.errors import EstimatorInputError, NotEnoughExcitation
-from estimator.estimate import EstimationOptions, MotionData, estimate_motion
-from estimator.filtering import FilterSpec
-from estimator.history import History
-from estimator.mismatch import MismatchResult, check_model
-from estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
+from feeddrive.cosim.component import Component
+from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.nc import describe_validation_error
+from feeddrive.estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
+from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
+from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.history import History
+from feeddrive.estimator.mismatch import MismatchResult, check_model
+from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
 #: NC state of a high-speed motion without machining
 RAPID = 1
@@ -146,7 +147,7 @@ class MonitorPipeline:
     """
 
     def __init__(self, config: MonitorConfig, history: History, axis: str) -> None:
-        from models import feed_drive
+        from feeddrive.models import feed_drive
 
         self.config, self.history, self.axis = config, history, axis
         self.nominal = feed_drive().nominal(("physical",))
@@ -386,7 +387,7 @@ class Monitor(Component):
 
     def write_plots(self, folder: str | Path) -> list[Path]:
         """Monitor plots of the kept motions and the parameter trends of the axis into ``folder``."""
-        from cosim.monitor_plots import plot_monitor
+        from feeddrive.cosim.monitor_plots import plot_monitor
 
         if self.config.db:
             with History(self.config.db) as history:

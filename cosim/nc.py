@@ -23,13 +23,14 @@ inserts, at the next boundary between program items (or at once when the program
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import lru_cache
-from typing import Any, Sequence
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_serializer, model_validator
 
-from cosim.component import Component
-from cosim.errors import ScenarioError
+from feeddrive.cosim.component import Component
+from feeddrive.cosim.errors import ScenarioError
 
 #: NC ``state`` codes
 IDLE, RAPID, FEED = 0, 1, 2
@@ -46,6 +47,9 @@ _MESSAGES = {
     "extra_forbidden": "unknown key",
 }
 
+#: margin added to the NC program's duration for the default stop time [s]
+SETTLING = 0.3
+
 
 class StrictConfig(BaseModel):
     """Base of the scenario sections: frozen, no unknown keys, no inf/NaN."""
@@ -53,7 +57,7 @@ class StrictConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     @classmethod
-    def parse(cls, data: Any, where: str) -> "StrictConfig":
+    def parse(cls, data: Any, where: str) -> StrictConfig:
         """Validate a scenario section, raising a one-line ``ScenarioError`` naming the key.
 
         Parameters
@@ -90,7 +94,7 @@ def describe_validation_error(exc: ValidationError, where: str) -> str:
 @lru_cache(maxsize=1)
 def drive_chain_nominal() -> tuple[float, float]:
     """``(pitch [m], belt_ratio [1])``: the design values of ``models.feed_drive()``."""
-    from models import feed_drive
+    from feeddrive.models import feed_drive
 
     nominal = feed_drive().nominal(("design",))
     return nominal["pitch"], nominal["belt_ratio"]

@@ -10,8 +10,8 @@ A figure is drawn only when its signals were recorded.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 import matplotlib
 

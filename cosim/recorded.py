@@ -10,13 +10,13 @@ import argparse
 import csv
 import io
 import re
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Mapping
 
 import numpy as np
 
-from cosim.errors import DataError, InputError
+from feeddrive.cosim.errors import DataError, InputError
 
 #: Fewest samples a recording must have.
 MIN_SAMPLES = 10
@@ -158,7 +158,7 @@ def pairs(items: list[str], what: str) -> dict[str, str]:
 
 def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str], filter_cutoff_hz: float) -> None:
     """The data file, ``--map``, ``--sample-time``, ``--segment``, ``--method``, ``--filter-cutoff``, ``--json``."""
-    from estimator.segmentation import MODES
+    from feeddrive.estimator.segmentation import MODES
 
     parser.add_argument("data", help="CSV file with a header row")
     parser.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",

@@ -1,8 +1,8 @@
 """Signal recorder: a preallocated array filled in blocks of rows, written to signals.csv."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

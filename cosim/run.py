@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from cosim.errors import InputError
-from cosim.master import Master
-from cosim.scenario import Scenario, load_scenario
+from feeddrive.cosim.errors import InputError
+from feeddrive.cosim.master import Master
+from feeddrive.cosim.scenario import Scenario, load_scenario
 
 OUTPUTS = ("signals.csv", "scenario.resolved.yaml", "report.json")
 #: ``cosim run``'s history file when the scenario names none: beside the run's output directory, so
@@ -131,7 +131,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
         signals = recorder.signals()
         if plots:
-            from cosim.plots import plot_run
+            from feeddrive.cosim.plots import plot_run
 
             paths["plots"] = plot_run(recorder.time, signals, out_dir / "plots", title=scenario.name)
             for comp in master.components.values():  # components that draw their own figures (the monitor)

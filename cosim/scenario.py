@@ -17,23 +17,19 @@ parameters, when given, are also the defaults of the NC's and the encoder's driv
 """
 from __future__ import annotations
 
-import hashlib
 import math
-import types
-import typing
 import warnings
-import zipfile
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Callable, Literal, Mapping
-from xml.etree import ElementTree
+from typing import Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
-from cosim.errors import ScenarioError
-from cosim.master import SETTLING
-from cosim.nc import NCConfig, plan_program
-from cosim.sensors import ChannelConfig, SensorsConfig
+from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.fmu_inspect import fmi_version, model_description, sha256
+from feeddrive.cosim.nc import SETTLING, NCConfig, plan_program
+from feeddrive.cosim.sensors import ChannelConfig, SensorsConfig
+from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error, read_yaml
 
 Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
 INPUT_ROLES = ("speed_ref", "load")
@@ -44,9 +40,8 @@ ROLE_UNITS = {"speed_ref": "rad/s", "load": "N.m", "voltage": "V", "voltage_ref"
 BUILTIN_MAP = {"speed_ref": "w_ref", "load": "Tl", "voltage": "u", "voltage_ref": "u_ref", "current": "i",
                "speed": "w", "position": "x"}
 STANDARD_COMPONENTS = ("nc", "plant", "sensors", "monitor")
-DEFAULT_MONITOR = "cosim.monitor:Monitor"
+DEFAULT_MONITOR = "feeddrive.cosim.monitor:Monitor"
 
-KeyPath = tuple[Any, ...]
 
 
 class _Strict(BaseModel):
@@ -158,7 +153,7 @@ class Scenario(_Strict):
 
     def error(self, path: KeyPath, message: str) -> ScenarioError:
         """A ScenarioError naming the file, the YAML line of ``path`` (or its nearest parent) and the key."""
-        return _error(self._source, self._lines, path, message)
+        return located_error(self._source, self._lines, path, message)
 
     def to_dict(self) -> dict:
         """Everything as plain YAML-able data, defaults filled; ``scenario_from_dict`` reads it back."""
@@ -193,7 +188,7 @@ def load_scenario(path: str | Path) -> Scenario:
         Unreadable or malformed file; the message has ``file:line: key:`` and what was expected.
     """
     path = Path(path)
-    data, lines = _read_yaml(path)
+    data, lines = read_yaml(path)
     return scenario_from_dict(data, source=str(path), base_dir=path.resolve().parent, lines=lines)
 
 
@@ -201,33 +196,14 @@ def load_plant_map(path: str | Path) -> tuple[dict[str, MapEntry], Callable[[Key
     """The role map of a scenario file's ``plant:`` section (with the built-in defaults when its FMU is
     ``builtin``), without resolving its FMU; and a factory of errors naming that file and line."""
     path = Path(path)
-    data, lines = _read_yaml(path)
+    data, lines = read_yaml(path)
     raw = data.get("plant") or {} if isinstance(data, dict) else {}
     try:
         plant = PlantConfig.model_validate(raw)
     except ValidationError as exc:
-        raise _from_validation(exc, raw, str(path), lines, prefix=("plant",), model=PlantConfig) from None
+        raise from_validation(exc, raw, str(path), lines, prefix=("plant",), model=PlantConfig) from None
     defaults = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} if plant.fmu in BUILTIN_PLANTS else {}
-    return defaults | dict(plant.map), lambda key, message: _error(str(path), lines, key, message)
-
-
-def _read_yaml(path: Path) -> tuple[Any, dict[KeyPath, int]]:
-    """The data of a YAML file and its key path -> line map."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ScenarioError(f"{path}: cannot read scenario file ({exc.strerror or exc})") from None
-    try:
-        root = yaml.compose(text)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise ScenarioError(f"{where}: invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
-    lines: dict[KeyPath, int] = {}
-    if root is not None:
-        _line_map(root, (), lines)
-    return data, lines
+    return defaults | dict(plant.map), lambda key, message: located_error(str(path), lines, key, message)
 
 
 def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Path | None = None,
@@ -239,14 +215,14 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     """
     lines = dict(lines or {})
     if not isinstance(data, dict):
-        raise _error(source, lines, (), f"expected a mapping of scenario keys, got {type(data).__name__}")
+        raise located_error(source, lines, (), f"expected a mapping of scenario keys, got {type(data).__name__}")
     data = _follow_builtin_drive_chain(dict(data))
     base_dir = Path(base_dir or ".").resolve()
     data["monitor"] = _monitor_spec(data.get("monitor"), data, base_dir, source, lines)
     try:
         scenario = Scenario.model_validate(data)
     except ValidationError as exc:
-        raise _from_validation(exc, data, source, lines) from None
+        raise from_validation(exc, data, source, lines, model=Scenario) from None
     scenario._source = source
     scenario._lines = lines
     scenario._base_dir = base_dir
@@ -288,14 +264,14 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     if raw is None:
         return None
     if not isinstance(raw, dict):
-        raise _error(source, lines, ("monitor",), f"expected a mapping, got {type(raw).__name__}")
+        raise located_error(source, lines, ("monitor",), f"expected a mapping, got {type(raw).__name__}")
     if "class" in raw and raw["class"] != DEFAULT_MONITOR:
         try:
             return ComponentSpec.model_validate({"name": "monitor", **raw})
         except ValidationError as exc:
-            raise _from_validation(exc, raw, source, lines, prefix=("monitor",), model=ComponentSpec) from None
+            raise from_validation(exc, raw, source, lines, prefix=("monitor",), model=ComponentSpec) from None
     try:
-        from cosim.monitor import MonitorConfig
+        from feeddrive.cosim.monitor import MonitorConfig
     except ImportError:
         warnings.warn(f"{source}: monitor: cosim.monitor is not available; running without a monitor",
                       stacklevel=3)
@@ -311,50 +287,11 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     try:
         config = MonitorConfig.model_validate(implied | raw if isinstance(raw, dict) else raw)
     except ValidationError as exc:
-        raise _from_validation(exc, raw, source, lines, prefix=prefix, model=MonitorConfig) from None
+        raise from_validation(exc, raw, source, lines, prefix=prefix, model=MonitorConfig) from None
     return ComponentSpec(name="monitor", class_=DEFAULT_MONITOR, config={}).model_copy(update={"config": config})
 
 
 # -- the plant FMU -------------------------------------------------------------------------------
-
-
-def fmi_version(path: Path) -> str:
-    """The ``fmiVersion`` attribute of an FMU's modelDescription.xml (raises ValueError if unreadable)."""
-    try:
-        with zipfile.ZipFile(path) as z, z.open("modelDescription.xml") as f:
-            return ElementTree.parse(f).getroot().get("fmiVersion", "")
-    except (zipfile.BadZipFile, KeyError, ElementTree.ParseError) as exc:
-        raise ValueError(f"not an FMU (a zip file with a modelDescription.xml): {exc}") from None
-
-
-def model_description(path: Path) -> Any:
-    """fmpy's validated model description of an FMU.
-
-    Raises
-    ------
-    ValueError
-        The modelDescription.xml fails fmpy's validation; the message gives its first problem.
-    """
-    from fmpy import read_model_description
-    from fmpy.model_description import ValidationError as FMIValidationError
-
-    try:
-        return read_model_description(str(path))
-    except FMIValidationError as exc:
-        problems = [" ".join(str(p).split()) for p in exc.problems] or ["(no detail)"]
-        more = f" (and {len(problems) - 1} more problem{'s' * (len(problems) > 2)})" if len(problems) > 1 else ""
-        raise ValueError(f"invalid modelDescription.xml: {problems[0]}{more}") from None
-    except Exception as exc:  # fmpy raises a bare Exception for other malformed content (types, variabilities)
-        raise ValueError(f"invalid modelDescription.xml: {' '.join(str(exc).split())}") from None
-
-
-def sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
 
 def check_map(md: Any, role_map: Mapping[str, MapEntry], fmu_name: str) -> list[tuple[KeyPath, str]]:
     """Problems of a role map against an FMU's model description, as ``(key path, message)`` pairs."""
@@ -384,7 +321,7 @@ def check_map(md: Any, role_map: Mapping[str, MapEntry], fmu_name: str) -> list[
 def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     p = s.plant
     if p.fmu in BUILTIN_PLANTS:
-        from fmu_build import builtin_fmu
+        from feeddrive.fmu_build import builtin_fmu
 
         path = Path(builtin_fmu(backlash=p.fmu == "builtin-backlash")).resolve()
         role_map = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} | dict(p.map)
@@ -481,100 +418,3 @@ def _check_sensor_event(s: Scenario, k: int, name: str, value: float | str) -> N
     if not isinstance(value, float) or not math.isfinite(value) or (field == "noise" and value < 0):
         raise s.error(("events", k, "value"), f"expected a finite number{' >= 0' * (field == 'noise')} for "
                                               f"sensors.{name}, got {value!r}")
-
-
-# -- error messages ------------------------------------------------------------------------------
-
-
-def _line_map(node: yaml.Node, path: KeyPath, out: dict[KeyPath, int]) -> None:
-    out.setdefault(path, node.start_mark.line + 1)
-    if isinstance(node, yaml.MappingNode):
-        for key, value in node.value:
-            sub = path + (key.value,)
-            out[sub] = key.start_mark.line + 1
-            _line_map(value, sub, out)
-    elif isinstance(node, yaml.SequenceNode):
-        for i, item in enumerate(node.value):
-            _line_map(item, path + (i,), out)
-
-
-def format_path(path: KeyPath) -> str:
-    """``("nc", "program", 2, "rapid")`` -> ``nc.program[2].rapid``."""
-    text = ""
-    for part in path:
-        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
-    return text
-
-
-def _error(source: str, lines: Mapping[KeyPath, int], path: KeyPath, message: str) -> ScenarioError:
-    path = tuple(path)
-    line = next((lines[path[:k]] for k in range(len(path), -1, -1) if path[:k] in lines), None)
-    where = f"{source}:{line}" if line else source
-    key = f" {format_path(path)}:" if path else ""
-    return ScenarioError(f"{where}:{key} {message}")
-
-
-def _allowed_keys(model: type, loc: KeyPath) -> list[str]:
-    """Field names (aliases) of the pydantic model found at ``loc`` inside ``model``, if any."""
-    candidates = [model]
-    for part in loc:
-        nxt = []
-        for tp in candidates:
-            for t in _unwrap(tp):
-                if isinstance(t, type) and issubclass(t, BaseModel) and isinstance(part, str):
-                    f = next((f for n, f in t.model_fields.items() if (f.alias or n) == part), None)
-                    if f is not None:
-                        nxt.append(f.annotation)
-                elif typing.get_origin(t) in (list, tuple) and isinstance(part, int):
-                    nxt.extend(typing.get_args(t)[:1])
-                elif typing.get_origin(t) is dict:
-                    nxt.extend(typing.get_args(t)[1:2])
-        candidates = nxt
-    return sorted({f.alias or n for tp in candidates for t in _unwrap(tp)
-                   if isinstance(t, type) and issubclass(t, BaseModel) for n, f in t.model_fields.items()})
-
-
-def _unwrap(tp: Any) -> list[Any]:
-    if typing.get_origin(tp) in (typing.Union, types.UnionType):
-        return [a for x in typing.get_args(tp) for a in _unwrap(x)]
-    if typing.get_origin(tp) is typing.Annotated:
-        return _unwrap(typing.get_args(tp)[0])
-    return [tp]
-
-
-def _from_validation(exc: ValidationError, data: Any, source: str, lines: Mapping[KeyPath, int],
-                     prefix: KeyPath = (), model: type = Scenario) -> ScenarioError:
-    errors = exc.errors(include_url=False)
-    e = errors[0]
-    loc = _data_path(data, e["loc"])
-    if e["type"] == "extra_forbidden":
-        allowed = _allowed_keys(model, loc[:-1])
-        message = f"unknown key {loc[-1]!r}" + (f"; expected one of: {', '.join(allowed)}" if allowed else "")
-    elif e["type"] == "missing":
-        message = "missing required key"
-    else:
-        # a union reports one error per member at the same key: say every alternative
-        same = [x for x in errors if _data_path(data, x["loc"]) == loc and x["type"] != "value_error"]
-        text = " or ".join(dict.fromkeys(x["msg"].removeprefix("Input should be ") for x in same)) \
-            if len(same) > 1 else e["msg"].removeprefix("Value error, ")
-        text = f"Input should be {text}" if len(same) > 1 else text
-        got = repr(e.get("input"))
-        message = text if len(got) > 60 or e["type"] == "value_error" else f"{text}, got {got}"
-        errors = [x for x in errors if x not in same[1:]]
-    more = f" (and {len(errors) - 1} more problem{'s' * (len(errors) > 2)})" if len(errors) > 1 else ""
-    return _error(source, lines, prefix + loc, message + more)
-
-
-def _data_path(data: Any, loc: KeyPath) -> KeyPath:
-    """Drop the union-member tags pydantic puts in ``loc`` ('str', "literal['all']", ...): keep the parts
-    that index into the data, and a last part that names a missing key."""
-    path: list = []
-    for k, part in enumerate(loc):
-        if isinstance(data, dict) and part in data:
-            data = data[part]
-        elif isinstance(data, list) and isinstance(part, int) and part < len(data):
-            data = data[part]
-        elif k < len(loc) - 1 or not isinstance(data, dict):
-            continue
-        path.append(part)
-    return tuple(path)

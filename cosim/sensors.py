@@ -34,14 +34,15 @@ from __future__ import annotations
 
 import math
 import zlib
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from pydantic import Field
 
-from cosim.component import Component
-from cosim.errors import ScenarioError
-from cosim.nc import StrictConfig, drive_chain_nominal
+from feeddrive.cosim.component import Component
+from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.nc import StrictConfig, drive_chain_nominal
 
 #: noise samples drawn at once per channel
 BLOCK = 4096

@@ -1,9 +1,9 @@
 """The paper's treatments on arrays: derivative operator, filter, CT-ARX regressions derived from the
 model, LS / IV / OE estimation with uncertainties, segmentation of recordings (and, in their own
 modules, measurement validation, model mismatch, diagnosis and the history store)."""
-from estimator.derivative import zero_forcing_derivative
-from estimator.errors import EstimatorInputError, NotEnoughExcitation
-from estimator.estimate import (
+from feeddrive.estimator.derivative import zero_forcing_derivative
+from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.estimate import (
     EstimationOptions,
     MethodResult,
     MotionData,
@@ -11,8 +11,8 @@ from estimator.estimate import (
     ParameterEstimate,
     estimate_motion,
 )
-from estimator.filtering import FilterSpec, lowpass
-from estimator.simulation import simulate_current, simulate_motor, simulate_speed
+from feeddrive.estimator.filtering import FilterSpec, lowpass
+from feeddrive.estimator.simulation import simulate_current, simulate_motor, simulate_speed
 
 __all__ = [
     "EstimationOptions", "EstimatorInputError", "FilterSpec", "MethodResult", "MotionData", "MotionEstimate",

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.errors import EstimatorInputError
+from feeddrive.estimator.errors import EstimatorInputError
 
 #: Weights of x(t+h), x(t), x(t-h), x(t-2h), as published (4 digits). They sum to 0 and their first
 #: moment is 1.0001, second moment -0.0001: exact on polynomials of degree <= 2 up to that rounding.

@@ -27,16 +27,16 @@ it with a small campaign.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from estimator.derivative import zero_forcing_derivative
-from estimator.errors import EstimatorInputError
-from estimator.estimate import EstimationOptions, MotionData, prepare
-from estimator.simulation import rk4_step
-from models import feed_drive
+from feeddrive.estimator.derivative import zero_forcing_derivative
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.estimate import EstimationOptions, MotionData, prepare
+from feeddrive.estimator.simulation import rk4_step
+from feeddrive.models import feed_drive
 
 MODEL = feed_drive()
 PHYSICAL = tuple(v.name for v in MODEL.parameters if v.kind == "physical" and not v.optional)

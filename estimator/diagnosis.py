@@ -24,13 +24,14 @@ that failed validation) must never be passed here; the monitor enforces it.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from scipy import stats
 
-from estimator.errors import EstimatorInputError
+from feeddrive.estimator.errors import EstimatorInputError
 
 #: Table I: fault -> {sensitive parameter: direction of change (+1 up, -1 down, 0 either)}
 TABLE_I: dict[str, dict[str, int]] = {

@@ -13,260 +13,35 @@ as independent.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Mapping
+from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 from scipy.ndimage import binary_erosion
 
-from estimator.derivative import FUTURE, PAST, zero_forcing_derivative
-from estimator.errors import EstimatorInputError, NotEnoughExcitation
-from estimator.filtering import FilterSpec
-from estimator.regression import Regression, derive_regression
-from estimator.simulation import MODEL, simulate
+from feeddrive.estimator.derivative import FUTURE, PAST, zero_forcing_derivative
+from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.motion import (
+    MEASURED,
+    METHODS,
+    PHYSICAL,
+    EstimationOptions,
+    MethodResult,
+    MotionData,
+    MotionEstimate,
+    ParameterEstimate,
+    Prepared,
+    check_result,
+    long_run_covariance,
+)
+from feeddrive.estimator.regression import Regression, derive_regression
+from feeddrive.estimator.simulation import MODEL, simulate
 
-METHODS = ("ls", "iv", "oe")
-#: Signals measured on the drive (the others are derivatives and sign(w), computed from them).
-MEASURED = ("u", "i", "w")
-#: Physical parameters of the model in model order (T0 and other optional terms on request).
-PHYSICAL = [v for v in MODEL.parameters if v.kind == "physical"]
+# the data types live in .motion; they are re-exported here, where users have always found them
+__all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionData", "MotionEstimate",
+           "ParameterEstimate", "Prepared", "estimate_motion", "instrumental_variables", "least_squares", "prepare"]
+
 _NOMINAL = {v.name: float(v.nominal) for v in PHYSICAL}
-
-
-@dataclass(frozen=True)
-class MotionData:
-    """One high-speed motion, sampled every ``h`` seconds from ``t0``.
-
-    Attributes
-    ----------
-    h : float
-        Sampling period [s].
-    u, i, w : ndarray, shape (n,), or None
-        Armature voltage [V], armature current [A], motor speed [rad/s].
-    position : ndarray, shape (n,), or None
-        Motor angle [rad] (encoder); differentiated for the speed when ``w`` is None.
-    torque : ndarray, shape (n,), or None
-        Motor torque [N.m], used in place of ``K i`` in the mechanical equation.
-    t0 : float
-        Time of the first sample [s].
-    """
-
-    h: float
-    u: np.ndarray | None = None
-    i: np.ndarray | None = None
-    w: np.ndarray | None = None
-    position: np.ndarray | None = None
-    torque: np.ndarray | None = None
-    t0: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not (np.isfinite(self.h) and self.h > 0):
-            raise EstimatorInputError(f"MotionData: h must be a positive sampling period [s], got {self.h}")
-        n = None
-        for name in ("u", "i", "w", "position", "torque"):
-            x = getattr(self, name)
-            if x is None:
-                continue
-            x = np.asarray(x, dtype=float)
-            if x.ndim != 1:
-                raise EstimatorInputError(f"MotionData: {name} must be 1-D, got shape {x.shape}")
-            if not np.all(np.isfinite(x)):
-                raise EstimatorInputError(f"MotionData: {name} contains NaN or infinite values")
-            if n is not None and x.size != n:
-                raise EstimatorInputError(f"MotionData: {name} has {x.size} samples, the other signals {n}")
-            n = x.size
-            object.__setattr__(self, name, x)
-        if n is None:
-            raise EstimatorInputError("MotionData: no signal given")
-
-    @property
-    def n(self) -> int:
-        return next(len(x) for x in (self.u, self.i, self.w, self.position, self.torque) if x is not None)
-
-
-@dataclass(frozen=True)
-class EstimationOptions:
-    """Options of ``estimate_motion``; the defaults suit 10 kHz data from the plant.
-
-    Attributes
-    ----------
-    method : str
-        ``ls``, ``iv`` (default) or ``oe``: the method whose numbers ``parameters`` holds.
-    filter : FilterSpec
-        The identical low-pass of every signal (cut-off below 0.1125 / h for IV and OE).
-    known : mapping of str to float
-        Parameters known in advance (e.g. ``{"K": 1.05}`` for the mechanical equation alone).
-    offset : bool
-        Also estimate the optional constant torque offset ``T0`` (needs a speed reversal).
-    speed_threshold : float
-        Samples with ``|w| <`` this [rad/s] are excluded from the equations that use sign(w) ...
-    sign_guard : float
-        ... and so are ``sign_guard / cutoff_hz`` seconds on either side of them (filter smearing).
-    edge_guard : float
-        ``edge_guard / cutoff_hz`` seconds at each end of the filtered motion (at its start only for a
-        causal filter) are dropped: the filter's start-up transient does not obey the model.
-    iv_iterations, iv_tolerance : int, float
-        IV iterations at most, and the relative parameter change that ends them.
-    max_condition : float
-        Largest condition number of the column-scaled regressor accepted.
-    max_relative_std : float
-        Largest relative standard error accepted for the strictly positive parameters (R, L, K, Jt).
-    block_seconds : float or None
-        Block length of the long-run covariance [s]; None: ``max(0.05, 5 / cutoff)``.
-    oe_rate_hz : float
-        Sampling rate the output-error refinement decimates to [Hz].
-    """
-
-    method: str = "iv"
-    filter: FilterSpec = FilterSpec(50.0)
-    known: Mapping[str, float] = field(default_factory=dict)
-    offset: bool = False
-    speed_threshold: float = 2.0
-    sign_guard: float = 2.0
-    edge_guard: float = 3.0
-    iv_iterations: int = 10
-    iv_tolerance: float = 1e-4
-    max_condition: float = 1e4
-    max_relative_std: float = 0.3
-    block_seconds: float | None = None
-    oe_rate_hz: float = 1000.0
-
-    def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise EstimatorInputError(f"method must be one of {METHODS}, got {self.method!r}")
-        names = {v.name for v in PHYSICAL}
-        for k, v in self.known.items():
-            if k not in names:
-                raise EstimatorInputError(f"known parameter {k!r} is not one of {sorted(names)}")
-            if not np.isfinite(v):
-                raise EstimatorInputError(f"known parameter {k!r} must be finite, got {v}")
-        if not self.speed_threshold >= 0:
-            raise EstimatorInputError(f"speed_threshold must be >= 0 rad/s, got {self.speed_threshold}")
-        object.__setattr__(self, "known", dict(self.known))
-
-    def block(self) -> float:
-        return self.block_seconds or max(0.05, 5.0 / self.filter.cutoff_hz)
-
-
-@dataclass(frozen=True)
-class ParameterEstimate:
-    """Estimate of one parameter: value, standard error and 95 % confidence interval (same unit)."""
-
-    value: float
-    std: float
-    ci95: tuple[float, float]
-
-
-@dataclass(frozen=True)
-class MethodResult:
-    """Result of one method (LS, IV or OE).
-
-    Attributes
-    ----------
-    method : str
-    names : tuple of str
-        Estimated physical parameters.
-    values : ndarray, shape (p,)
-    covariance : ndarray, shape (p, p)
-    dof : int
-        Degrees of freedom of the t quantile of the intervals.
-    condition_number : float
-        Of the column-scaled regressor (largest over the equations; OE: of the scaled jacobian).
-    fit_error : float
-        Relative fit error ``||y - Phi theta|| / ||y||`` (largest over the equations; OE: outputs).
-    iterations : int
-    message : str
-        Why OE fell back, or "".
-    """
-
-    method: str
-    names: tuple[str, ...]
-    values: np.ndarray
-    covariance: np.ndarray
-    dof: int
-    condition_number: float
-    fit_error: float
-    iterations: int = 1
-    message: str = ""
-
-    @property
-    def parameters(self) -> dict[str, ParameterEstimate]:
-        t = stats.t.ppf(0.975, max(self.dof, 1))
-        std = np.sqrt(np.clip(np.diag(self.covariance), 0, None))
-        return {n: ParameterEstimate(float(v), float(s), (float(v - t * s), float(v + t * s)))
-                for n, v, s in zip(self.names, self.values, std)}
-
-    def as_dict(self) -> dict[str, float]:
-        return dict(zip(self.names, map(float, self.values)))
-
-
-@dataclass(frozen=True)
-class MotionEstimate:
-    """Estimates of one motion.
-
-    ``parameters``, ``names``, ``covariance``, ``condition_number`` and ``fit_error`` are those of the
-    requested ``method``; ``ls``, ``iv`` and ``oe`` hold each method's result (None if not run).
-    ``start`` and ``end`` are the times of the motion's first and last samples [s].
-    """
-
-    method: str
-    start: float
-    end: float
-    ls: MethodResult
-    iv: MethodResult | None
-    oe: MethodResult | None
-
-    @property
-    def result(self) -> MethodResult:
-        return getattr(self, self.method)
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return self.result.names
-
-    @property
-    def parameters(self) -> dict[str, ParameterEstimate]:
-        return self.result.parameters
-
-    @property
-    def covariance(self) -> np.ndarray:
-        return self.result.covariance
-
-    @property
-    def condition_number(self) -> float:
-        return self.result.condition_number
-
-    @property
-    def fit_error(self) -> float:
-        return self.result.fit_error
-
-    def to_dict(self) -> dict:
-        """``{"start","end","method","parameters": {name: {"value","ci95"}},"condition_number","fit_error"}``."""
-        return {
-            "start": self.start, "end": self.end, "method": self.method,
-            "parameters": {n: {"value": p.value, "ci95": list(p.ci95)} for n, p in self.parameters.items()},
-            "condition_number": float(self.condition_number), "fit_error": float(self.fit_error),
-        }
-
-
-@dataclass
-class Prepared:
-    """Filtered, differentiated, aligned signals of one motion and the regressions they allow.
-
-    ``signals`` holds ``u, i, w, Di, Dw, sgn_w`` (and ``torque``) on the samples where every
-    derivative exists; ``rows[equation]`` marks the usable samples (the sign term excludes speeds
-    near zero); ``overrides[equation]`` replaces signals (a torque signal for ``K i``); ``block`` is
-    the block length of the long-run covariance in samples.
-    """
-
-    h: float
-    signals: dict[str, np.ndarray]  # u, i, w, Di, Dw, sgn_w on the aligned samples
-    regressions: list[Regression]
-    rows: dict[str, np.ndarray]  # equation -> boolean mask of usable samples
-    overrides: dict[str, dict[str, np.ndarray]]  # equation -> signals replaced (torque for K i)
-    known: dict[str, float]
-    block: int
 
 
 def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
@@ -330,15 +105,6 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
 
 def _signals_for(p: Prepared, reg: Regression, instruments: Mapping[str, np.ndarray] | None = None) -> dict:
     return {**p.signals, **(instruments or {}), **p.overrides[reg.equation]}
-
-
-def _long_run(G: np.ndarray, block: int) -> tuple[np.ndarray, int]:
-    """Batch-means long-run covariance of the sum of the rows of G (n, p), and its blocks count."""
-    block = min(block, len(G))
-    nb = len(G) // block
-    B = G[:nb * block].reshape(nb, block, -1).sum(axis=1)
-    # scaled up for the samples of the incomplete last block and for the p estimated parameters
-    return B.T @ B * (len(G) / (nb * block)) * nb / max(nb - G.shape[1], 1), nb
 
 
 @dataclass
@@ -406,7 +172,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         G += g[:n]
         res2 += e @ e
         out2 += yr @ yr
-    S, nb = _long_run(G, block)
+    S, nb = long_run_covariance(G, block)
     Ai = np.linalg.inv(A)
     return _Fit(theta_s / scale, Ai @ S @ Ai.T / np.outer(scale, scale), nb - p, float(cond),
                 float(np.sqrt(res2 / out2)))
@@ -450,17 +216,6 @@ def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 
                         max(f.cond for f in fits.values()), max(f.fit for f in fits.values()), iterations)
 
 
-def _check(result: MethodResult, options: EstimationOptions) -> None:
-    """Refuse parameters that must be positive but whose relative standard error is too large."""
-    std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
-    strict = {v.name for v in PHYSICAL if v.lower_strict}
-    bad = [n for n, v, s in zip(result.names, result.values, std)
-           if n in strict and not (v > 0 and s / v <= options.max_relative_std)]
-    if bad:
-        raise NotEnoughExcitation(bad, f"relative standard error above {options.max_relative_std:.0%} or "
-                                  f"non-positive estimate ({result.method.upper()})", result.condition_number)
-
-
 def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
     """Ordinary least squares of every regression (eq. 4, 5)."""
     fits, refused = {}, []
@@ -475,7 +230,7 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
                                   "; ".join(exc.reason for exc in refused),
                                   max(exc.condition_number for exc in refused))
     res = _combine("ls", p, fits)
-    _check(res, options)
+    check_result(res, options)
     return res
 
 
@@ -552,7 +307,7 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
         cur = new
         if change < options.iv_tolerance:
             break
-    _check(cur, options)
+    check_result(cur, options)
     return cur
 
 
@@ -583,7 +338,7 @@ def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOpt
     if options.method in ("iv", "oe"):
         iv = instrumental_variables(data, ls, options)
     if options.method == "oe":
-        from estimator.oe import output_error
+        from feeddrive.estimator.oe import output_error
 
         oe = output_error(p, iv, options)
     return MotionEstimate(options.method, float(data.t0), float(data.t0 + (data.n - 1) * data.h), ls, iv, oe)

@@ -5,13 +5,13 @@ Filtering all signals with the same linear filter F leaves the model unchanged
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 from scipy import signal
 
-from estimator.errors import EstimatorInputError
+from feeddrive.estimator.errors import EstimatorInputError
 
 
 @dataclass(frozen=True)

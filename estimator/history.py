@@ -24,12 +24,13 @@ from __future__ import annotations
 import json
 import sqlite3
 import time as _time
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any
 
-from estimator.errors import EstimatorInputError
+from feeddrive.estimator.errors import EstimatorInputError
 
 SCHEMA_VERSION = 1
 _SCHEMA = """
@@ -250,7 +251,7 @@ class History:
     def close(self) -> None:
         self._db.close()
 
-    def __enter__(self) -> "History":
+    def __enter__(self) -> History:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -71,18 +71,18 @@ the parameters are NOT validated; they are still reported.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
 
 import casadi as ca
 import numpy as np
 from scipy import stats
 from statsmodels.stats.diagnostic import acorr_ljungbox
 
-from estimator.errors import EstimatorInputError
-from estimator.filtering import FilterSpec
-from estimator.simulation import MODEL, simulate_speed
-from estimator.validation import model_reference
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.simulation import MODEL, simulate_speed
+from feeddrive.estimator.validation import model_reference
 
 #: physical parameters each simulated output depends on (from the model's equations)
 USES = {signal: tuple(v.name for v in MODEL.parameters

@@ -18,9 +18,16 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from estimator.errors import NotEnoughExcitation
-from estimator.estimate import PHYSICAL, EstimationOptions, MethodResult, Prepared, _check, _long_run
-from estimator.simulation import MODEL, _ode, _rollout
+from feeddrive.estimator.errors import NotEnoughExcitation
+from feeddrive.estimator.motion import (
+    PHYSICAL,
+    EstimationOptions,
+    MethodResult,
+    Prepared,
+    check_result,
+    long_run_covariance,
+)
+from feeddrive.estimator.simulation import MODEL, _ode, _rollout
 
 MAX_ITERATIONS = 30
 OE_W_EPS = 0.01
@@ -107,14 +114,14 @@ def output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -
     Jw = (J * weight[:, :, None])  # (2, n-1, nq)
     A = Jw.reshape(-1, len(q)).T @ Jw.reshape(-1, len(q))
     G = np.einsum("ctq,ct->tq", Jw, r)
-    S, nb = _long_run(G, max(1, int(round(max(0.2, options.block()) / h))))
+    S, nb = long_run_covariance(G, max(1, int(round(max(0.2, options.block()) / h))))
     Ai = np.linalg.inv(A)
     cov = (Ai @ S @ Ai.T)[:len(free), :len(free)]
     sv = np.linalg.svd(Jw.reshape(-1, len(q)) * scale, compute_uv=False)
     fit = float(np.max(np.sqrt(np.sum((y[:, 1:] - X) ** 2, axis=1) / np.sum(y[:, 1:] ** 2, axis=1))))
     result = MethodResult("oe", free, q[:len(free)].copy(), cov, nb - len(q), float(sv[0] / sv[-1]), fit, it)
     try:
-        _check(result, options)
+        check_result(result, options)
     except NotEnoughExcitation as exc:
         return fallback(str(exc))
     return result

@@ -12,15 +12,14 @@ its physical parameters: ``residual = sum_j p_j phi_j(signals) + r0(signals)``. 
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Callable, Mapping
 
 import casadi as ca
 import numpy as np
 
-from estimator.errors import EstimatorInputError
-
+from feeddrive.estimator.errors import EstimatorInputError
 
 _UNARY = {ca.OP_NEG: np.negative, ca.OP_SQ: np.square, ca.OP_SQRT: np.sqrt, ca.OP_EXP: np.exp, ca.OP_LOG: np.log,
           ca.OP_TANH: np.tanh, ca.OP_SIN: np.sin, ca.OP_COS: np.cos, ca.OP_FABS: np.abs, ca.OP_SIGN: np.sign,

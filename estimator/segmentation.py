@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.errors import EstimatorInputError
+from feeddrive.estimator.errors import EstimatorInputError
 
 MODES = ("auto", "nc", "none")
 

@@ -7,15 +7,15 @@ zero speed where it differs from the exact sign). RK4, inputs linearly interpola
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import lru_cache
-from typing import Mapping
 
 import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from estimator.errors import EstimatorInputError
-from models import feed_drive
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.models import feed_drive
 
 MODEL = feed_drive()
 #: Default smoothing speed of sign(w) in simulations [rad/s]: well below the estimator's speed threshold.

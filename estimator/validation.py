@@ -44,15 +44,15 @@ Without a fault the pair's signal is the mean of the two sensors.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import numpy as np
 import statsmodels.api as sm
 from scipy import signal, stats
 
-from estimator.errors import EstimatorInputError
-from estimator.filtering import FilterSpec
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.filtering import FilterSpec
 
 #: the redundant pairs: quantity -> (sensor 1, sensor 2)
 PAIRS: dict[str, tuple[str, str]] = {
@@ -403,7 +403,7 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
     notes = []
     if electrical is None:
         if nominal is None:
-            from models import feed_drive
+            from feeddrive.models import feed_drive
             nominal = feed_drive().nominal()
         electrical = nominal
         reference = "nominal"

@@ -4,9 +4,9 @@
 ``build_fmu(model, out)`` builds an FMU for any ``models.Model``. The FMU contains a native
 shared library only (CasADi-generated C + one generic FMI 2.0 wrapper), no Python.
 """
-from fmu_build.build import build_fmu, builtin_fmu
-from fmu_build.codegen import DEFAULT_CS_SUBSTEP, MAX_SUBSTEPS, MIN_CS_SUBSTEP, FMUVariable, fmu_variables
-from fmu_build.errors import CompilerError, FMUBuildError, FMUBuildInputError
+from feeddrive.fmu_build.build import build_fmu, builtin_fmu
+from feeddrive.fmu_build.codegen import DEFAULT_CS_SUBSTEP, MAX_SUBSTEPS, MIN_CS_SUBSTEP, FMUVariable, fmu_variables
+from feeddrive.fmu_build.errors import CompilerError, FMUBuildError, FMUBuildInputError
 
 __all__ = ["DEFAULT_CS_SUBSTEP", "MAX_SUBSTEPS", "MIN_CS_SUBSTEP", "CompilerError", "FMUBuildError",
            "FMUBuildInputError", "FMUVariable", "build_fmu", "builtin_fmu", "fmu_variables"]

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import fmpy
 
-from fmu_build.codegen import DEFAULT_CS_SUBSTEP, Sources, generate
-from fmu_build.errors import CompilerError, FMUBuildError
-from models import Model, feed_drive
+from feeddrive.fmu_build.codegen import DEFAULT_CS_SUBSTEP, Sources, generate
+from feeddrive.fmu_build.errors import CompilerError, FMUBuildError
+from feeddrive.models import Model, feed_drive
 
 #: Flags for the shared library. Hidden visibility exports only the fmi2 functions.
 CFLAGS = ("-O2", "-fPIC", "-shared", "-fvisibility=hidden")

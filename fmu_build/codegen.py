@@ -64,8 +64,8 @@ from pathlib import Path
 
 import casadi as ca
 
-from fmu_build.errors import FMUBuildInputError
-from models import Model
+from feeddrive.fmu_build.errors import FMUBuildInputError
+from feeddrive.models import Model
 
 #: Default RK4 substep of the Co-Simulation interface [s]; see the module docstring.
 DEFAULT_CS_SUBSTEP = 1e-5

@@ -3,7 +3,7 @@
 ``models`` imports casadi only. ``fmu_build`` turns a model into an FMI 2.0 FMU and
 ``estimator`` derives its continuous-time ARX regressions from the same model.
 """
-from models.base import Equation, Model, Variable
-from models.feed_drive import feed_drive
+from feeddrive.models.base import Equation, Model, Variable
+from feeddrive.models.feed_drive import feed_drive
 
 __all__ = ["Equation", "Model", "Variable", "feed_drive"]

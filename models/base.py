@@ -14,8 +14,8 @@ for the implicit equations, from which it derives the linear-in-parameters regre
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import casadi as ca
 

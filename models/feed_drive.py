@@ -36,7 +36,7 @@ import math
 
 import casadi as ca
 
-from models.base import Equation, Model, Variable
+from feeddrive.models.base import Equation, Model, Variable
 
 
 def _sat(v: ca.SX, limit: ca.SX) -> ca.SX:

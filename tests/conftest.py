@@ -1,12 +1,12 @@
 """Shared fixtures. FMUs are built into pytest's temporary directory, never into ~/.cache."""
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
-from fmu_build import builtin_fmu
+from feeddrive.fmu_build import builtin_fmu
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -62,7 +62,7 @@ def parameters_at(k: int, n: int = 500, oil_change: int | None = 300) -> dict[st
     dict
         R [Ohm], L [H], K [N.m/A], Jt [kg.m^2], ft [N.m.s/rad], Cd [N.m].
     """
-    from models import feed_drive
+    from feeddrive.models import feed_drive
 
     nominal = {p: v for p, v in feed_drive().nominal(("physical",)).items() if p != "T0"}
     since_oil = k - oil_change if oil_change is not None and k >= oil_change else k
@@ -77,10 +77,10 @@ def run_drift(out: Path, motions: int = 500, oil_change: int | None = 300, overw
     """
     from tqdm import tqdm
 
-    from cosim.campaign import aggregate
-    from cosim.errors import InputError
-    from cosim.run import run_scenario
-    from cosim.scenario import scenario_from_dict
+    from feeddrive.cosim.campaign import aggregate
+    from feeddrive.cosim.errors import InputError
+    from feeddrive.cosim.run import run_scenario
+    from feeddrive.cosim.scenario import scenario_from_dict
 
     out.mkdir(parents=True, exist_ok=True)
     db = out / "history.db"
@@ -125,7 +125,7 @@ def run_drift(out: Path, motions: int = 500, oil_change: int | None = 300, overw
 def _tool_changes(db: Path) -> list[dict]:
     """The monitor's result of each tool change k, in order (identification motions that the monitor's
     request inserted into a run are stored too, under the same scenario, and skipped here)."""
-    from estimator.history import History
+    from feeddrive.estimator.history import History
 
     first: dict[int, dict] = {}
     with History(db) as history:

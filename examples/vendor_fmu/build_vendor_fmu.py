@@ -18,8 +18,8 @@ import dataclasses
 import math
 from pathlib import Path
 
-from fmu_build import build_fmu
-from models import Model, Variable, feed_drive
+from feeddrive.fmu_build import build_fmu
+from feeddrive.models import Model, Variable, feed_drive
 
 RPM = 30 / math.pi  # rad/s -> rpm
 

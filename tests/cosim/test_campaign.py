@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from cosim.campaign import Campaign, CampaignError, aggregate, expand, load_campaign, run_campaign
-from cosim.errors import ScenarioError
+from feeddrive.cosim.campaign import Campaign, CampaignError, aggregate, expand, load_campaign, run_campaign
+from feeddrive.cosim.errors import ScenarioError
 
 NOMINAL = {"R": 0.6, "L": 4.0e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
 

@@ -11,9 +11,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "estimator"))
 from plant_data import TRUTH, closed_loop  # noqa: E402
 
-from cosim.cli import main  # noqa: E402
-from cosim.errors import DataError  # noqa: E402
-from cosim.recorded import load_recording  # noqa: E402
+from feeddrive.cosim.cli import main  # noqa: E402
+from feeddrive.cosim.errors import DataError  # noqa: E402
+from feeddrive.cosim.recorded import load_recording  # noqa: E402
 
 HEADER = "time [s],u [V],i [A],w [rad/s],theta [rad],state"
 MAP = ["--map", "time=time", "--map", "voltage=u", "--map", "current=i [A]", "--map", "speed=w"]

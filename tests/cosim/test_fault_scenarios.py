@@ -14,11 +14,11 @@ import shutil
 import numpy as np
 import pytest
 
-from cosim.monitor import centred_speed
-from cosim.run import run_scenario
-from cosim.scenario import scenario_from_dict
-from estimator.history import History
-from models import feed_drive
+from feeddrive.cosim.monitor import centred_speed
+from feeddrive.cosim.run import run_scenario
+from feeddrive.cosim.scenario import scenario_from_dict
+from feeddrive.estimator.history import History
+from feeddrive.models import feed_drive
 
 pytestmark = pytest.mark.slow
 

@@ -7,10 +7,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from cosim.errors import FMIError
-from cosim.fmu_adapter import FMUComponent, FMUDiscard
-from cosim.master import Master
-from cosim.scenario import MapEntry, PlantConfig, load_scenario
+from feeddrive.cosim.errors import FMIError
+from feeddrive.cosim.fmu_adapter import FMUComponent, FMUDiscard
+from feeddrive.cosim.master import Master
+from feeddrive.cosim.scenario import MapEntry, PlantConfig, load_scenario
 
 SCENARIO = """\
 name: adapter

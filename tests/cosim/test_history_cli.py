@@ -4,8 +4,8 @@ import json
 import matplotlib.image
 import pytest
 
-from cosim.cli import main
-from estimator.history import History
+from feeddrive.cosim.cli import main
+from feeddrive.estimator.history import History
 
 NAMES = ("R", "L", "K", "Jt", "ft", "Cd")
 

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import yaml
 
-from cosim.errors import ScenarioError
-from cosim.run import run_scenario
-from cosim.scenario import BUILTIN_MAP, scenario_from_dict
-from models import feed_drive
+from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.run import run_scenario
+from feeddrive.cosim.scenario import BUILTIN_MAP, scenario_from_dict
+from feeddrive.models import feed_drive
 
 TRUTH = feed_drive().nominal()
 EXAMPLE = Path(__file__).parents[2] / "examples" / "tool_change.yaml"
@@ -118,8 +118,8 @@ def test_a_ramped_voltage_follows_the_linear_ode_exactly(feeddrive_fmu, interfac
     step by step (matrix exponential of the system augmented with u and du/dt). ME: CVode at rtol 1e-8."""
     from scipy.linalg import expm
 
-    from cosim.fmu_adapter import FMUComponent
-    from cosim.scenario import MapEntry, PlantConfig
+    from feeddrive.cosim.fmu_adapter import FMUComponent
+    from feeddrive.cosim.scenario import MapEntry, PlantConfig
 
     R, L, K, J, ft = (TRUTH[n] for n in ("R", "L", "K", "Jt", "ft"))
     h, n, a, b = 1e-4, 2000, 24.0, 20.0

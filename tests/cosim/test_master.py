@@ -11,10 +11,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from cosim.component import Component
-from cosim.errors import ScenarioError, SimulationError
-from cosim.master import Master, event_step
-from cosim.scenario import load_scenario
+from feeddrive.cosim.component import Component
+from feeddrive.cosim.errors import ScenarioError, SimulationError
+from feeddrive.cosim.master import Master, event_step
+from feeddrive.cosim.scenario import load_scenario
 
 
 class Source(Component):
@@ -182,7 +182,7 @@ def test_user_component_errors_name_the_scenario_key(tmp_path, feeddrive_fmu):
     base = "name: t\nplant: {fmu: builtin}\nnc: {program: []}\ncomponents:\n"
     cases = [("  - {name: x, class: 'no_such_module:X'}\n", r":5: components\[0\]\.class: cannot import module"),
              ("  - {name: x, class: 'test_master:Failing', config: {at: 1}}\n  - {name: y, class: 'math:pi'}\n",
-              r":6: components\[1\]\.class: 'math:pi' is not a subclass of cosim\.component\.Component"),
+              r":6: components\[1\]\.class: 'math:pi' is not a subclass of feeddrive\.cosim\.component\.Component"),
              ("  - {name: x, class: 'test_master:Integrator'}\n", r"connections: input 'x\.a' is not connected")]
     for k, (text, pattern) in enumerate(cases):
         path = tmp_path / f"s{k}.yaml"

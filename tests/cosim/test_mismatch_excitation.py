@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from cosim.monitor import MEASUREMENTS, MonitorConfig, MonitorPipeline, centred_speed
-from cosim.run import run_scenario
-from cosim.scenario import scenario_from_dict
-from estimator.history import History
-from estimator.mismatch import window_rms, check_model
+from feeddrive.cosim.monitor import MEASUREMENTS, MonitorConfig, MonitorPipeline, centred_speed
+from feeddrive.cosim.run import run_scenario
+from feeddrive.cosim.scenario import scenario_from_dict
+from feeddrive.estimator.history import History
+from feeddrive.estimator.mismatch import check_model, window_rms
 
 pytestmark = pytest.mark.slow
 

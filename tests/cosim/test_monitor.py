@@ -13,9 +13,9 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from cosim.errors import ScenarioError
-from cosim.monitor import MEASUREMENTS, Monitor, MonitorConfig, centred_speed
-from estimator.history import History
+from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.monitor import MEASUREMENTS, Monitor, MonitorConfig, centred_speed
+from feeddrive.estimator.history import History
 
 _spec = importlib.util.spec_from_file_location(
     "validation_plant", Path(__file__).parents[1] / "estimator" / "test_validation.py")

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from cosim.cli import main
-from cosim.monitor import MonitorConfig, MonitorPipeline
-from estimator.diagnosis import DiagnosisOptions
-from estimator.history import History
+from feeddrive.cosim.cli import main
+from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
+from feeddrive.estimator.diagnosis import DiagnosisOptions
+from feeddrive.estimator.history import History
 
 _spec = importlib.util.spec_from_file_location(
     "validation_plant", Path(__file__).parents[1] / "estimator" / "test_validation.py")

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.cli import main
-from estimator.history import History
+from feeddrive.cosim.cli import main
+from feeddrive.estimator.history import History
 
 _spec = importlib.util.spec_from_file_location(
     "validation_plant", Path(__file__).parents[1] / "estimator" / "test_validation.py")

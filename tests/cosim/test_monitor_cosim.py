@@ -5,9 +5,9 @@ import json
 
 import pytest
 
-from cosim.run import run_scenario
-from cosim.scenario import scenario_from_dict
-from estimator.history import History
+from feeddrive.cosim.run import run_scenario
+from feeddrive.cosim.scenario import scenario_from_dict
+from feeddrive.estimator.history import History
 
 pytestmark = pytest.mark.slow
 

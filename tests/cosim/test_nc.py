@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from cosim.errors import ScenarioError
-from cosim.nc import NCComponent, NCConfig
-from models import feed_drive
+from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.nc import NCComponent, NCConfig
+from feeddrive.models import feed_drive
 
 SPEED_REF, LOAD, X_REF, V_REF, A_REF, STATE, MOTION = range(7)
 

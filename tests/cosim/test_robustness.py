@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.campaign import Campaign, run_campaign
-from cosim.cli import main
-from cosim.component import Component
-from cosim.errors import DataError, ScenarioError
-from cosim.recorded import load_recording
-from cosim.run import run_scenario
-from cosim.scenario import load_scenario, scenario_from_dict
-from estimator.history import History
+from feeddrive.cosim.campaign import Campaign, run_campaign
+from feeddrive.cosim.cli import main
+from feeddrive.cosim.component import Component
+from feeddrive.cosim.errors import DataError, ScenarioError
+from feeddrive.cosim.recorded import load_recording
+from feeddrive.cosim.run import run_scenario
+from feeddrive.cosim.scenario import load_scenario, scenario_from_dict
+from feeddrive.estimator.history import History
 
 BASE = """\
 name: t

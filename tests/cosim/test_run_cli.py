@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from cosim.cli import main
-from cosim.scenario import load_scenario
+from feeddrive.cosim.cli import main
+from feeddrive.cosim.scenario import load_scenario
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

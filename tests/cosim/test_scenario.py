@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from cosim.errors import ScenarioError
-from cosim.scenario import BUILTIN_MAP, load_scenario, scenario_from_dict, sha256
+from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.scenario import BUILTIN_MAP, load_scenario, scenario_from_dict, sha256
 
 BASE = """\
 name: t
@@ -117,16 +117,16 @@ def test_yaml_syntax_error_names_the_line(tmp_path):
 
 
 def test_monitor_is_skipped_with_a_warning_when_unavailable(tmp_path, feeddrive_fmu, monkeypatch):
-    monkeypatch.setitem(sys.modules, "cosim.monitor", None)  # import fails
+    monkeypatch.setitem(sys.modules, "feeddrive.cosim.monitor", None)  # import fails
     with pytest.warns(UserWarning, match="running without a monitor"):
         s = load_scenario(write(tmp_path, BASE + "monitor: {}\n"))
     assert s.monitor is None
 
 
 def test_monitor_class_replaces_the_default(tmp_path, feeddrive_fmu):
-    s = load_scenario(write(tmp_path, BASE + "monitor: {class: 'cosim.sensors:SensorsComponent', config: {seed: 3}}\n"))
-    assert s.monitor.class_ == "cosim.sensors:SensorsComponent" and s.monitor.config == {"seed": 3}
-    assert s.to_dict()["monitor"] == {"class": "cosim.sensors:SensorsComponent", "config": {"seed": 3}}
+    s = load_scenario(write(tmp_path, BASE + "monitor: {class: 'feeddrive.cosim.sensors:SensorsComponent', config: {seed: 3}}\n"))
+    assert s.monitor.class_ == "feeddrive.cosim.sensors:SensorsComponent" and s.monitor.config == {"seed": 3}
+    assert s.to_dict()["monitor"] == {"class": "feeddrive.cosim.sensors:SensorsComponent", "config": {"seed": 3}}
 
 
 def test_builtin_drive_chain_is_the_default_of_nc_and_encoder(tmp_path, feeddrive_fmu):

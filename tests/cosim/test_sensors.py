@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from cosim.errors import ScenarioError
-from cosim.sensors import BLOCK, SensorsComponent, SensorsConfig
+from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.sensors import BLOCK, SensorsComponent, SensorsConfig
 
 IM1, IM2, U, U_REF, W_TACH, THETA_ENC, W_ENC, X = range(8)
 QUIET = {"current": [{"noise": 0}, {"noise": 0}], "voltage": {"noise": 0}, "voltage_ref": {"noise": 0},

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from cosim.master import Master
-from cosim.scenario import load_scenario, scenario_from_dict
+from feeddrive.cosim.master import Master
+from feeddrive.cosim.scenario import load_scenario, scenario_from_dict
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

@@ -10,8 +10,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from estimator.design import simulate_closed_loop
-from models import feed_drive
+from feeddrive.estimator.design import simulate_closed_loop
+from feeddrive.models import feed_drive
 
 H = 1e-4
 TRUTH = feed_drive().nominal(("physical",))

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator import EstimatorInputError, zero_forcing_derivative
-from estimator.derivative import ZERO_FORCING_WEIGHTS
+from feeddrive.estimator import EstimatorInputError, zero_forcing_derivative
+from feeddrive.estimator.derivative import ZERO_FORCING_WEIGHTS
 
 H = 1e-3
 

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from estimator.design import MODEL, PHYSICAL, design_acceleration, predicted_std, simulate_closed_loop
-from estimator.errors import EstimatorInputError
-from estimator.estimate import EstimationOptions, MotionData, least_squares, prepare
+from feeddrive.estimator.design import MODEL, PHYSICAL, design_acceleration, predicted_std, simulate_closed_loop
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.estimate import EstimationOptions, MotionData, least_squares, prepare
 
 H = 1e-4
 NOISE = {"u": 0.2, "i": 0.05, "w": 0.05}
@@ -18,7 +18,7 @@ P = MODEL.nominal()
 def tool_change(accel, distance=0.25, v_max=0.22, dwell=0.2):
     """Motor speed reference [rad/s] of an out-and-back trapezoid move, then 0.1 s at rest."""
     v = min(v_max, math.sqrt(accel * distance))
-    t_acc, t_move = v / accel, distance / v + v / accel
+    t_move = distance / v + v / accel
     t = np.arange(int(round((2 * t_move + dwell + 0.1) / H))) * H
 
     def one(tt):

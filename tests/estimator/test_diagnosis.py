@@ -6,9 +6,9 @@ Estimates are the true values plus Gaussian estimation noise of a stated relativ
 import numpy as np
 import pytest
 
-from estimator.diagnosis import UNEXPLAINED, DiagnosisOptions, diagnose, drifts, make_baseline
-from estimator.errors import EstimatorInputError
-from models import feed_drive
+from feeddrive.estimator.diagnosis import UNEXPLAINED, DiagnosisOptions, diagnose, drifts, make_baseline
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.models import feed_drive
 
 TRUE = {k: v for k, v in feed_drive().nominal(("physical",)).items() if k != "T0"}
 REL_STD = 0.005

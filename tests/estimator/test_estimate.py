@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from plant_data import H, TRUTH, add_noise, closed_loop, fmu_closed_loop
+from plant_data import TRUTH, H, add_noise, closed_loop, fmu_closed_loop
 
-from estimator import (
+from feeddrive.estimator import (
     EstimationOptions,
     MotionData,
     NotEnoughExcitation,
@@ -180,7 +180,7 @@ def test_simulate_speed_is_the_first_order_response_with_dry_friction():
 def test_simulate_motor_is_the_linear_drive_without_dry_friction():
     from scipy.linalg import expm
 
-    from estimator import simulate_motor
+    from feeddrive.estimator import simulate_motor
 
     p = dict(TRUTH, Cd=0.0)
     t = np.arange(3000) * H

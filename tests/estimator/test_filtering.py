@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator import EstimatorInputError, FilterSpec, lowpass
+from feeddrive.estimator import EstimatorInputError, FilterSpec, lowpass
 
 H = 1e-4
 

@@ -6,12 +6,11 @@ import sqlite3
 import subprocess
 import sys
 import textwrap
-import time
 
 import pytest
 
-from estimator.errors import EstimatorInputError
-from estimator.history import History
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.history import History
 
 NAMES = ("R", "L", "K", "Jt", "ft", "Cd")
 
@@ -111,7 +110,7 @@ def test_bad_database_paths_are_named(tmp_path):
 
 WRITER = textwrap.dedent("""
     import sys
-    from estimator.history import History
+    from feeddrive.estimator.history import History
     sys.path.insert(0, {tests!r})
     from test_history import result
     h = History({db!r})

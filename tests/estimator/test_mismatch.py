@@ -8,14 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from scipy import stats
 
-from estimator.errors import EstimatorInputError
-from estimator.estimate import MotionData, estimate_motion
-from estimator.mismatch import USES, check_model, residue_check, uncertainty_band, window_rms
-from estimator.simulation import simulate_speed
-from estimator.validation import model_reference
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.estimate import MotionData, estimate_motion
+from feeddrive.estimator.mismatch import USES, check_model, residue_check, uncertainty_band, window_rms
+from feeddrive.estimator.simulation import simulate_speed
+from feeddrive.estimator.validation import model_reference
 
 # the plant data of test_validation.py, loaded by path (test folders are not packages)
 _spec = importlib.util.spec_from_file_location("validation_plant", Path(__file__).with_name("test_validation.py"))

@@ -5,9 +5,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from estimator import EstimatorInputError
-from estimator.regression import derive_regression
-from models import Equation, Model, Variable, feed_drive
+from feeddrive.estimator import EstimatorInputError
+from feeddrive.estimator.regression import derive_regression
+from feeddrive.models import Equation, Model, Variable, feed_drive
 
 MODEL = feed_drive()
 RNG = np.random.default_rng(1)
@@ -63,7 +63,7 @@ def test_a_model_nonlinear_in_its_parameters_is_refused():
 
 
 def test_numpy_evaluation_equals_casadi():
-    from estimator.regression import numpy_function
+    from feeddrive.estimator.regression import numpy_function
 
     x = ca.SX.sym("x", 3)
     f = ca.Function("f", [x], [ca.vertcat(2 * x[0] - x[1] / x[2], ca.tanh(x[2] / 0.1) * x[0] ** 2, -x[1], 3.0)])

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from plant_data import CORNERS, H, w_ref
 
-from estimator import EstimatorInputError
-from estimator.segmentation import Segment, from_speed, from_state, segment
+from feeddrive.estimator import EstimatorInputError
+from feeddrive.estimator.segmentation import Segment, from_speed, from_state, segment
 
 
 def test_nc_state_blocks_are_the_motions():

@@ -14,13 +14,19 @@ import functools
 import numpy as np
 import pytest
 
-from estimator.design import simulate_closed_loop
-from estimator.errors import EstimatorInputError
-from estimator.filtering import FilterSpec
-from estimator.simulation import rk4_step
-from estimator.validation import (ValidationOptions, gain_ratio, model_reference, noise_std, residue_test,
-                                  validate_measurements)
-from models import feed_drive
+from feeddrive.estimator.design import simulate_closed_loop
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.simulation import rk4_step
+from feeddrive.estimator.validation import (
+    ValidationOptions,
+    gain_ratio,
+    model_reference,
+    noise_std,
+    residue_test,
+    validate_measurements,
+)
+from feeddrive.models import feed_drive
 
 H = 1e-4
 ACCEL, W_MAX = 184.0, 70.0

@@ -1,16 +1,22 @@
 """Helpers for the plant-FMU tests: an extracted FMU and instances that record the FMU's log."""
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from ctypes import byref
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
 
 import numpy as np
 import pytest
 from fmpy import calloc, extract, free, read_model_description
-from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (
+    FMU2Model,
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
 from fmpy.logging import addLoggerProxy
 
 

@@ -5,8 +5,8 @@ import fmpy
 import numpy as np
 import pytest
 
-from fmu_build import builtin_fmu
-from models import feed_drive
+from feeddrive.fmu_build import builtin_fmu
+from feeddrive.models import feed_drive
 
 NOMINAL = feed_drive(backlash=True).nominal()
 

@@ -12,11 +12,11 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
-import fmu_build.build
-import fmu_build.codegen
-from cosim.cli import main as cosim_main
-from fmu_build import CompilerError, FMUBuildInputError, build_fmu, builtin_fmu
-from models import Equation, Model, Variable, feed_drive
+import feeddrive.fmu_build.build
+import feeddrive.fmu_build.codegen
+from feeddrive.cosim.cli import main as cosim_main
+from feeddrive.fmu_build import CompilerError, FMUBuildInputError, build_fmu, builtin_fmu
+from feeddrive.models import Equation, Model, Variable, feed_drive
 
 
 def rc_model() -> Model:
@@ -67,8 +67,8 @@ def test_failing_compiler_is_named(tmp_path, monkeypatch, cc):
 
 def test_syntax_error_shows_the_compiler_message(tmp_path, monkeypatch):
     broken = tmp_path / "fmi2_wrapper.c"
-    broken.write_text(fmu_build.codegen.WRAPPER_SOURCE.read_text() + "\nint broken( {\n")
-    monkeypatch.setattr(fmu_build.codegen, "WRAPPER_SOURCE", broken)
+    broken.write_text(feeddrive.fmu_build.codegen.WRAPPER_SOURCE.read_text() + "\nint broken( {\n")
+    monkeypatch.setattr(feeddrive.fmu_build.codegen, "WRAPPER_SOURCE", broken)
     monkeypatch.setenv("CC", "gcc")
     with pytest.raises(CompilerError, match="C compilation with 'gcc' failed: .*fmi2_wrapper.c:.*error") as err:
         build_fmu(out=tmp_path / "x.fmu")
@@ -85,7 +85,7 @@ def test_cache_is_reused_and_rebuilt_when_the_sources_change(tmp_path, monkeypat
         m.variables["Jt"] = replace(m.variables["Jt"], nominal=0.2)
         return m
 
-    monkeypatch.setattr(fmu_build.build, "feed_drive", heavier_drive)
+    monkeypatch.setattr(feeddrive.fmu_build.build, "feed_drive", heavier_drive)
     second = builtin_fmu(tmp_path)
     assert second != first and second.name == first.name
     jt = {v.name: v for v in read_model_description(str(second)).modelVariables}["Jt"]
@@ -93,8 +93,8 @@ def test_cache_is_reused_and_rebuilt_when_the_sources_change(tmp_path, monkeypat
     assert first.stat().st_mtime_ns == stamp
 
     edited = tmp_path / "fmi2_wrapper.c"  # so does a wrapper edit
-    edited.write_text(fmu_build.codegen.WRAPPER_SOURCE.read_text() + "/* edited */\n")
-    monkeypatch.setattr(fmu_build.codegen, "WRAPPER_SOURCE", edited)
+    edited.write_text(feeddrive.fmu_build.codegen.WRAPPER_SOURCE.read_text() + "/* edited */\n")
+    monkeypatch.setattr(feeddrive.fmu_build.codegen, "WRAPPER_SOURCE", edited)
     assert builtin_fmu(tmp_path) not in (first, second)
 
 

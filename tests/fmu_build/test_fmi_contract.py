@@ -11,11 +11,10 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
-
-from fmu_build import MAX_SUBSTEPS, MIN_CS_SUBSTEP, FMUBuildInputError, fmu_variables
-from models import feed_drive
-
 from test_plant_fmu import OPEN_LOOP, H, _trajectory, open_loop_exact  # same directory, on sys.path
+
+from feeddrive.fmu_build import MAX_SUBSTEPS, MIN_CS_SUBSTEP, FMUBuildInputError, fmu_variables
+from feeddrive.models import feed_drive
 
 NOMINAL = feed_drive().nominal()
 STATES = ("i", "w", "theta", "xi_w", "xi_i", "w_rf")

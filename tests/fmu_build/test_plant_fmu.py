@@ -11,8 +11,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 from scipy.linalg import expm
 
-from fmu_build import DEFAULT_CS_SUBSTEP
-from models import feed_drive
+from feeddrive.fmu_build import DEFAULT_CS_SUBSTEP
+from feeddrive.models import feed_drive
 
 NOMINAL = feed_drive().nominal()
 R, L, K, Jt, ft, Cd = (NOMINAL[n] for n in ("R", "L", "K", "Jt", "ft", "Cd"))

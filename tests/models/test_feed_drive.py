@@ -3,7 +3,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from models import Model, Variable, feed_drive
+from feeddrive.models import Variable, feed_drive
 
 
 @pytest.fixture(scope="module")

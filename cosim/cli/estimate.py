@@ -20,9 +20,9 @@ import sys
 
 import numpy as np
 
-from cosim.errors import InputError
-from cosim.recorded import add_recording_arguments, load_recording, mapped_roles, pairs
-from estimator import (
+from feeddrive.cosim.errors import InputError
+from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles, pairs
+from feeddrive.estimator import (
     EstimationOptions,
     EstimatorInputError,
     FilterSpec,
@@ -30,8 +30,8 @@ from estimator import (
     NotEnoughExcitation,
     estimate_motion,
 )
-from estimator.segmentation import segment
-from models import feed_drive
+from feeddrive.estimator.segmentation import segment
+from feeddrive.models import feed_drive
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
          "state": None}

@@ -7,8 +7,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cosim.errors import InputError, ScenarioError
-from cosim.scenario import INPUT_ROLES, ROLE_UNITS, check_map, fmi_version, load_plant_map, model_description
+from feeddrive.cosim.errors import InputError, ScenarioError
+from feeddrive.cosim.scenario import INPUT_ROLES, ROLE_UNITS, check_map, fmi_version, load_plant_map, model_description
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     if args.fmu == "builtin":
-        from fmu_build import builtin_fmu
+        from feeddrive.fmu_build import builtin_fmu
 
         path = Path(builtin_fmu())
     else:

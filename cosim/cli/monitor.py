@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.errors import InputError
-from cosim.history_cli import DEFAULT_DB
-from cosim.monitor import MonitorConfig, MonitorPipeline
-from cosim.recorded import add_recording_arguments, load_recording, mapped_roles
-from estimator.segmentation import segment
+from feeddrive.cosim.cli.history import DEFAULT_DB
+from feeddrive.cosim.errors import InputError
+from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
+from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles
+from feeddrive.estimator.segmentation import segment
 
 #: role -> monitor signal
 ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from estimator.history import History
+    from feeddrive.estimator.history import History
 
     role_map = mapped_roles(args, ROLES)
     missing = [r for r in ("voltage", "current1") if r not in role_map]
@@ -72,7 +72,7 @@ def main(args: argparse.Namespace) -> int:
         motions = history.motions(args.axis)
     results = [t.result for t in traces]
     if plots is not None:
-        from cosim.monitor_plots import plot_monitor
+        from feeddrive.cosim.monitor_plots import plot_monitor
 
         for p in plot_monitor(traces, motions, plots):
             print(f"wrote {p}")

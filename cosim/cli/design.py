@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.errors import InputError
+from feeddrive.cosim.errors import InputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,7 +47,7 @@ def reference(nc, item: int, accel: float, h: float, tail: float = 0.1) -> np.nd
     h : float
         Sampling period [s].
     """
-    from cosim.nc import plan_program
+    from feeddrive.cosim.nc import plan_program
 
     start = next(s[1] for s in plan_program(nc) if s[6] == item)
     line = nc.program[item]
@@ -63,8 +63,8 @@ def reference(nc, item: int, accel: float, h: float, tail: float = 0.1) -> np.nd
 
 
 def main(args: argparse.Namespace) -> int:
-    from cosim.scenario import load_scenario
-    from estimator.design import PHYSICAL, design_acceleration
+    from feeddrive.cosim.scenario import load_scenario
+    from feeddrive.estimator.design import PHYSICAL, design_acceleration
 
     # checked now, not after the whole design sweep
     if args.verify < 0 or args.verify == 1:
@@ -87,7 +87,7 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"--accel: accelerations must be > 0 m/s^2, got {accels}")
     noise = {"u": scenario.sensors.voltage.noise, "i": scenario.sensors.current[0].noise,
              "w": scenario.sensors.tachometer.noise}
-    from estimator.design import MODEL
+    from feeddrive.estimator.design import MODEL
 
     # the design simulates the built-in model: a vendor plant's own parameter names are not used
     params = {k: v for k, v in scenario.plant.parameters.items() if k in MODEL.nominal()}
@@ -108,8 +108,8 @@ def main(args: argparse.Namespace) -> int:
 
 def verify(args, scenario, item: int, kind: str, default: float, best: float, noise, params) -> None:
     """Small campaign: N runs at each slope; measured relative std of LS and IV against the prediction."""
-    from cosim.campaign import Campaign, run_campaign
-    from estimator.design import PHYSICAL, predicted_std, simulate_closed_loop
+    from feeddrive.cosim.campaign import Campaign, run_campaign
+    from feeddrive.estimator.design import PHYSICAL, predicted_std, simulate_closed_loop
 
     key = f"nc.program[{item}].{kind}.accel"
     campaign = Campaign(name=f"design-{scenario.name}", base=str(Path(args.scenario).resolve()), seed=1,

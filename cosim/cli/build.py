@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cosim.errors import InputError
+from feeddrive.cosim.errors import InputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -14,8 +14,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from fmu_build import build_fmu, fmu_variables
-    from models import feed_drive
+    from feeddrive.fmu_build import build_fmu, fmu_variables
+    from feeddrive.models import feed_drive
 
     out: Path = args.out
     if out.is_dir():

@@ -1,4 +1,4 @@
-"""The ``cosim`` command line.
+"""The ``cosim`` command line: a thin dispatcher to one module per subcommand in this package.
 
 Each subcommand lives in its own module, which exposes
 
@@ -14,36 +14,38 @@ import argparse
 import importlib
 import sys
 
-from cosim.errors import InputError, SimulationError
+from feeddrive.cosim import __version__
+from feeddrive.cosim.errors import InputError, SimulationError
 
 #: subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "run": ("cosim.run_cli", "run a co-simulation scenario (plant FMU + NC + sensors + monitor)"),
-    "build-fmu": ("cosim.build_cli", "build the built-in feed-drive plant FMU"),
-    "info": ("cosim.info_cli", "list an FMU's variables and check a scenario's mapping against them"),
-    "estimate": ("cosim.estimate_cli", "estimate R, L, K, Jt, ft, Cd from a recorded CSV"),
-    "monitor": ("cosim.monitor_cli", "run the monitor (validation, estimation, diagnosis) on a recorded CSV"),
-    "history": ("cosim.history_cli", "print and plot the parameter history of an axis"),
-    "campaign": ("cosim.campaign_cli", "run a Monte Carlo / sweep campaign of scenarios"),
-    "design": ("cosim.design_cli", "choose the rapid-move acceleration that minimises parameter variance"),
+    "run": ("feeddrive.cosim.cli.run", "run a co-simulation scenario (plant FMU + NC + sensors + monitor)"),
+    "build-fmu": ("feeddrive.cosim.cli.build", "build the built-in feed-drive plant FMU"),
+    "info": ("feeddrive.cosim.cli.info", "list an FMU's variables and check a scenario's mapping against them"),
+    "estimate": ("feeddrive.cosim.cli.estimate", "estimate R, L, K, Jt, ft, Cd from a recorded CSV"),
+    "monitor": ("feeddrive.cosim.cli.monitor", "run the monitor (validation, estimation, diagnosis) on a recorded CSV"),
+    "history": ("feeddrive.cosim.cli.history", "print and plot the parameter history of an axis"),
+    "campaign": ("feeddrive.cosim.cli.campaign", "run a Monte Carlo / sweep campaign of scenarios"),
+    "design": ("feeddrive.cosim.cli.design", "choose the rapid-move acceleration that minimises parameter variance"),
 }
 
 
 def _input_errors() -> tuple[type[BaseException], ...]:
-    from estimator.errors import EstimatorInputError, NotEnoughExcitation
+    from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 
     return (InputError, EstimatorInputError, NotEnoughExcitation, FileNotFoundError, FileExistsError,
             IsADirectoryError, NotADirectoryError, PermissionError)
 
 
 def _failure_errors() -> tuple[type[BaseException], ...]:
-    from fmu_build.errors import FMUBuildError
+    from feeddrive.fmu_build.errors import FMUBuildError
 
     return (SimulationError, FMUBuildError)
 
 
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, object]]:
     parser = argparse.ArgumentParser(prog="cosim", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"cosim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     modules: dict[str, object] = {}
     for name, (module_name, help_text) in COMMANDS.items():

@@ -12,8 +12,8 @@ import logging
 import sys
 from pathlib import Path
 
-from cosim.run import DEFAULT_HISTORY, run_scenario
-from cosim.scenario import load_scenario
+from feeddrive.cosim.run import DEFAULT_HISTORY, run_scenario
+from feeddrive.cosim.scenario import load_scenario
 
 
 class _ReportedElsewhere(logging.Filter):

@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from cosim.campaign import load_campaign, run_campaign
+from feeddrive.cosim.campaign import load_campaign, run_campaign
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -10,7 +10,7 @@ import json
 import math
 from pathlib import Path
 
-from cosim.errors import InputError
+from feeddrive.cosim.errors import InputError
 
 #: history file used by ``cosim monitor`` and ``cosim history`` when --db is not given
 #: Where ``cosim run`` keeps the history by default (``history.sqlite`` beside its ``runs/<name>-<time>``
@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from estimator.history import History
+    from feeddrive.estimator.history import History
 
     db = Path(args.db)
     if not db.is_file():  # reading must not create an empty database
@@ -42,7 +42,7 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"history database {db}: no motion for axis {args.axis!r} (axes in the file: "
                          f"{', '.join(held) or 'none'})")
     if args.plot is not None:
-        from cosim.monitor_plots import plot_trends
+        from feeddrive.cosim.monitor_plots import plot_trends
 
         if args.plot and len(axes) > 1:
             raise InputError("--plot PNG names one file: choose an axis with --axis")

@@ -1,0 +1,282 @@
+"""Campaign aggregates (detection and estimation tables) and their plots."""
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from feeddrive.cosim.campaign.schema import PHYSICAL
+from feeddrive.estimator.diagnosis import TABLE_I
+from feeddrive.estimator.estimate import METHODS
+
+
+# -- aggregates ------------------------------------------------------------------------------------------
+def fault_class(injected: Mapping[str, Any]) -> str:
+    """``healthy``, ``plant:Cd+ft``, ``sensor:Im1`` or a combination joined by ``&``."""
+    parts = []
+    if injected.get("plant"):
+        parts.append("plant:" + "+".join(sorted(injected["plant"])))
+    if injected.get("sensors"):
+        parts.append("sensor:" + "+".join(sorted(injected["sensors"])))
+    return " & ".join(parts) or "healthy"
+
+
+def _isolates(diagnoses: list[Mapping[str, Any]], changed: set[str]) -> bool:
+    """The plant diagnoses of one motion isolate the fault when the Table I faults they name cover every
+    changed parameter and none of them is foreign (sensitive to no changed parameter)."""
+    named = [set(TABLE_I[d["fault"]]) for d in diagnoses if d.get("fault") in TABLE_I]
+    return bool(changed and named) and changed <= set().union(*named) and all(s & changed for s in named)
+
+
+def _truths(result: Mapping[str, Any]) -> list[dict[str, float]]:
+    return [m.get("truth") or result.get("truth") or {} for m in result.get("motions", [])]
+
+
+def _onset(truths: list[dict[str, float]]) -> tuple[int, set[str]]:
+    """First motion whose truth differs from motion 0 and the parameters that change (drifts); 0 and the
+    empty set when the truth is constant."""
+    if not truths:
+        return 0, set()
+    changed = {p for t in truths for p, v in t.items() if not math.isclose(v, truths[0].get(p, v), rel_tol=1e-9)}
+    onset = next((k for k, t in enumerate(truths)
+                  if any(not math.isclose(t[p], truths[0][p], rel_tol=1e-9) for p in changed)), 0)
+    return onset, changed
+
+
+def _run_outcome(result: Mapping[str, Any]) -> dict[str, Any]:
+    """Per-run detection facts; see ``aggregate`` for the definitions."""
+    injected = result.get("injected") or {}
+    motions = result.get("motions", [])
+    onset, drifting = _onset(_truths(result))
+    plant = set(injected.get("plant") or ()) | drifting
+    sensors = set(injected.get("sensors") or ())
+    alarms = [bool(m.get("diagnosis")) or bool(m.get("sensor_faults")) for m in motions]
+    hits = [_isolates(m.get("diagnosis") or [], plant) for m in motions]
+    sensor_hits = [{f.get("sensor") for f in m.get("sensor_faults") or ()} == sensors if sensors else False
+                   for m in motions]
+    cls = fault_class({"plant": plant, "sensors": sensors})
+    if cls == "healthy":
+        return {"class": cls, "false_alarm": any(alarms)}
+    detected_at = next((k for k in range(onset, len(motions))
+                        if (plant and motions[k].get("diagnosis")) or (sensors and motions[k].get("sensor_faults"))),
+                       None)
+    return {"class": cls, "detected": detected_at is not None,
+            "isolated": any(h or s for h, s in zip(hits[onset:], sensor_hits[onset:])),
+            "delay": None if detected_at is None else detected_at - onset,
+            "false_alarm": any(alarms[:onset])}
+
+
+@dataclass
+class Aggregates:
+    """``detection``: one row per fault class; ``estimation``: one row per (parameter, method)."""
+
+    detection: list[dict[str, Any]]
+    estimation: list[dict[str, Any]]
+
+    def write(self, out: Path) -> None:
+        for name, rows in (("detection", self.detection), ("estimation", self.estimation)):
+            if rows:
+                with open(out / f"{name}.csv", "w", newline="") as f:
+                    w = csv.DictWriter(f, fieldnames=list(rows[0]))
+                    w.writeheader()
+                    w.writerows(rows)
+
+    def table(self) -> str:
+        """Both tables as aligned text."""
+        def fmt(v: Any) -> str:
+            return "-" if v is None else f"{v:.3g}" if isinstance(v, float) else str(v)
+
+        blocks = []
+        for rows in (self.detection, self.estimation):
+            if not rows:
+                continue
+            cells = [list(rows[0])] + [[fmt(v) for v in r.values()] for r in rows]
+            widths = [max(len(c[j]) for c in cells) for j in range(len(cells[0]))]
+            blocks.append("\n".join("  ".join(c.ljust(w) for c, w in zip(row, widths)) for row in cells))
+        return "\n\n".join(blocks)
+
+
+def _rate(num: int, den: int) -> float | None:
+    return num / den if den else None
+
+
+def aggregate(records: list[dict]) -> Aggregates:
+    """Detection and estimation statistics of a campaign.
+
+    Detection (per fault class, ``fault_class`` of the injected faults and of the parameters that
+    drift over the motions):
+
+    * a run detects its fault when a motion at or after the fault's onset has a diagnosis (plant
+      fault) or a sensor fault (sensor fault);
+    * it isolates it when such a motion names the right faults: Table I faults whose sensitive
+      parameters together hold every faulty parameter, none of them foreign to the faulty parameters
+      (several faults of one drift, e.g. wear and brush wear, need several diagnoses), or exactly the
+      faulty sensors;
+    * ``false_alarm_rate``: on healthy runs, the fraction with any diagnosis or sensor fault; on
+      drifting runs, the fraction with an alarm before the onset;
+    * ``mean_delay_motions``: motions from the onset to the first detection (0 for a fault present
+      from the first motion), over the detecting runs.
+
+    Estimation (per physical parameter and method, over every motion not marked ``validated: false``
+    of the finished runs without an injected sensor fault; method ``monitor``: the parameters of the
+    motions the monitor validated):
+    relative error ``e = (value - truth) / truth``; ``bias_pct`` = 100 mean(e), ``rms_pct`` =
+    100 sqrt(mean(e^2)), ``coverage`` = fraction of motions whose ``ci95`` holds the truth.
+
+    Failed runs are counted in ``failed`` and left out of every rate; runs without a monitor (no motion
+    has a ``validated`` verdict) are left out of the detection table.
+    """
+    classes: dict[str, list[dict]] = {}
+    failed: dict[str, int] = {}
+    errors: dict[tuple[str, str], list[tuple[float, bool]]] = {}
+    for record in records:
+        if record["status"] != "ok":
+            failed["(failed)"] = failed.get("(failed)", 0) + 1
+            continue
+        result = record["result"]
+        if any(m.get("validated") is not None for m in result.get("motions", [])):  # runs without a monitor
+            outcome = _run_outcome(result)                                           # detect nothing
+            classes.setdefault(outcome["class"], []).append(outcome)
+        if (result.get("injected") or {}).get("sensors"):
+            continue  # estimates from a faulty sensor say nothing about the estimator
+        for motion, truth in zip(result.get("motions", []), _truths(result)):
+            if motion.get("validated") is False:
+                continue
+            # the methods scored on the recorded signals, and the parameters the monitor validated
+            methods = dict(motion.get("methods") or {})
+            if motion.get("validated") and motion.get("parameters"):
+                methods["monitor"] = motion["parameters"]
+            for method, params in methods.items():
+                for name, est in (params or {}).items():
+                    if name in truth and truth[name] != 0 and est.get("value") is not None:
+                        lo, hi = est.get("ci95") or (math.nan, math.nan)
+                        errors.setdefault((name, method), []).append(
+                            ((est["value"] - truth[name]) / truth[name], lo <= truth[name] <= hi))
+    detection = []
+    for cls in sorted(classes, key=lambda c: (c != "healthy", c)):
+        runs = classes[cls]
+        n = len(runs)
+        row = {"fault_class": cls, "runs": n}
+        if cls == "healthy":
+            row |= {"detected": None, "isolated": None, "detection_rate": None, "isolation_rate": None,
+                    "false_alarm_rate": _rate(sum(r["false_alarm"] for r in runs), n), "mean_delay_motions": None}
+        else:
+            det = [r for r in runs if r["detected"]]
+            row |= {"detected": len(det), "isolated": sum(r["isolated"] for r in runs),
+                    "detection_rate": _rate(len(det), n), "isolation_rate": _rate(sum(r["isolated"] for r in runs), n),
+                    "false_alarm_rate": _rate(sum(r["false_alarm"] for r in runs), n),
+                    "mean_delay_motions": float(np.mean([r["delay"] for r in det])) if det else None}
+        detection.append(row)
+    if failed:
+        detection.append({"fault_class": "(failed)", "runs": failed["(failed)"]} | dict.fromkeys(
+            ("detected", "isolated", "detection_rate", "isolation_rate", "false_alarm_rate", "mean_delay_motions")))
+    order = {p: n for n, p in enumerate(PHYSICAL)}
+    estimation = []
+    for (name, method), values in sorted(errors.items(), key=lambda kv: (order.get(kv[0][0], 99), kv[0][0],
+                                                                         METHODS.index(kv[0][1]) if kv[0][1] in METHODS else 9)):
+        e = np.array([v for v, _ in values])
+        estimation.append({"parameter": name, "method": method, "n": len(e), "bias_pct": float(100 * e.mean()),
+                           "rms_pct": float(100 * np.sqrt(np.mean(e ** 2))),
+                           "coverage": float(np.mean([c for _, c in values]))})
+    return Aggregates(detection, estimation)
+
+
+# -- plots -----------------------------------------------------------------------------------------------
+def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> list[Path]:
+    """Detection rate against each swept key, parameter error against the noise key, one drift with its alarm.
+
+    Returns the written PNG paths (plots that have no data in this campaign are skipped).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = [r for r in records if r["status"] == "ok"]
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    keys = sorted({k for r in ok for k, v in r["overrides"].items() if isinstance(v, (int, float))})
+    sweep_keys = [k for k in keys if len({r["overrides"].get(k) for r in ok}) <= max(10, len(ok) // 3)]
+    if sweep_keys and any(row["fault_class"] not in ("healthy", "(failed)") for row in aggregates.detection):
+        fig, axes = plt.subplots(1, len(sweep_keys), figsize=(4.5 * len(sweep_keys), 3.6), squeeze=False)
+        for ax, key in zip(axes[0], sweep_keys):
+            xs = sorted({r["overrides"][key] for r in ok if key in r["overrides"]})
+            outs = {x: [_run_outcome(r["result"]) for r in ok if r["overrides"].get(key) == x] for x in xs}
+            for name, pick, faulty in (("detection", "detected", True), ("isolation", "isolated", True),
+                                       ("false alarm (healthy runs)", "false_alarm", False)):
+                rates = [np.mean([o[pick] for o in outs[x] if (o["class"] != "healthy") == faulty] or [np.nan])
+                         for x in xs]
+                ax.plot(xs, rates, "o-" if faulty else "x--", label=name)
+            ax.set(xlabel=key, ylabel="rate", ylim=(-0.05, 1.05), title="detection against fault size")
+            ax.grid(True)
+            ax.legend()
+        fig.tight_layout()
+        written.append(out / "detection_rate.png")
+        fig.savefig(written[-1], dpi=110)
+        plt.close(fig)
+    noise = next((k for k in sweep_keys if "noise" in k), next((k for k in keys if "noise" in k), None))
+    if noise:
+        fig, ax = plt.subplots(figsize=(6, 4))
+        xs = np.array([r["overrides"].get(noise, np.nan) for r in ok], dtype=float)
+        values = np.unique(xs[np.isfinite(xs)])
+        # a swept key: one point per value; a drawn one: up to 6 quantile bins
+        edges = np.c_[values, values] if noise in sweep_keys else np.c_[
+            np.quantile(xs, np.linspace(0, 1, 7))[:-1], np.quantile(xs, np.linspace(0, 1, 7))[1:]]
+        colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        for c, name in enumerate(PHYSICAL):
+            for method, style in zip(METHODS + ("monitor",), ("o-", "s--", "^:", "d-.")):
+                centres, rms = [], []
+                for lo, hi in edges:
+                    rows = aggregate([r for r, x in zip(ok, xs) if lo <= x <= hi]).estimation
+                    row = next((row for row in rows if row["parameter"] == name and row["method"] == method), None)
+                    if row:
+                        centres.append((lo + hi) / 2)
+                        rms.append(row["rms_pct"])
+                if centres:
+                    ax.plot(centres, rms, style, color=colours[c % len(colours)], label=f"{name} {method}")
+        ax.set(xlabel=noise, ylabel="RMS relative error [%]", yscale="log", title="parameter error against noise")
+        ax.grid(True, which="both")
+        ax.legend(fontsize=7, ncol=3)
+        fig.tight_layout()
+        written.append(out / "error_vs_noise.png")
+        fig.savefig(written[-1], dpi=110)
+        plt.close(fig)
+    drift = next((r for r in ok if _onset(_truths(r["result"]))[1]), None)
+    if drift:
+        written.append(plot_drift(drift["result"], out / "drift.png"))
+    return written
+
+
+def plot_drift(result: Mapping[str, Any], path: Path) -> Path:
+    """Estimated and true drifting parameters against the motion index, with the first alarm marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    motions = result["motions"]
+    truths = _truths(result)
+    onset, drifting = _onset(truths)
+    outcome = _run_outcome(result)
+    names = [p for p in PHYSICAL if p in drifting]
+    fig, axes = plt.subplots(len(names), 1, figsize=(7, 2.4 * len(names)), sharex=True, squeeze=False)
+    for ax, name in zip(axes[:, 0], names):
+        k = np.arange(len(motions))
+        est = [m.get("parameters", {}).get(name, {}) for m in motions]
+        ax.plot(k, [t[name] for t in truths], "k-", label="truth")
+        ax.plot(k, [e.get("value", np.nan) for e in est], ".", ms=3, label="estimate")
+        ax.set_ylabel(name)
+        if outcome.get("delay") is not None:
+            ax.axvline(onset + outcome["delay"], color="r", ls="--", label="first diagnosis")
+        ax.grid(True)
+    axes[0, 0].legend(fontsize=8)
+    axes[-1, 0].set_xlabel("motion")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,150 @@
+"""The campaign's default run function: one co-simulation, its monitor and its estimates per motion."""
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from feeddrive.cosim.campaign.schema import PHYSICAL, CampaignError, RunSpec
+from feeddrive.estimator.estimate import METHODS
+from feeddrive.models import feed_drive
+
+# -- the co-simulation run function ----------------------------------------------------------------------
+#: sensor outputs ``run_cosim`` needs recorded
+RECORDED = ("u", "u_ref", "Im1", "Im2", "w_tach", "w_enc", "theta_enc")
+#: monitor keys copied into a campaign record (residues and notes stay in the run's report.json)
+MONITOR_KEYS = ("validated", "measurements_valid", "method", "parameters", "sensor_faults", "gain_ratio", "mismatch",
+                "diagnosis", "processing_s", "error")
+
+
+def _injected(scenario: Any, truth: Mapping[str, float], nominal: Mapping[str, float]) -> dict[str, Any]:
+    """Faults a scenario injects: plant parameters off nominal (static or by event), sensors off gain 1 / offset 0."""
+    plant = {p: v / nominal[p] - 1 for p, v in truth.items() if not math.isclose(v, nominal[p], rel_tol=1e-9)}
+    sensors = {name: {"gain": ch.gain, "offset": ch.offset}
+               for name, ch in scenario.sensors.channels().items() if ch.gain != 1 or ch.offset != 0}
+    for e in scenario.events:
+        component, _, rest = e.target.partition(".")
+        name, _, what = rest.rpartition(".")
+        if component == "sensors" and what in ("gain", "offset"):
+            sensors.setdefault(name, {})[what] = e.value
+    return {"plant": plant, "sensors": sensors}
+
+
+#: recorded sensor signals of each quantity, in the monitor's pairs (speed: the encoder is handled apart)
+_QUANTITIES = {"u": ("u", "u_ref"), "i": ("Im1", "Im2"), "w": ("w_tach", "encoder")}
+
+
+def _estimates(signals: Mapping[str, np.ndarray], rows: slice, h: float, faulty: set[str], methods: list[str],
+               config: Any) -> dict[str, dict]:
+    """LS / IV / OE estimates of one motion from the recorded measurements, as the monitor forms them.
+
+    Each quantity is the mean of its sensors without an injected fault (the monitor's signal of a pair
+    that passes validation; the first sensor when both are faulty): ``u`` and ``u_ref``, ``Im1`` and
+    ``Im2``, the tachometer and the encoder speed centred over ``config.encoder_window_s``
+    (``cosim.monitor.centred_speed``). The filter and the speed threshold are the monitor's ``config``
+    (``cosim.monitor.MonitorConfig``), so that the table scores the estimator the monitor validates.
+    """
+    from feeddrive.cosim.monitor import centred_speed
+    from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
+
+    def measured(name: str) -> np.ndarray:
+        if name == "encoder":
+            return centred_speed(signals["sensors.theta_enc"][rows], signals["sensors.w_enc"][rows], h,
+                                 config.encoder_window_s)
+        return signals[f"sensors.{name}"][rows]
+
+    data = {q: np.mean([measured(c) for c in [c for c in pair if c not in faulty] or pair[:1]], axis=0)
+            for q, pair in _QUANTITIES.items()}
+    method = next(m for m in ("oe", "iv", "ls") if m in methods)
+    est = estimate_motion(MotionData(h=h, **data), EstimationOptions(method=method, filter=config.filter,
+                                                                     speed_threshold=config.speed_threshold))
+    return {m: {k: {"value": p.value, "ci95": list(p.ci95)} for k, p in getattr(est, m).parameters.items()}
+            for m in methods if getattr(est, m) is not None}
+
+
+def _scenario(spec: RunSpec) -> Any:
+    from feeddrive.cosim.errors import ScenarioError
+    from feeddrive.cosim.scenario import scenario_from_dict
+
+    try:
+        return scenario_from_dict(spec.scenario, source="scenario", base_dir=spec.base_dir)
+    except ScenarioError as exc:
+        raise ScenarioError(f"campaign run {spec.id} {json.dumps(spec.overrides)}: {exc}") from None
+
+
+def run_cosim(spec: RunSpec) -> dict[str, Any]:
+    """The default run function: one co-simulation (``cosim.run.run_scenario``) and its per-motion results.
+
+    For each high-speed motion (NC ``state == 1``, one ``motion`` index): the true parameters at its
+    start (the scenario's plant parameters with the plant events applied by its first step: an event
+    applied at step n changes the plant over [t_n, ...), although the plant outputs show it from
+    t_(n+1) on), the monitor's result when the scenario has a monitor, and the estimates of every method
+    in ``spec.options["methods"]`` (default ``["ls", "iv"]``; add ``"oe"`` for the output-error
+    refinement) computed from the recorded measurements with the monitor's signals and filter (see
+    ``_estimates``), so that each method can be compared with the truth whatever the monitor's own method.
+
+    Needs the signals ``nc.state``, ``nc.motion`` and ``sensors.<name>`` for every name in ``RECORDED``
+    recorded (the default ``record: all``).
+    """
+    from feeddrive.cosim.master import event_step
+    from feeddrive.cosim.monitor import MonitorConfig
+    from feeddrive.cosim.run import run_scenario
+
+    methods = _methods(spec)
+    scenario = _scenario(spec)
+    with tempfile.TemporaryDirectory(prefix="campaign-run-") as tmp:
+        res = run_scenario(scenario, spec.out_dir or tmp, overwrite=True, plots=spec.out_dir is not None)
+    nominal = feed_drive().nominal(("physical",))
+    nominal = {p: nominal[p] for p in PHYSICAL}
+    truth0 = nominal | {k: float(v) for k, v in scenario.plant.parameters.items() if k in nominal}
+    t0 = float(res.time[0])
+    # (step at which the event applies, parameter, value), the master's rule
+    events = sorted((event_step(e.time, t0, scenario.step), e.target.partition(".")[2], float(e.value))
+                    for e in scenario.events
+                    if e.target.startswith("plant.") and e.target.partition(".")[2] in nominal)
+    final = truth0 | {p: v for _, p, v in events}
+    injected = _injected(scenario, final, nominal)
+    config = scenario.monitor.config if isinstance(getattr(scenario.monitor, "config", None), MonitorConfig) \
+        else MonitorConfig()
+    missing = [k for k in ("nc.state", "nc.motion") + tuple(f"sensors.{c}" for c in RECORDED) if k not in res.signals]
+    if missing:
+        raise CampaignError(f"run {spec.id}: the scenario does not record {missing} (use record: all)")
+    state, motion = res.signals["nc.state"], res.signals["nc.motion"]
+    monitor = {int(m["motion"]): m for m in res.report.get("motions", [])}
+    motions = []
+    for k in np.unique(motion[state == 1]).astype(int):
+        idx = np.flatnonzero((state == 1) & (motion == k))
+        rows = slice(int(idx[0]), int(idx[-1]) + 1)
+        start = float(res.time[rows.start])
+        truth = truth0 | {p: v for n, p, v in events if n <= rows.start}
+        entry: dict[str, Any] = {"motion": int(k), "start": start, "end": float(res.time[rows.stop - 1]),
+                                 "truth": truth, "validated": None, "parameters": {}, "sensor_faults": [],
+                                 "diagnosis": []}
+        try:
+            entry["methods"] = _estimates(res.signals, rows, scenario.step, set(injected["sensors"]), methods, config)
+        except ValueError as exc:  # not enough excitation in this motion: no numbers, the reason kept
+            entry["methods"], entry["estimation_error"] = {}, " ".join(str(exc).split())
+        entry |= {key: monitor[k][key] for key in MONITOR_KEYS if key in monitor.get(k, {})}
+        motions.append(entry)
+    return {"truth": truth0, "injected": injected, "motions": motions, "wall_time_s": res.report.get("wall_time_s")}
+
+
+def _methods(spec: RunSpec) -> list[str]:
+    methods = list(spec.options.get("methods", ["ls", "iv"]))
+    unknown = sorted(set(methods) - set(METHODS))
+    if unknown or not methods:
+        raise CampaignError(f"run_options.methods: expected some of {list(METHODS)}, got {methods}")
+    return methods
+
+
+def _validate(spec: RunSpec) -> None:
+    _methods(spec)
+    _scenario(spec)
+
+
+#: ``run_campaign`` checks every pending run's options and scenario with it before running any
+run_cosim.validate = _validate

@@ -1,0 +1,226 @@
+"""Campaign execution: in this process, on a local process pool or on a Dask cluster; resumable store."""
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from feeddrive.cosim.campaign.aggregate import Aggregates, aggregate, plot_campaign
+from feeddrive.cosim.campaign.schema import Campaign, CampaignError, RunSpec, expand
+from feeddrive.cosim.component import legacy_hint
+
+
+# -- execution -------------------------------------------------------------------------------------------
+def resolve_function(spec: str) -> Callable[[RunSpec], dict]:
+    """Import ``package.module:function``."""
+    module_name, _, name = spec.partition(":")
+    try:
+        fn = getattr(importlib.import_module(module_name), name)
+    except (ImportError, AttributeError) as exc:
+        raise CampaignError(f"run: cannot load {spec!r} ({exc}){legacy_hint(module_name)}") from None
+    if not callable(fn):
+        raise CampaignError(f"run: {spec!r} is not callable")
+    return fn
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"run result holds a {type(obj).__name__}, which is not JSON-serialisable")
+
+
+def execute(run: str | Callable[[RunSpec], dict], spec: RunSpec) -> dict[str, Any]:
+    """Run one spec and return its record; any exception becomes a ``failed`` record with its reason.
+
+    The result goes through a JSON round trip here, in the worker, so records are identical whichever
+    executor ran them.
+    """
+    start = time.perf_counter()
+    try:
+        fn = resolve_function(run) if isinstance(run, str) else run
+        result, status, reason = json.loads(json.dumps(fn(spec), default=_jsonable)), "ok", ""
+    except Exception as exc:  # a failing run must not stop the campaign: it is recorded with its reason
+        result, status, reason = None, "failed", f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    return {"id": spec.id, "index": spec.index, "seed": spec.seed, "overrides": spec.overrides,
+            "status": status, "reason": reason, "elapsed_s": time.perf_counter() - start, "result": result}
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _fingerprint(campaign: Campaign) -> str:
+    payload = json.dumps([campaign.model_dump(mode="json", exclude={"root"}), campaign.base_scenario()], sort_keys=True)
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
+def _open_store(campaign: Campaign, out: Path, overwrite: bool) -> dict[str, dict]:
+    """Create or reopen the out dir; return the finished records by id."""
+    meta = out / "campaign.json"
+    runs = out / "runs"
+    fingerprint = _fingerprint(campaign)
+    if meta.exists():
+        old = json.loads(meta.read_text())
+        if old.get("fingerprint") != fingerprint:
+            if not overwrite:
+                raise CampaignError(f"{out}: holds the results of another campaign ({old.get('name')!r} or an "
+                                    "earlier version of this one); choose another --out or pass --overwrite")
+            for f in runs.glob("*.json"):
+                f.unlink()
+    elif out.exists() and any(out.iterdir()) and not overwrite:
+        raise CampaignError(f"{out}: exists, is not empty and holds no campaign; choose another --out or pass --overwrite")
+    runs.mkdir(parents=True, exist_ok=True)
+    _write_atomic(meta, json.dumps({"name": campaign.name, "fingerprint": fingerprint,
+                                    "campaign": campaign.model_dump(mode="json")}, indent=1))
+    done = {}
+    for f in runs.glob("*.json"):
+        record = json.loads(f.read_text())
+        done[record["id"]] = record
+    return done
+
+
+def _local(run, specs, workers, on_done) -> None:
+    if workers == 1:
+        for spec in specs:
+            on_done(execute(run, spec))
+        return
+    # spawn, not fork: CasADi, FMU libraries and the progress bar's thread do not survive a fork safely
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"))
+    try:
+        futures = [pool.submit(execute, run, spec) for spec in specs]
+        for future in as_completed(futures):
+            on_done(future.result())
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _check_scheduler(scheduler: str) -> None:
+    """Refuse a malformed or unresolvable scheduler address before anything is written."""
+    from distributed.comm.addressing import resolve_address
+
+    try:
+        resolve_address(scheduler)
+    except (ValueError, OSError) as exc:
+        raise CampaignError(f"--scheduler {scheduler}: {' '.join(str(exc).split())}; expected the address of a "
+                            "Dask scheduler, such as tcp://host:8786") from None
+
+
+def _dask(run, specs, scheduler, on_done) -> None:
+    from distributed import Client
+    from distributed import as_completed as dask_completed
+
+    try:
+        client = Client(scheduler, timeout="20s")
+    except (OSError, TimeoutError) as exc:
+        raise CampaignError(f"--scheduler {scheduler}: cannot connect to the Dask scheduler ({exc})") from None
+    futures = []
+    try:
+        futures = [client.submit(execute, run, spec, key=f"campaign-{spec.id}", pure=False) for spec in specs]
+        for future in dask_completed(futures):
+            on_done(future.result())
+    finally:
+        client.cancel(futures)
+        client.close()
+
+
+@dataclass
+class CampaignResult:
+    """Records of every run in index order, the aggregates, and how many runs this call executed."""
+
+    out_dir: Path
+    records: list[dict]
+    executed: int
+    aggregates: Aggregates
+
+    @property
+    def failed(self) -> list[dict]:
+        return [r for r in self.records if r["status"] == "failed"]
+
+
+def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int = 1, scheduler: str | None = None,
+                 progress: bool = False, overwrite: bool = False, retry_failed: bool = False,
+                 run: Callable[[RunSpec], dict] | None = None, plots: bool = True) -> CampaignResult:
+    """Run (or resume) a campaign and write its records, aggregates and plots to ``out_dir``.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    out_dir : path
+        Holds ``campaign.json``, ``runs/<id>.json`` (one per finished run), ``detection.csv``,
+        ``estimation.csv``, ``plots/``. Reopened runs with the same campaign resume.
+    workers : int
+        1: run in this process; > 1: a local process pool of that size. Ignored with ``scheduler``.
+    scheduler : str or None
+        Address of a running ``dask.distributed`` scheduler (``tcp://host:port``).
+    progress : bool
+        tqdm progress bar.
+    overwrite : bool
+        Discard the results of a different campaign in ``out_dir`` instead of refusing.
+    retry_failed : bool
+        Run the failed runs again (they are otherwise finished).
+    run : callable or None
+        Run function; default the campaign's ``run`` entry.
+    plots : bool
+        Draw the plots.
+    """
+    from tqdm import tqdm
+
+    if workers < 1:
+        raise CampaignError(f"--workers: expected >= 1, got {workers}")
+    if scheduler:
+        _check_scheduler(scheduler)
+    out = Path(out_dir)
+    done = _open_store(campaign, out, overwrite)
+    specs = expand(campaign, out)
+    ids = {s.id for s in specs}
+    finished = {i: r for i, r in done.items() if i in ids and not (retry_failed and r["status"] == "failed")}
+    pending = [s for s in specs if s.id not in finished]
+    fn = run if run is not None else campaign.run
+    # a bad entry or scenario is one input error now, not N failed runs later
+    check = getattr(resolve_function(fn) if isinstance(fn, str) else fn, "validate", None)
+    for spec in pending if check else ():
+        check(spec)
+    bar = tqdm(total=len(specs), initial=len(finished), desc=campaign.name, unit="run", disable=not progress)
+
+    def on_done(record: dict) -> None:
+        _write_atomic(out / "runs" / f"{record['id']}.json", json.dumps(record, indent=1))
+        finished[record["id"]] = record
+        bar.update(1)
+
+    try:
+        if not pending:
+            pass
+        elif scheduler:
+            _dask(fn, pending, scheduler, on_done)
+        else:
+            _local(fn, pending, min(workers, len(pending)), on_done)
+    finally:
+        bar.close()
+    records = sorted(finished.values(), key=lambda r: r["index"])
+    aggregates = aggregate(records)
+    aggregates.write(out)
+    if plots:
+        plot_campaign(records, aggregates, out / "plots")
+    return CampaignResult(out, records, len(pending), aggregates)

@@ -1,0 +1,46 @@
+"""Reading a plant FMU's archive without running it: FMI version, model description, content hash."""
+from __future__ import annotations
+
+import hashlib
+import zipfile
+from pathlib import Path
+from typing import Any
+from xml.etree import ElementTree
+
+
+def fmi_version(path: Path) -> str:
+    """The ``fmiVersion`` attribute of an FMU's modelDescription.xml (raises ValueError if unreadable)."""
+    try:
+        with zipfile.ZipFile(path) as z, z.open("modelDescription.xml") as f:
+            return ElementTree.parse(f).getroot().get("fmiVersion", "")
+    except (zipfile.BadZipFile, KeyError, ElementTree.ParseError) as exc:
+        raise ValueError(f"not an FMU (a zip file with a modelDescription.xml): {exc}") from None
+
+
+def model_description(path: Path) -> Any:
+    """fmpy's validated model description of an FMU.
+
+    Raises
+    ------
+    ValueError
+        The modelDescription.xml fails fmpy's validation; the message gives its first problem.
+    """
+    from fmpy import read_model_description
+    from fmpy.model_description import ValidationError as FMIValidationError
+
+    try:
+        return read_model_description(str(path))
+    except FMIValidationError as exc:
+        problems = [" ".join(str(p).split()) for p in exc.problems] or ["(no detail)"]
+        more = f" (and {len(problems) - 1} more problem{'s' * (len(problems) > 2)})" if len(problems) > 1 else ""
+        raise ValueError(f"invalid modelDescription.xml: {problems[0]}{more}") from None
+    except Exception as exc:  # fmpy raises a bare Exception for other malformed content (types, variabilities)
+        raise ValueError(f"invalid modelDescription.xml: {' '.join(str(exc).split())}") from None
+
+
+def sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

@@ -1,0 +1,127 @@
+"""YAML sources that remember where each key stands, and pydantic errors turned into ``file:line: key:`` lines.
+
+Shared by the scenario and campaign loaders, so that every configuration error names its file, line
+and key in the same way.
+"""
+from __future__ import annotations
+
+import types
+import typing
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from feeddrive.cosim.errors import ScenarioError, format_path
+
+#: a key's path in a YAML document, e.g. ``("nc", "program", 2, "rapid")``
+KeyPath = tuple[Any, ...]
+
+
+def read_yaml(path: Path) -> tuple[Any, dict[KeyPath, int]]:
+    """The data of a YAML file and its key path -> line map."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read scenario file ({exc.strerror or exc})") from None
+    try:
+        root = yaml.compose(text)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark else str(path)
+        raise ScenarioError(f"{where}: invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    lines: dict[KeyPath, int] = {}
+    if root is not None:
+        _line_map(root, (), lines)
+    return data, lines
+
+
+def _line_map(node: yaml.Node, path: KeyPath, out: dict[KeyPath, int]) -> None:
+    out.setdefault(path, node.start_mark.line + 1)
+    if isinstance(node, yaml.MappingNode):
+        for key, value in node.value:
+            sub = path + (key.value,)
+            out[sub] = key.start_mark.line + 1
+            _line_map(value, sub, out)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            _line_map(item, path + (i,), out)
+
+
+
+
+def located_error(source: str, lines: Mapping[KeyPath, int], path: KeyPath, message: str) -> ScenarioError:
+    path = tuple(path)
+    line = next((lines[path[:k]] for k in range(len(path), -1, -1) if path[:k] in lines), None)
+    where = f"{source}:{line}" if line else source
+    key = f" {format_path(path)}:" if path else ""
+    return ScenarioError(f"{where}:{key} {message}")
+
+
+def _allowed_keys(model: type, loc: KeyPath) -> list[str]:
+    """Field names (aliases) of the pydantic model found at ``loc`` inside ``model``, if any."""
+    candidates = [model]
+    for part in loc:
+        nxt = []
+        for tp in candidates:
+            for t in _unwrap(tp):
+                if isinstance(t, type) and issubclass(t, BaseModel) and isinstance(part, str):
+                    f = next((f for n, f in t.model_fields.items() if (f.alias or n) == part), None)
+                    if f is not None:
+                        nxt.append(f.annotation)
+                elif typing.get_origin(t) in (list, tuple) and isinstance(part, int):
+                    nxt.extend(typing.get_args(t)[:1])
+                elif typing.get_origin(t) is dict:
+                    nxt.extend(typing.get_args(t)[1:2])
+        candidates = nxt
+    return sorted({f.alias or n for tp in candidates for t in _unwrap(tp)
+                   if isinstance(t, type) and issubclass(t, BaseModel) for n, f in t.model_fields.items()})
+
+
+def _unwrap(tp: Any) -> list[Any]:
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        return [a for x in typing.get_args(tp) for a in _unwrap(x)]
+    if typing.get_origin(tp) is typing.Annotated:
+        return _unwrap(typing.get_args(tp)[0])
+    return [tp]
+
+
+def from_validation(exc: ValidationError, data: Any, source: str, lines: Mapping[KeyPath, int],
+                     model: type, prefix: KeyPath = ()) -> ScenarioError:
+    errors = exc.errors(include_url=False)
+    e = errors[0]
+    loc = _data_path(data, e["loc"])
+    if e["type"] == "extra_forbidden":
+        allowed = _allowed_keys(model, loc[:-1])
+        message = f"unknown key {loc[-1]!r}" + (f"; expected one of: {', '.join(allowed)}" if allowed else "")
+    elif e["type"] == "missing":
+        message = "missing required key"
+    else:
+        # a union reports one error per member at the same key: say every alternative
+        same = [x for x in errors if _data_path(data, x["loc"]) == loc and x["type"] != "value_error"]
+        text = " or ".join(dict.fromkeys(x["msg"].removeprefix("Input should be ") for x in same)) \
+            if len(same) > 1 else e["msg"].removeprefix("Value error, ")
+        text = f"Input should be {text}" if len(same) > 1 else text
+        got = repr(e.get("input"))
+        message = text if len(got) > 60 or e["type"] == "value_error" else f"{text}, got {got}"
+        errors = [x for x in errors if x not in same[1:]]
+    more = f" (and {len(errors) - 1} more problem{'s' * (len(errors) > 2)})" if len(errors) > 1 else ""
+    return located_error(source, lines, prefix + loc, message + more)
+
+
+def _data_path(data: Any, loc: KeyPath) -> KeyPath:
+    """Drop the union-member tags pydantic puts in ``loc`` ('str', "literal['all']", ...): keep the parts
+    that index into the data, and a last part that names a missing key."""
+    path: list = []
+    for k, part in enumerate(loc):
+        if isinstance(data, dict) and part in data:
+            data = data[part]
+        elif isinstance(data, list) and isinstance(part, int) and part < len(data):
+            data = data[part]
+        elif k < len(loc) - 1 or not isinstance(data, dict):
+            continue
+        path.append(part)
+    return tuple(path)
