@@ -175,6 +175,16 @@ class MonitorPipeline:
             return {k: (v, 0.0) for k, v in self.nominal.items()}
         return make_baseline(self.baseline_sets) if self.baseline_sets else None
 
+    def thresholds(self) -> dict:
+        """The diagnosis' thresholds and the healthy baseline now (report.json ``diagnosis_thresholds``).
+
+        ``{"alpha", "z_crit", "min_relative": {name: fraction}, "baseline_motions", "baseline":
+        {name: {"value", "std"}} or None}``: what the alarm bands of the trend plots are drawn from.
+        """
+        return _drift_reference(self.baseline(), self.diagnosis_options, list(self.nominal)) | {
+            "alpha": self.diagnosis_options.alpha, "baseline_motions": self.config.baseline_motions,
+            "baseline_learnt": len(self.baseline_sets)}
+
     def process(self, signals: Mapping[str, np.ndarray | None], h: float, start: float, motion: int,
                 time: float, scenario: str = "") -> MotionTrace:
         """Validate, estimate, check, diagnose and store one motion.
@@ -249,6 +259,8 @@ class MonitorPipeline:
         current = result["parameters"]
         reference = self.baseline()
         if reference is not None:
+            # the reference and thresholds this motion was judged against: the trend plots' alarm band
+            result["drift_reference"] = _drift_reference(reference, self.diagnosis_options, list(self.nominal))
             result["diagnosis"] = [d.to_dict() for d in diagnose(current, reference, self.last_validated, self.recent,
                                                                  self.diagnosis_options)]
         if self.building:
@@ -285,6 +297,12 @@ def centred_speed(theta: np.ndarray, fallback: np.ndarray, h: float, window_s: f
     if theta.size > 2 * k:
         w[k:-k] = (theta[2 * k:] - theta[:-2 * k]) / (2 * k * h)
     return w
+
+
+def _drift_reference(reference: Mapping | None, options: DiagnosisOptions, names: Sequence[str]) -> dict:
+    """``{"z_crit", "min_relative": {name}, "baseline": {name: {"value", "std"}} or None}`` of a drift test."""
+    base = None if reference is None else {k: {"value": float(v), "std": float(s)} for k, (v, s) in reference.items()}
+    return {"z_crit": options.z_crit, "min_relative": {n: options.min_rel(n) for n in names}, "baseline": base}
 
 
 def _residue_dict(pair) -> dict:
@@ -383,7 +401,9 @@ class Monitor(Component):
         return {"axis": self.axis, "db": self.config.db, "budget_s": self.config.budget_s,
                 "max_processing_s": max(times, default=None),
                 "within_budget": all(r["within_budget"] for r in self.results),
-                "request": self._request, "unfinished_motion": self._motion, "motions": self.results}
+                "request": self._request, "unfinished_motion": self._motion,
+                "diagnosis_thresholds": self.pipeline.thresholds() if self.pipeline else None,
+                "motions": self.results}
 
     def write_plots(self, folder: str | Path) -> list[Path]:
         """Monitor plots of the kept motions and the parameter trends of the axis into ``folder``."""
@@ -394,7 +414,7 @@ class Monitor(Component):
                 motions = history.motions(self.axis)
         else:
             motions = self.results
-        return plot_monitor(self.traces, motions, Path(folder))
+        return plot_monitor(self.traces, motions, Path(folder), self.pipeline.thresholds() if self.pipeline else None)
 
     def terminate(self) -> None:
         if self.history is not None:

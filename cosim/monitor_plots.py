@@ -3,7 +3,8 @@
 * per motion: the current residue ``Im1 - Im2`` with its window means (paper Fig. 9, 10), the
   measured and model-simulated current (Fig. 12), the measured and simulated speed and their residue
   (Fig. 13, 14);
-* per axis: each parameter's trend over the motions with its 95 % confidence band.
+* per axis: each parameter's trend over the motions with its 95 % confidence interval, the healthy
+  baseline and the diagnosis' alarm band (cosim/trends.py).
 """
 from __future__ import annotations
 
@@ -15,11 +16,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from feeddrive.cosim.errors import InputError  # noqa: E402
-
-PARAMETERS = (("R", "Ohm"), ("L", "H"), ("K", "N.m/A"), ("Jt", "kg.m2"), ("ft", "N.m.s/rad"), ("Cd", "N.m"))
+from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
+from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
 
 
 def plot_motion(trace, path: Path) -> Path:
@@ -61,42 +60,22 @@ def plot_motion(trace, path: Path) -> Path:
     return path
 
 
-def plot_trends(motions: Sequence[dict], path: Path, title: str = "") -> Path:
-    """Each parameter's value and 95 % CI band over the stored motions (filled: validated)."""
-    rows = [m for m in motions if m.get("parameters")]
-    if not rows:
-        raise InputError(f"no motion with estimated parameters to plot{' for ' + title if title else ''}")
-    fig, axes = plt.subplots(3, 2, figsize=(10, 7.5), sharex=True)
-    for ax, (name, unit) in zip(axes.T.ravel(), PARAMETERS):
-        pts = [(k, m["parameters"][name], bool(m["validated"]))
-               for k, m in enumerate(rows, 1) if name in m["parameters"]]
-        if not pts:
-            ax.set_visible(False)
-            continue
-        k = np.array([p[0] for p in pts])
-        val = np.array([p[1]["value"] for p in pts])
-        lo, hi = (np.array([p[1]["ci95"][j] for p in pts], dtype=float) for j in (0, 1))
-        ok = np.array([p[2] for p in pts])
-        ax.fill_between(k, lo, hi, color="C0", alpha=0.25, lw=0, label="95 % CI")
-        ax.plot(k, val, color="C0", lw=0.8)
-        ax.plot(k[ok], val[ok], "o", color="C0", ms=4, label="validated")
-        ax.plot(k[~ok], val[~ok], "o", mfc="none", color="C3", ms=4, label="not validated")
-        ax.set_ylabel(f"{name} [{unit}]")
-    axes[0, 0].legend(fontsize=7)
-    for ax in axes[-1]:
-        ax.set_xlabel("motion (in history order)")
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    fig.suptitle(f"parameter trends {title}".strip(), fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+def plot_trends(motions: Sequence[dict], path: Path, title: str = "", thresholds: dict | None = None,
+                x: str = "auto") -> Path:
+    """Each parameter's trend with its 95 % CI, healthy baseline and alarm band (``cosim.trends.plot_trends``)."""
+    return _plot_trends(motions, path, title, thresholds, x)
 
 
-def plot_monitor(traces: Sequence, motions: Sequence[dict], folder: Path) -> list[Path]:
-    """``monitor_motion<k>.png`` for each kept trace and ``monitor_trends.png`` into ``folder``."""
+def plot_monitor(traces: Sequence, motions: Sequence[dict], folder: Path, thresholds: dict | None = None
+                 ) -> list[Path]:
+    """``monitor_motion<k>.png`` for each kept trace and ``monitor_trends.png`` into ``folder``.
+
+    ``thresholds``: the diagnosis thresholds and healthy baseline of the trends' alarm band
+    (``MonitorPipeline.thresholds()``).
+    """
     folder.mkdir(parents=True, exist_ok=True)
     paths = [plot_motion(tr, folder / f"monitor_motion{tr.motion}.png") for tr in traces]
     if any(m.get("parameters") for m in motions):
-        paths.append(plot_trends(motions, folder / "monitor_trends.png"))
+        axis = motions[-1].get("axis")
+        paths.append(plot_trends(motions, folder / "monitor_trends.png", f"axis {axis}" if axis else "", thresholds))
     return paths

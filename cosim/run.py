@@ -6,6 +6,7 @@ Files in ``out_dir``::
                              sha256, the stop time and the complete connections (loadable again)
     signals.csv              time and every recorded signal, units in the header (partial on failure)
     report.json              run metadata, each component's report(), the monitor's motions
+    report.html              the same as one self-contained page with every figure (cosim.report)
     plots/*.png              per high-speed motion: profiles and current residue (cosim.plots),
                              and the figures of components that draw their own (the monitor)
 
@@ -19,6 +20,7 @@ import datetime as _dt
 import json
 import os
 import platform
+import sys
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,7 +33,7 @@ from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.master import Master
 from feeddrive.cosim.scenario import Scenario, load_scenario
 
-OUTPUTS = ("signals.csv", "scenario.resolved.yaml", "report.json")
+OUTPUTS = ("signals.csv", "scenario.resolved.yaml", "report.json", "report.html")
 #: ``cosim run``'s history file when the scenario names none: beside the run's output directory, so
 #: that successive runs into ``runs/`` continue one history (``runs/history.sqlite``).
 DEFAULT_HISTORY = "history.sqlite"
@@ -110,7 +112,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     for old in [out_dir / n for n in OUTPUTS] + sorted((out_dir / "plots").glob("*.png")):
         old.unlink(missing_ok=True)
     paths: dict[str, Any] = {"signals": out_dir / "signals.csv", "resolved": out_dir / "scenario.resolved.yaml",
-                             "report": out_dir / "report.json", "plots": []}
+                             "report": out_dir / "report.json", "page": out_dir / "report.html", "plots": []}
     report: dict[str, Any] = {"scenario": scenario.name, "axis": scenario.axis, "source": scenario.source,
                               "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                               "status": "running", "versions": _versions(),
@@ -143,6 +145,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
                    "wall_time_s": round(_time.perf_counter() - wall, 3),
                    "recorded_until_s": float(rec.time[-1]) if rec is not None and rec.n else None}
         paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
+        _write_page(out_dir, report)
         raise
     finally:
         master.terminate()
@@ -153,7 +156,20 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     report["files"] = {k: ([os.path.relpath(p, out_dir) for p in v] if k == "plots" else v.name)
                        for k, v in paths.items()}
     paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
+    _write_page(out_dir, report)
     return RunResult(out_dir, recorder.time, signals, dict(zip(recorder.names, recorder.units)), report, paths)
+
+
+def _write_page(out_dir: Path, report: dict) -> None:
+    """report.html beside report.json, from the JSON just written (so the page shows exactly its values).
+
+    A page that cannot be drawn must not hide the run's own result or error: it is reported on stderr."""
+    from feeddrive.cosim.report import write_run_page
+
+    try:
+        write_run_page(out_dir, json.loads((out_dir / "report.json").read_text(encoding="utf-8")))
+    except Exception as exc:  # noqa: BLE001 - the run's outcome is what matters here
+        print(f"{out_dir / 'report.html'}: not written ({type(exc).__name__}: {exc})", file=sys.stderr)
 
 
 def _with_default_history(scenario: Scenario, db: Path) -> Scenario:

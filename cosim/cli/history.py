@@ -1,6 +1,6 @@
 """``cosim history``: print an axis's stored motions and plot each parameter's trend with its CI band.
 
-    cosim history [--db PATH] [--axis ID] [--plot [PNG]] [--overwrite] [--json]
+    cosim history [--db PATH] [--axis ID] [--plot [PNG]] [--html OUT.html] [--overwrite] [--json]
 """
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 from feeddrive.cosim.errors import InputError
+from feeddrive.estimator.history import History
 
 #: history file used by ``cosim monitor`` and ``cosim history`` when --db is not given
 #: Where ``cosim run`` keeps the history by default (``history.sqlite`` beside its ``runs/<name>-<time>``
@@ -24,13 +25,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--axis", help="machine/axis id (default: every axis in the file)")
     parser.add_argument("--plot", nargs="?", const="", metavar="PNG",
                         help="draw the parameter trends (default file: history_<axis>.png)")
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing plot file")
+    parser.add_argument("--html", metavar="OUT.html", help="write the axis's history page (trends against "
+                        "calendar time and motion number, healthy baseline, alarm band, diagnoses)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing plot or HTML file")
     parser.add_argument("--json", action="store_true", help="print the stored motions as JSON")
 
 
 def main(args: argparse.Namespace) -> int:
-    from feeddrive.estimator.history import History
-
     db = Path(args.db)
     if not db.is_file():  # reading must not create an empty database
         raise InputError(f"history database {db} does not exist")
@@ -50,14 +51,40 @@ def main(args: argparse.Namespace) -> int:
             path = Path(args.plot or f"history_{axis}.png")
             if path.exists() and not args.overwrite:
                 raise InputError(f"plot file {path} exists; use --overwrite to replace it")
-            plot_trends(motions[axis], path, title=f"axis {axis}")
+            plot_trends(motions[axis], path, f"axis {axis}", thresholds(db, axis, motions[axis]))
             print(f"wrote {path}")
+    if args.html is not None:
+        from feeddrive.cosim.report import write_history_page
+
+        if len(axes) != 1:
+            raise InputError(f"--html: the history {db} holds the axes {', '.join(axes)}; choose one with --axis")
+        html = Path(args.html)
+        if html.exists() and not args.overwrite:
+            raise InputError(f"--html {html}: the file exists; use --overwrite to replace it")
+        write_history_page(html, axes[0], motions[axes[0]], thresholds(db, axes[0], motions[axes[0]]), str(db))
+        print(f"wrote {html}")
     if args.json:
         print(json.dumps({"db": str(db), "axes": motions}, indent=2))
     else:
         for axis in axes:
             print(format_table(axis, motions[axis]))
     return 0
+
+
+def thresholds(db: Path, axis: str, motions: list[dict]) -> dict:
+    """The alarm band's thresholds for a history page: those of the newest diagnosed motion (what the
+    monitor used), else the monitor's defaults; the healthy baseline as the monitor reads it from ``db``."""
+    from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
+
+    config = MonitorConfig(axis=axis)
+    with History(db) as history:
+        out = MonitorPipeline(config, history, axis).thresholds()
+    used = next((m["drift_reference"] for m in reversed(motions) if m.get("drift_reference")), None)
+    if used is not None:
+        from scipy.stats import norm
+
+        out |= {"z_crit": used["z_crit"], "min_relative": used["min_relative"], "alpha": 2 * norm.sf(used["z_crit"])}
+    return out
 
 
 def format_table(axis: str, motions: list[dict]) -> str:

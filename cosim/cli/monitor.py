@@ -10,10 +10,14 @@ Each high-speed motion (``--segment``: the NC state when mapped, else the speed 
 validation, estimation, model validation and diagnosis, and is stored in the history (``--db``) of
 ``--axis``, continuing from what the history already holds. Machine time of a motion: the file's
 modification time is taken as the end of the recording.
+
+``--out DIR`` writes ``report.json`` (the motions' results, the diagnosis thresholds, versions),
+``plots/`` and ``report.html`` (cosim.report) into DIR.
 """
 from __future__ import annotations
 
 import argparse
+import datetime as _dt
 import json
 import os
 from pathlib import Path
@@ -24,6 +28,7 @@ from feeddrive.cosim.cli.history import DEFAULT_DB
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
 from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles
+from feeddrive.cosim.run import _versions
 from feeddrive.estimator.segmentation import segment
 
 #: role -> monitor signal
@@ -36,6 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--db", default=DEFAULT_DB, help=f"SQLite history file (default: {DEFAULT_DB})")
     parser.add_argument("--axis", default="X", help="machine/axis id in the history (default X)")
     parser.add_argument("--plots", metavar="DIR", help="write the monitor plots of every motion into DIR")
+    parser.add_argument("--out", metavar="DIR", help="write report.json, report.html and plots/ into DIR")
     parser.add_argument("--overwrite", action="store_true", help="replace existing plot files")
 
 
@@ -57,6 +63,8 @@ def main(args: argparse.Namespace) -> int:
     if not segments:
         raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
     plots = _plot_folder(args.plots, args.overwrite) if args.plots else None
+    out = _out_folder(args.out, args.overwrite) if args.out else None
+    started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     config = MonitorConfig(axis=args.axis, scenario=str(rec.path), db=args.db, method=args.method,
                            filter_cutoff_hz=args.filter_cutoff)
     end_clock = rec.path.stat().st_mtime - (rec.n - 1) * rec.h  # machine time of sample 0
@@ -70,12 +78,19 @@ def main(args: argparse.Namespace) -> int:
             traces.append(pipeline.process(part, rec.h, rec.t0 + seg.start * rec.h, k,
                                            end_clock + (seg.stop - 1) * rec.h, str(rec.path)))
         motions = history.motions(args.axis)
+        thresholds = pipeline.thresholds()
     results = [t.result for t in traces]
     if plots is not None:
         from feeddrive.cosim.monitor_plots import plot_monitor
 
-        for p in plot_monitor(traces, motions, plots):
+        for p in plot_monitor(traces, motions, plots, thresholds):
             print(f"wrote {p}")
+    if out is not None:
+        report = {"kind": "monitor", "source": str(rec.path), "axis": args.axis, "db": args.db, "started": started,
+                  "status": "ok", "versions": _versions(), "method": args.method,
+                  "components": {"monitor": {"budget_s": config.budget_s}}, "diagnosis_thresholds": thresholds,
+                  "motions": results}
+        print(f"wrote {write_monitor_report(out, report, traces, motions, thresholds)}")
     if args.json:
         print(json.dumps({"axis": args.axis, "db": args.db, "motions": results}, default=_jsonable))
     else:
@@ -99,6 +114,29 @@ def _plot_folder(name: str, overwrite: bool) -> Path:
     if not overwrite and any(plots.glob("monitor_*.png")):
         raise InputError(f"--plots {plots}: the folder already holds monitor plots; use --overwrite to replace them")
     return plots
+
+
+def _out_folder(name: str, overwrite: bool) -> Path:
+    """The ``--out`` folder, created (and checked) before the history is written, as for ``--plots``."""
+    out = _plot_folder(name, True)
+    if not overwrite and any((out / f).exists() for f in ("report.json", "report.html", "plots")):
+        raise InputError(f"--out {out}: the folder already holds a report; use --overwrite to replace it")
+    return out
+
+
+def write_monitor_report(out: Path, report: dict, traces: list, motions: list[dict], thresholds: dict) -> Path:
+    """``out/plots/*.png``, ``out/report.json`` and ``out/report.html`` of one ``cosim monitor`` call."""
+    from feeddrive.cosim.monitor_plots import plot_monitor
+    from feeddrive.cosim.report import write_run_page
+
+    for old in (out / "plots").glob("monitor_*.png"):
+        old.unlink()
+    plots = plot_monitor(traces, motions, out / "plots", thresholds)
+    report["files"] = {"report": "report.json", "page": "report.html",
+                       "plots": [os.path.relpath(p, out) for p in plots]}
+    (out / "report.json").write_text(json.dumps(report, indent=2, default=_jsonable), encoding="utf-8")
+    # the page is drawn from the JSON just written, so that it shows exactly report.json's values
+    return write_run_page(out, json.loads((out / "report.json").read_text(encoding="utf-8")))
 
 
 def _jsonable(x):  # noqa: ANN001, ANN202 - numpy scalars in the results

@@ -1,0 +1,213 @@
+"""report.html: one self-contained page per run (``cosim run``, ``cosim monitor --out``) and per axis history.
+
+The page is rendered with jinja2 from the data of report.json (or of the history); every figure is
+embedded as a base64 PNG (``data:`` URI), so the file opens without network access or its folder.
+
+Parameter colours: against the alarm band of the diagnosis (cosim/trends.py), a validated parameter is
+``healthy`` within half the band, ``drifting`` beyond half of it and ``diagnosed`` when a diagnosis
+names it; a parameter of a motion that was not validated is ``not judged`` (the monitor never
+diagnoses it).
+"""
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import json
+import math
+import re
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import jinja2
+
+from feeddrive.cosim.trends import UNITS, trend_series, use_dates
+
+PAGE = "report.html"
+_ENV = jinja2.Environment(loader=jinja2.PackageLoader("feeddrive.cosim.report", "templates"),
+                          autoescape=jinja2.select_autoescape(default=True, default_for_string=True),
+                          undefined=jinja2.ChainableUndefined, trim_blocks=True, lstrip_blocks=True)
+
+
+def num(x: Any, digits: int = 6) -> str:
+    """A number for the page: ``digits`` significant digits, ``-`` for None, yes/no for booleans."""
+    if x is None:
+        return "-"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, int):
+        return str(x)
+    if isinstance(x, float):
+        return "nan" if math.isnan(x) else f"{x:.{digits}g}"
+    if isinstance(x, (list, tuple)):
+        return "[" + ", ".join(num(v, digits) for v in x) + "]"
+    if isinstance(x, Mapping):
+        return ", ".join(f"{k}: {num(v, digits)}" for k, v in x.items())
+    return str(x)
+
+
+_ENV.filters["num"] = num
+_ENV.filters["pct"] = lambda x, d=3: "-" if x is None else f"{100 * x:+.{d}g} %"
+_ENV.filters["percent"] = lambda x, d=3: "-" if x is None else f"{100 * x:.{d}g} %"
+_ENV.filters["utc"] = lambda t: "-" if t is None else _dt.datetime.fromtimestamp(
+    t, _dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def embed_png(path: Path) -> str:
+    """``data:image/png;base64,...`` URI of a PNG file."""
+    return "data:image/png;base64," + base64.b64encode(Path(path).read_bytes()).decode("ascii")
+
+
+def _caption(name: str) -> tuple[int | None, str]:
+    """(motion or None, caption) of a plot file of a run."""
+    if m := re.fullmatch(r"motion_(\d+)_profiles\.png", name):
+        return int(m[1]), f"Motion {m[1]}: voltage, current and speed (paper Fig. 3, 8)"
+    if m := re.fullmatch(r"motion_(\d+)_currents\.png", name):
+        return int(m[1]), f"Motion {m[1]}: the redundant current sensors and their residue (paper Fig. 9, 10)"
+    if m := re.fullmatch(r"monitor_motion(\d+)\.png", name):
+        return int(m[1]), (f"Motion {m[1]}: residue windows, measured vs simulated current and speed "
+                           "(paper Fig. 10-14)")
+    if name == "monitor_trends.png":
+        return None, "Parameter trends of the axis with the healthy baseline and the diagnosis' alarm band"
+    return None, name
+
+
+def motion_view(m: Mapping, thresholds: Mapping | None, units: Mapping[str, str], budget_s: float | None) -> dict:
+    """What the page shows of one motion result (report.json ``motions[k]``)."""
+    series = trend_series([m], thresholds)
+    diagnosed = {p for d in m.get("diagnosis") or () for p in d.get("parameters", ())}
+    rows = []
+    for name, p in (m.get("parameters") or {}).items():
+        s = series[name]
+        ref, lo, hi = s["reference"][0], s["band_low"][0], s["band_high"][0]
+        value = float(p["value"])
+        if not m.get("validated"):
+            status = "not judged"
+        elif name in diagnosed:
+            status = "diagnosed"
+        elif ref is not None and abs(value - ref) > (hi - lo) / 4:  # beyond half the band's half-width
+            status = "drifting"
+        else:
+            status = "healthy"
+        rows.append({"name": name, "unit": p.get("unit") or units.get(name, ""), "value": value,
+                     "repr": repr(value), "std": p.get("std"), "ci95": list(p.get("ci95") or (None, None)),
+                     "reference": ref, "band": None if ref is None else (lo, hi),
+                     "change": None if not ref else (value - ref) / abs(ref), "status": status})
+    processing = m.get("processing_s")
+    return {"m": m, "rows": rows, "status": _motion_status(m),
+            "budget_s": budget_s, "processing_s": processing,
+            "within_budget": None if processing is None or budget_s is None else processing <= budget_s,
+            "mismatch": _flat(m.get("mismatch")) if m.get("mismatch") else None,
+            "residues": m.get("residues") or {}, "figures": []}
+
+
+def _motion_status(m: Mapping) -> str:
+    if m.get("error") and not m.get("parameters"):
+        return "not identified"
+    if not m.get("validated"):
+        return "not validated"
+    return "diagnosed" if m.get("diagnosis") else "validated, healthy"
+
+
+def _flat(d: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    """``[(dotted key, scalar or list)]`` of a nested dict, whatever keys it holds (the model check)."""
+    if not isinstance(d, Mapping):
+        return [(prefix or "value", d)]
+    out = []
+    for k, v in d.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        out += _flat(v, key) if isinstance(v, Mapping) else [(key, v)]
+    return out
+
+
+def _units(report: Mapping) -> dict[str, str]:
+    """Parameter units: the defaults, overridden by any ``unit`` a motion's parameters carry."""
+    out = dict(UNITS)
+    for m in report.get("motions") or ():
+        out |= {k: p["unit"] for k, p in (m.get("parameters") or {}).items() if p.get("unit")}
+    return out
+
+
+def _figures(out_dir: Path, report: Mapping) -> list[dict]:
+    files = (report.get("files") or {}).get("plots")
+    paths = [out_dir / f for f in files] if files else sorted((out_dir / "plots").glob("*.png"))
+    out = []
+    for p in paths:
+        if p.is_file():
+            motion, caption = _caption(p.name)
+            out.append({"motion": motion, "caption": caption, "file": p.name, "src": embed_png(p)})
+    return out
+
+
+def render_run(report: Mapping, out_dir: Path) -> str:
+    """The page of one run (or one ``cosim monitor`` call) from its report.json data."""
+    monitor = (report.get("components") or {}).get("monitor") or {}
+    thresholds = report.get("diagnosis_thresholds") or monitor.get("diagnosis_thresholds")
+    units = _units(report)
+    budget = monitor.get("budget_s")
+    motions = [motion_view(m, thresholds, units, budget) for m in report.get("motions") or ()]
+    figures = _figures(out_dir, report)
+    by_motion = {v["m"].get("motion"): v for v in motions}
+    general = []
+    for f in figures:
+        if f["motion"] in by_motion:
+            by_motion[f["motion"]]["figures"].append(f)
+        else:
+            general.append(f)
+    return _ENV.get_template("report.html.j2").render(
+        kind="run", title=f"{report.get('scenario') or report.get('source') or 'run'}", report=report,
+        motions=motions, figures=general, thresholds=thresholds, units=units, history=None, rows=[], data_json=None)
+
+
+def write_run_page(out_dir: str | Path, report: Mapping | None = None) -> Path:
+    """Write ``out_dir/report.html`` from ``report`` (default: ``out_dir/report.json``); returns its path."""
+    out_dir = Path(out_dir)
+    if report is None:
+        report = json.loads((out_dir / "report.json").read_text(encoding="utf-8"))
+    path = out_dir / PAGE
+    path.write_text(render_run(report, out_dir), encoding="utf-8")
+    return path
+
+
+def write_history_page(path: str | Path, axis: str, motions: Sequence[Mapping], thresholds: Mapping | None,
+                       db: str = "") -> Path:
+    """Write the page of an axis's whole history to ``path``.
+
+    Parameters
+    ----------
+    path : path
+        The HTML file.
+    axis : str
+    motions : sequence of dict
+        The stored motions (``History.motions(axis)``), oldest first.
+    thresholds : mapping or None
+        ``diagnosis_thresholds`` with the axis's healthy baseline (cosim/trends.py).
+    db : str
+        The history file, shown in the summary.
+    """
+    from feeddrive.cosim.trends import plot_trends
+
+    path = Path(path)
+    figures = []
+    with tempfile.TemporaryDirectory() as tmp:
+        kinds = (["date"] if use_dates(motions) else []) + ["motion"]
+        for x in kinds:
+            png = plot_trends(motions, Path(tmp) / f"trends_{x}.png", f"axis {axis}", thresholds, x=x)
+            what = "machine time (UTC)" if x == "date" else "motion number"
+            figures.append({"motion": None, "file": png.name, "src": embed_png(png),
+                            "caption": f"Parameter trends against {what}: 95 % CIs, healthy baseline, alarm band, "
+                                       "diagnoses"})
+    units = _units({"motions": motions})
+    series = trend_series(motions, thresholds)
+    times = [m["time"] for m in motions if m.get("time") is not None]
+    history = {"axis": axis, "db": db, "n": len(motions), "validated": sum(bool(m.get("validated")) for m in motions),
+               "first": min(times, default=None), "last": max(times, default=None),
+               "diagnosed": [m for m in motions if m.get("diagnosis")]}
+    rows = [{"number": k, "m": m} for k, m in enumerate(motions, 1)]
+    html = _ENV.get_template("report.html.j2").render(
+        kind="history", title=f"axis {axis}", report={}, motions=[], figures=figures, thresholds=thresholds,
+        units=units, history=history, rows=rows, data_json=json.dumps({"axis": axis, "thresholds": thresholds, "trends": series}).replace("</", "<\\/"))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(html, encoding="utf-8")
+    return path

@@ -1,0 +1,223 @@
+"""Parameter trends with the healthy baseline and the alarm band the diagnosis uses (matplotlib, Agg).
+
+The alarm band. A validated parameter ``v`` (standard error ``s``) is diagnosed as drifted against a
+reference ``b`` (standard error ``s_b``) when ``|v - b| > z_crit * hypot(s, s_b)`` AND
+``|v - b| > min_relative * |b|`` (estimator/diagnosis.py), i.e. when it lies outside
+
+    b +- max(z_crit * hypot(s, s_b), min_relative * |b|).
+
+That interval is drawn per motion: a point outside it is a diagnosed drift, a point inside is not.
+The reference ``b`` is the one the diagnosis used for that motion (``drift_reference`` of the motion's
+result: the healthy baseline, or the healthy motions so far while the baseline was being learnt);
+for a motion that was not diagnosed (the first one, one that was not validated) it is the axis's
+healthy baseline as it stands now (``thresholds["baseline"]``), so a reader still sees where the
+alarm would be.
+
+``thresholds`` (report.json ``diagnosis_thresholds``)::
+
+    {"alpha", "z_crit", "min_relative": {name: fraction}, "baseline_motions",
+     "baseline": {name: {"value", "std"}} or None}
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.dates as mdates  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.ticker import MaxNLocator, ScalarFormatter  # noqa: E402
+
+from feeddrive.cosim.errors import InputError  # noqa: E402
+
+#: the six monitored parameters and their SI units (a report's own ``unit`` wins when present)
+PARAMETERS = (("R", "Ohm"), ("L", "H"), ("K", "N.m/A"), ("Jt", "kg.m2"), ("ft", "N.m.s/rad"), ("Cd", "N.m"))
+UNITS = dict(PARAMETERS)
+#: a history spanning more than this [s] is plotted against calendar time
+DATE_SPAN_S = 86400.0
+
+
+def alarm_half_width(std: float | None, ref: Mapping, z_crit: float, min_relative: float) -> float:
+    """Half-width of the no-alarm interval around the reference value [parameter unit].
+
+    Parameters
+    ----------
+    std : float or None
+        Standard error of the motion's estimate (None: 0).
+    ref : mapping
+        ``{"value", "std"}`` of the reference.
+    z_crit, min_relative : float
+        The drift test's critical value [standard errors] and smallest relative change.
+    """
+    s = math.hypot(float(std or 0.0), float(ref.get("std") or 0.0))
+    return max(z_crit * s, min_relative * abs(float(ref["value"])))
+
+
+def trend_series(motions: Sequence[Mapping], thresholds: Mapping | None = None) -> dict[str, dict[str, list]]:
+    """Per parameter, the points of the trend plot and the alarm band at each of them.
+
+    Parameters
+    ----------
+    motions : sequence of dict
+        Stored motion results (history or report.json ``motions``), oldest first.
+    thresholds : mapping or None
+        ``diagnosis_thresholds`` (see the module docstring); None: only the motions' own references.
+
+    Returns
+    -------
+    dict name -> dict of lists
+        ``number`` (motion in history order, from 1), ``time`` [s since the epoch] or None, ``value``,
+        ``ci_low``, ``ci_high``, ``validated``, ``diagnosed`` (the parameter is in one of the motion's
+        diagnoses), ``reference``, ``band_low``, ``band_high`` (None where no reference exists).
+    """
+    thresholds = thresholds or {}
+    out: dict[str, dict[str, list]] = {}
+    rows = [m for m in motions if m.get("parameters")]
+    for k, m in enumerate(rows, 1):
+        own = m.get("drift_reference") or {}
+        diagnosed = {p for d in m.get("diagnosis") or () for p in d.get("parameters", ())}
+        for name, p in m["parameters"].items():
+            s = out.setdefault(name, {key: [] for key in ("number", "time", "value", "ci_low", "ci_high", "validated",
+                                                          "diagnosed", "reference", "band_low", "band_high")})
+            ref = (own.get("baseline") or {}).get(name)
+            z, rel = own.get("z_crit"), (own.get("min_relative") or {}).get(name)
+            if ref is None:  # not diagnosed: where the current baseline would put the alarm
+                ref = (thresholds.get("baseline") or {}).get(name)
+                z, rel = thresholds.get("z_crit"), (thresholds.get("min_relative") or {}).get(name)
+            lo, hi = (p.get("ci95") or (None, None))[:2]
+            s["number"].append(k)
+            s["time"].append(m.get("time"))
+            s["value"].append(float(p["value"]))
+            s["ci_low"].append(lo)
+            s["ci_high"].append(hi)
+            s["validated"].append(bool(m.get("validated")))
+            s["diagnosed"].append(name in diagnosed)
+            if ref is None or z is None or rel is None:
+                for key in ("reference", "band_low", "band_high"):
+                    s[key].append(None)
+                continue
+            half = alarm_half_width(p.get("std"), ref, float(z), float(rel))
+            s["reference"].append(float(ref["value"]))
+            s["band_low"].append(float(ref["value"]) - half)
+            s["band_high"].append(float(ref["value"]) + half)
+    return out
+
+
+def use_dates(motions: Sequence[Mapping]) -> bool:
+    """True when the motions' machine times span more than a day."""
+    times = [m["time"] for m in motions if m.get("time") is not None]
+    return bool(times) and max(times) - min(times) > DATE_SPAN_S
+
+
+def _steps(x: np.ndarray, y: np.ndarray, pad: float) -> tuple[np.ndarray, np.ndarray]:
+    """A step curve holding y[j] from halfway to the previous x to halfway to the next (``pad`` at the ends)."""
+    mids = (x[1:] + x[:-1]) / 2
+    edges = np.concatenate([[x[0] - pad], mids, [x[-1] + pad]])
+    return np.repeat(edges, 2)[1:-1], np.repeat(y, 2)
+
+
+def plot_trends(motions: Sequence[Mapping], path: Path, title: str = "", thresholds: Mapping | None = None,
+                x: str = "auto", units: Mapping[str, str] | None = None) -> Path:
+    """Each parameter's value with its 95 % CI, the healthy baseline, the alarm band and the diagnoses.
+
+    Parameters
+    ----------
+    motions : sequence of dict
+        Stored motion results, oldest first (``time`` [s since the epoch] used for dates).
+    path : Path
+        PNG file to write.
+    title : str
+        Figure title suffix (e.g. ``axis X``).
+    thresholds : mapping or None
+        ``diagnosis_thresholds`` (module docstring).
+    x : {"auto", "motion", "date"}
+        Horizontal axis: motion number in history order, or calendar time (UTC); ``auto``: dates when the
+        history spans more than a day.
+    units : mapping or None
+        Parameter units overriding ``UNITS``.
+    """
+    series = trend_series(motions, thresholds)
+    if not series:
+        raise InputError(f"no motion with estimated parameters to plot{' for ' + title if title else ''}")
+    dates = use_dates(motions) if x == "auto" else x == "date"
+    units = {**UNITS, **(units or {})}
+    fig, axes = plt.subplots(3, 2, figsize=(11, 8.2), sharex=True)
+    for ax, (name, _) in zip(axes.T.ravel(), PARAMETERS):
+        s = series.get(name)
+        if s is None:
+            ax.set_visible(False)
+            continue
+        if dates:
+            xs = mdates.date2num([_dt.datetime.fromtimestamp(t, _dt.timezone.utc) for t in s["time"]])
+            pad = 0.5 * (float(np.median(np.diff(xs))) if len(xs) > 1 else 1.0)
+        else:
+            xs, pad = np.asarray(s["number"], dtype=float), 0.5
+        _draw_parameter(ax, xs, s, pad)
+        ax.set_ylabel(f"{name} [{units.get(name, '?')}]")
+        fmt = ScalarFormatter(useOffset=False)  # "1e-5+1e-1" tick labels read badly
+        fmt.set_scientific(False)
+        ax.yaxis.set_major_formatter(fmt)
+        ax.grid(alpha=0.3)
+    for ax in axes[-1]:
+        if dates:
+            loc = mdates.AutoDateLocator()
+            ax.xaxis.set_major_locator(loc)
+            ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(loc, tz=_dt.timezone.utc))
+            ax.set_xlabel("machine time (UTC)")
+        else:
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True, min_n_ticks=1))
+            ax.set_xlabel("motion number (history order)")
+    handles: dict = {}
+    for ax in axes.ravel():
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(lab, h)
+    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(len(handles), 4), fontsize=8,
+               frameon=False)
+    fig.suptitle(f"parameter trends {title}".strip(), fontsize=11)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _draw_parameter(ax: plt.Axes, xs: np.ndarray, s: Mapping[str, list], pad: float) -> None:
+    val = np.asarray(s["value"], dtype=float)
+    ref = np.array([np.nan if r is None else r for r in s["reference"]], dtype=float)
+    blo = np.array([np.nan if r is None else r for r in s["band_low"]], dtype=float)
+    bhi = np.array([np.nan if r is None else r for r in s["band_high"]], dtype=float)
+    if np.isfinite(ref).any():
+        sx, slo = _steps(xs, blo, pad)
+        _, shi = _steps(xs, bhi, pad)
+        _, sref = _steps(xs, ref, pad)
+        ax.fill_between(sx, slo, shi, color="C2", alpha=0.12, lw=0, label="no alarm (inside the diagnosis thresholds)")
+        ax.plot(sx, slo, color="C3", ls="--", lw=0.9, label="alarm threshold")
+        ax.plot(sx, shi, color="C3", ls="--", lw=0.9)
+        ax.plot(sx, sref, color="C2", lw=1.2, label="healthy baseline")
+    lo = np.array([np.nan if v is None else v for v in s["ci_low"]], dtype=float)
+    hi = np.array([np.nan if v is None else v for v in s["ci_high"]], dtype=float)
+    err = np.vstack([np.clip(val - lo, 0, None), np.clip(hi - val, 0, None)])
+    err = np.nan_to_num(err)
+    ok = np.asarray(s["validated"], dtype=bool)
+    diag = np.asarray(s["diagnosed"], dtype=bool)
+    if len(xs) > 1:
+        ax.plot(xs, val, color="C0", lw=0.6, alpha=0.6)
+    if ok.any():
+        ax.errorbar(xs[ok], val[ok], yerr=err[:, ok], fmt="o", color="C0", ms=4, capsize=3, elinewidth=1,
+                    label="validated estimate, 95 % CI")
+    if (~ok).any():
+        ax.errorbar(xs[~ok], val[~ok], yerr=err[:, ~ok], fmt="o", mfc="white", color="0.5", ms=4, capsize=3,
+                    elinewidth=1, label="not validated (not diagnosed)")
+    if diag.any():
+        ax.plot(xs[diag], val[diag], "X", color="C3", ms=9, mec="k", mew=0.5, label="diagnosis")
+    lo_all = np.nanmin(np.concatenate([lo, val, blo]))
+    hi_all = np.nanmax(np.concatenate([hi, val, bhi]))
+    span = hi_all - lo_all
+    if np.isfinite(span) and span > 0:
+        ax.set_ylim(lo_all - 0.08 * span, hi_all + 0.08 * span)
+    ax.set_xlim(xs[0] - pad, xs[-1] + pad)
