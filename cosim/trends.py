@@ -73,7 +73,7 @@ def trend_series(motions: Sequence[Mapping], thresholds: Mapping | None = None) 
     dict name -> dict of lists
         ``number`` (motion in history order, from 1), ``time`` [s since the epoch] or None, ``value``,
         ``ci_low``, ``ci_high``, ``validated``, ``diagnosed`` (the parameter is in one of the motion's
-        diagnoses), ``reference``, ``band_low``, ``band_high`` (None where no reference exists).
+        diagnoses), ``any_diagnosis`` (the motion has one), ``reference``, ``band_low``, ``band_high`` (None where no reference exists).
     """
     thresholds = thresholds or {}
     out: dict[str, dict[str, list]] = {}
@@ -83,7 +83,8 @@ def trend_series(motions: Sequence[Mapping], thresholds: Mapping | None = None) 
         diagnosed = {p for d in m.get("diagnosis") or () for p in d.get("parameters", ())}
         for name, p in m["parameters"].items():
             s = out.setdefault(name, {key: [] for key in ("number", "time", "value", "ci_low", "ci_high", "validated",
-                                                          "diagnosed", "reference", "band_low", "band_high")})
+                                                          "diagnosed", "any_diagnosis", "reference", "band_low",
+                                                          "band_high")})
             ref = (own.get("baseline") or {}).get(name)
             z, rel = own.get("z_crit"), (own.get("min_relative") or {}).get(name)
             if ref is None:  # not diagnosed: where the current baseline would put the alarm
@@ -97,6 +98,7 @@ def trend_series(motions: Sequence[Mapping], thresholds: Mapping | None = None) 
             s["ci_high"].append(hi)
             s["validated"].append(bool(m.get("validated")))
             s["diagnosed"].append(name in diagnosed)
+            s["any_diagnosis"].append(bool(diagnosed))
             if ref is None or z is None or rel is None:
                 for key in ("reference", "band_low", "band_high"):
                     s[key].append(None)
@@ -123,14 +125,22 @@ def _steps(x: np.ndarray, y: np.ndarray, pad: float) -> tuple[np.ndarray, np.nda
 
 def plot_trends(motions: Sequence[Mapping], path: Path, title: str = "", thresholds: Mapping | None = None,
                 x: str = "auto", units: Mapping[str, str] | None = None) -> Path:
+    """Draw ``trend_figure`` into ``path`` (PNG); returns ``path``."""
+    fig = trend_figure(motions, title, thresholds, x, units)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mapping | None = None,
+                 x: str = "auto", units: Mapping[str, str] | None = None) -> plt.Figure:
     """Each parameter's value with its 95 % CI, the healthy baseline, the alarm band and the diagnoses.
 
     Parameters
     ----------
     motions : sequence of dict
         Stored motion results, oldest first (``time`` [s since the epoch] used for dates).
-    path : Path
-        PNG file to write.
     title : str
         Figure title suffix (e.g. ``axis X``).
     thresholds : mapping or None
@@ -140,6 +150,11 @@ def plot_trends(motions: Sequence[Mapping], path: Path, title: str = "", thresho
         history spans more than a day.
     units : mapping or None
         Parameter units overriding ``UNITS``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        3 x 2 panels (R, L, K | Jt, ft, Cd); the caller closes it.
     """
     series = trend_series(motions, thresholds)
     if not series:
@@ -180,10 +195,7 @@ def plot_trends(motions: Sequence[Mapping], path: Path, title: str = "", thresho
                frameon=False)
     fig.suptitle(f"parameter trends {title}".strip(), fontsize=11)
     fig.tight_layout(rect=(0, 0.06, 1, 1))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def _draw_parameter(ax: plt.Axes, xs: np.ndarray, s: Mapping[str, list], pad: float) -> None:
@@ -215,6 +227,8 @@ def _draw_parameter(ax: plt.Axes, xs: np.ndarray, s: Mapping[str, list], pad: fl
                     elinewidth=1, label="not validated (not diagnosed)")
     if diag.any():
         ax.plot(xs[diag], val[diag], "X", color="C3", ms=9, mec="k", mew=0.5, label="diagnosis")
+    for xd in xs[np.asarray(s["any_diagnosis"], dtype=bool)]:  # where a diagnosis occurred, on every panel
+        ax.axvline(xd, color="C3", lw=4, alpha=0.12, zorder=0)
     lo_all = np.nanmin(np.concatenate([lo, val, blo]))
     hi_all = np.nanmax(np.concatenate([hi, val, bhi]))
     span = hi_all - lo_all
