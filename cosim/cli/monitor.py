@@ -12,7 +12,8 @@ validation, estimation, model validation and diagnosis, and is stored in the his
 modification time is taken as the end of the recording.
 
 ``--out DIR`` writes ``report.json`` (the motions' results, the diagnosis thresholds, versions),
-``plots/`` and ``report.html`` (cosim.report) into DIR.
+``plots/`` (the figures of the last ``keep_traces`` = 5 motions, as in a run, and the trends) and
+``report.html`` (cosim.report) into DIR.
 """
 from __future__ import annotations
 
@@ -90,7 +91,8 @@ def main(args: argparse.Namespace) -> int:
                   "status": "ok", "versions": _versions(), "method": args.method,
                   "components": {"monitor": {"budget_s": config.budget_s}}, "diagnosis_thresholds": thresholds,
                   "motions": results}
-        print(f"wrote {write_monitor_report(out, report, traces, motions, thresholds)}")
+        kept = traces[-config.keep_traces:] if config.keep_traces else []  # as the co-simulation monitor keeps
+        print(f"wrote {write_monitor_report(out, report, kept, motions, thresholds)}")
     if args.json:
         print(json.dumps({"axis": args.axis, "db": args.db, "motions": results}, default=_jsonable))
     else:

@@ -1,0 +1,161 @@
+"""``cosim history --html``: a 20-motion drift history over three days, recorded by two ``cosim monitor``
+calls (the second with ``--out``: its report.json holds the diagnosis thresholds), drawn with its
+healthy baseline and alarm band.
+
+Plant data: the closed-loop CasADi model with redundant sensors of tests/estimator/test_validation.py.
+Truth: Cd (paper Table I: wear, lubrication) healthy for motions 1-6, +3 % for 7-10 (significant but
+below the 5 % minimum change: not a fault), +10 % for 11-15, then +20 % with ft +30 % for 16-20.
+"""
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.dates import ConciseDateFormatter
+
+from feeddrive.cosim.cli import main
+from feeddrive.cosim.trends import trend_figure
+from feeddrive.estimator.history import History
+
+_spec = importlib.util.spec_from_file_location("page_checks", Path(__file__).with_name("page_checks.py"))
+checks = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(checks)
+_spec = importlib.util.spec_from_file_location(
+    "validation_plant", Path(__file__).parents[1] / "estimator" / "test_validation.py")
+plant = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(plant)
+H, CD, FT = plant.H, plant.NOMINAL["Cd"], plant.NOMINAL["ft"]
+PLATEAU = 0.3  # s at full speed: a ~2.2 s round trip, long enough for the monitor (min_motion_s 1 s)
+COLUMNS = (("u", "u"), ("u_ref", "u_ref"), ("Im1", "Im1"), ("Im2", "Im2"), ("w_tach", "w_tach"),
+           ("theta_enc", "theta_enc"))
+MAP = ["--map", "time=time", "--map", "state=state", "--map", "voltage=u", "--map", "voltage_ref=u_ref",
+       "--map", "current1=Im1", "--map", "current2=Im2", "--map", "speed=w_tach", "--map", "position=theta_enc"]
+
+
+def changes(k: int) -> tuple:
+    """The plant's parameter changes at motion k (1-based): the drift of the module docstring."""
+    if k <= 6:
+        return ()
+    if k <= 10:
+        return (("Cd", 1.03 * CD, 0.0),)
+    if k <= 15:
+        return (("Cd", 1.10 * CD, 0.0),)
+    return (("Cd", 1.20 * CD, 0.0), ("ft", 1.30 * FT, 0.0))
+
+
+def recording(path: Path, motions: range, end_time: float) -> Path:
+    """A CSV of the given motions (NC state 1) between idle stretches, modified at ``end_time``."""
+    idle = np.zeros((500, len(COLUMNS)))
+    blocks, state = [], []
+    for k in motions:
+        m = plant.measure(plant.plant_motion(changes(k), PLATEAU), seed=100 + k)
+        blocks += [idle, np.column_stack([m[s] for _, s in COLUMNS])]
+        state += [0] * len(idle) + [1] * len(m["Im1"])
+    blocks.append(idle)
+    state += [0] * len(idle)
+    data = np.vstack(blocks)
+    header = ",".join(["time"] + [c for c, _ in COLUMNS] + ["state"])
+    np.savetxt(path, np.column_stack([np.arange(len(state)) * H, data, state]), delimiter=",", header=header,
+               comments="", fmt="%.9g")
+    os.utime(path, (end_time, end_time))  # the machine clock of cosim monitor: the file's modification time
+    return path
+
+
+@pytest.fixture(scope="module")
+def drift(tmp_path_factory) -> dict:
+    """Two ``cosim monitor --out`` calls three days apart on one history, then ``cosim history --html``."""
+    work = tmp_path_factory.mktemp("drift")
+    db, now = work / "history.sqlite", time.time()
+    # the first call's results are read back from the history (the same dicts as its report.json would hold),
+    # so that only the second one draws its figures
+    csv = recording(work / "part1.csv", range(1, 11), now - 3 * 86400)
+    assert main(["monitor", str(csv), *MAP, "--db", str(db)]) == 0
+    csv = recording(work / "part2.csv", range(11, 21), now)
+    assert main(["monitor", str(csv), *MAP, "--db", str(db), "--out", str(work / "out")]) == 0
+    report = json.loads((work / "out" / "report.json").read_text(encoding="utf-8"))
+    with History(db) as history:
+        first = history.motions("X")[:10]
+    page = work / "axis_X.html"
+    assert main(["history", "--db", str(db), "--axis", "X", "--html", str(page)]) == 0
+    return {"work": work, "db": db, "report": report, "motions": first + report["motions"], "page": page}
+
+
+def test_monitor_page(drift):
+    out, report = drift["work"] / "out", drift["report"]
+    root = checks.parse(out / "report.html")
+    checks.assert_self_contained(out / "report.html", root)
+    images = checks.embedded_images(root)
+    assert len(images) == 6  # the last 5 motions (keep_traces) and the trends
+    assert sorted(images) == sorted((out / p).read_bytes() for p in report["files"]["plots"])
+    assert len(report["motions"]) == 10 and all(m["validated"] for m in report["motions"])
+    for m in report["motions"]:
+        rows = root.find(f".//table[@id='parameters-{m['motion']}']").findall(".//tr[@data-parameter]")
+        assert {r.get("data-parameter"): float(r.get("data-value")) for r in rows} == {
+            k: p["value"] for k, p in m["parameters"].items()}
+        assert {r.get("data-parameter"): r.get("class") for r in rows}["Cd"] == "diagnosed"
+
+
+def test_history_page_alarm_band_is_the_diagnosis_thresholds_of_report_json(drift):
+    root = checks.parse(drift["page"])
+    checks.assert_self_contained(drift["page"], root)
+    assert len(checks.embedded_images(root)) == 2  # against calendar time and against motion number
+    data = json.loads(root.find(".//script[@id='trend-data']").text)
+    motions = drift["motions"]
+    assert [m["motion"] for m in motions] == list(range(1, 11)) * 2
+    final = drift["report"]["diagnosis_thresholds"]
+    assert data["thresholds"]["baseline"] == final["baseline"] and data["thresholds"]["z_crit"] == final["z_crit"]
+    assert final["z_crit"] == pytest.approx(3.2905, abs=1e-4) and final["baseline_learnt"] == 3
+    for name in ("R", "L", "K", "Jt", "ft", "Cd"):
+        s = data["trends"][name]
+        assert s["number"] == list(range(1, 21))
+        for j, m in enumerate(motions):
+            p = m["parameters"][name]
+            ref = m.get("drift_reference") or final  # the first motion had no reference: today's baseline
+            b = ref["baseline"][name]
+            half = max(ref["z_crit"] * math.hypot(p["std"], b["std"]), ref["min_relative"][name] * abs(b["value"]))
+            assert s["reference"][j] == pytest.approx(b["value"], rel=1e-12)
+            assert [s["band_low"][j], s["band_high"][j]] == pytest.approx([b["value"] - half, b["value"] + half],
+                                                                          rel=1e-12)
+            outside = not s["band_low"][j] <= s["value"][j] <= s["band_high"][j]
+            # the band is exactly the diagnosis' test: outside it <=> diagnosed (first motion: nothing to test)
+            assert s["diagnosed"][j] == (outside and m.get("drift_reference") is not None), (name, j + 1)
+    diagnosed = [k for k, m in enumerate(motions, 1) if m["diagnosis"]]
+    assert diagnosed == list(range(11, 21))  # +3 % is significant but below 5 %: not a fault
+    cd = data["trends"]["Cd"]
+    assert all(cd["diagnosed"][k - 1] for k in diagnosed)
+    for k, truth in ((8, 0.03), (13, 0.10), (18, 0.20)):
+        assert cd["value"][k - 1] / cd["reference"][k - 1] - 1 == pytest.approx(truth, abs=0.01)
+    assert all(data["trends"]["ft"]["diagnosed"][k - 1] for k in range(16, 21))
+    # every diagnosis is listed with its evidence, at the machine time it occurred
+    with History(drift["db"]) as history:
+        when = {str(m["id"]): m["time"] for m in history.motions("X")}
+    tables = root.findall(".//table[@class='diagnosis']")
+    assert len({t.get("data-motion-id") for t in tables}) == 10
+    for t in tables:
+        caption = "".join(t.find("caption").itertext())
+        assert caption.startswith(time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(when[t.get("data-motion-id")])))
+        assert t.get("data-fault") in caption and len(t.findall(".//tr[@class='diagnosed']")) >= 1
+
+
+def test_history_spanning_days_is_plotted_against_dates(drift):
+    with History(drift["db"]) as history:
+        motions = history.motions("X")
+    span = motions[-1]["time"] - motions[0]["time"]
+    assert 2.9 * 86400 < span < 3.1 * 86400
+    fig = trend_figure(motions, "axis X", drift["report"]["diagnosis_thresholds"])
+    try:
+        bottom = fig.axes[4:]  # R, Jt / L, ft / K, Cd: the bottom row carries the time axis
+        assert all(isinstance(ax.xaxis.get_major_formatter(), ConciseDateFormatter) for ax in bottom)
+        assert [ax.get_xlabel() for ax in bottom] == ["machine time (UTC)"] * 2
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    text = "".join(checks.parse(drift["page"]).itertext())
+    assert "Parameter trends against machine time (UTC)" in text and "Parameter trends against motion number" in text
