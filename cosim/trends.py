@@ -169,7 +169,8 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
             continue
         if dates:
             xs = mdates.date2num([_dt.datetime.fromtimestamp(t, _dt.timezone.utc) for t in s["time"]])
-            pad = 0.5 * (float(np.median(np.diff(xs))) if len(xs) > 1 else 1.0)
+            # half a motion spacing, but at least 2 % of the span: points at the ends stay visible
+            pad = max(0.5 * float(np.median(np.diff(xs))), 0.02 * float(xs[-1] - xs[0])) if len(xs) > 1 else 0.5
         else:
             xs, pad = np.asarray(s["number"], dtype=float), 0.5
         _draw_parameter(ax, xs, s, pad)

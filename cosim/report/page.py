@@ -47,7 +47,20 @@ def num(x: Any, digits: int = 6) -> str:
     return str(x)
 
 
+def merged_evidence(diagnosis: Sequence[Mapping]) -> list[dict]:
+    """The evidence of a motion's diagnoses, once per parameter, with the faults it points at.
+
+    Faults that Table I cannot tell apart (wear, lubrication) share their evidence: listing it once reads better.
+    """
+    out: dict[str, dict] = {}
+    for d in diagnosis or ():
+        for ev in d.get("evidence", ()):
+            out.setdefault(ev["parameter"], dict(ev) | {"faults": []})["faults"].append(d["fault"])
+    return list(out.values())
+
+
 _ENV.filters["num"] = num
+_ENV.filters["evidence"] = merged_evidence
 _ENV.filters["pct"] = lambda x, d=3: "-" if x is None else f"{100 * x:+.{d}g} %"
 _ENV.filters["percent"] = lambda x, d=3: "-" if x is None else f"{100 * x:.{d}g} %"
 _ENV.filters["utc"] = lambda t: "-" if t is None else _dt.datetime.fromtimestamp(

@@ -136,11 +136,15 @@ def test_history_page_alarm_band_is_the_diagnosis_thresholds_of_report_json(drif
     with History(drift["db"]) as history:
         when = {str(m["id"]): m["time"] for m in history.motions("X")}
     tables = root.findall(".//table[@class='diagnosis']")
-    assert len({t.get("data-motion-id") for t in tables}) == 10
-    for t in tables:
+    assert len(tables) == len({t.get("data-motion-id") for t in tables}) == 10
+    for t, m in zip(tables, motions[10:]):
         caption = "".join(t.find("caption").itertext())
         assert caption.startswith(time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(when[t.get("data-motion-id")])))
-        assert t.get("data-fault") in caption and len(t.findall(".//tr[@class='diagnosed']")) >= 1
+        assert t.get("data-faults") == "; ".join(d["fault"] for d in m["diagnosis"]) and t.get("data-faults") in caption
+        shown = {r.get("data-parameter"): checks.numbers(checks.cells(r)[3])[0] / 100
+                 for r in t.findall(".//tr[@data-parameter]")}
+        assert shown == pytest.approx({e["parameter"]: e["relative_change"]
+                                       for d in m["diagnosis"] for e in d["evidence"]}, rel=1e-2)
 
 
 def test_history_spanning_days_is_plotted_against_dates(drift):
