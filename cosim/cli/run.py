@@ -64,7 +64,7 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
                 lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
             if m.get("error"):
                 lines.append(f"    {m['error']}")
-    lines.append(f"  files: signals.csv, scenario.resolved.yaml, report.json, {len(result.paths['plots'])} plots")
+    lines.append(f"  files: signals.csv, scenario.resolved.yaml, report.json, report.html, {len(result.paths['plots'])} plots")
     return "\n".join(lines)
 
 
