@@ -163,3 +163,19 @@ def test_history_spanning_days_is_plotted_against_dates(drift):
         plt.close(fig)
     text = "".join(checks.parse(drift["page"]).itertext())
     assert "Parameter trends against machine time (UTC)" in text and "Parameter trends against motion number" in text
+
+
+def test_bad_requests_are_one_line_errors_before_anything_is_written(drift, capsys):
+    work = drift["work"]
+    capsys.readouterr()
+    # an existing report is not replaced without --overwrite, and the history is not touched
+    assert main(["monitor", str(work / "part2.csv"), *MAP, "--db", str(work / "other.sqlite"),
+                 "--out", str(work / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--out" in err and "--overwrite" in err and not (work / "other.sqlite").exists()
+    before = drift["page"].read_bytes()
+    assert main(["history", "--db", str(drift["db"]), "--html", str(drift["page"])]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and str(drift["page"]) in err and drift["page"].read_bytes() == before
+    assert main(["history", "--db", str(work / "missing.sqlite"), "--html", str(work / "x.html")]) == 2
+    assert "does not exist" in capsys.readouterr().err and not (work / "x.html").exists()
