@@ -90,6 +90,8 @@ def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str |
 
 def _save(fig: plt.Figure, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
+    for ax in fig.axes:  # plain tick labels: an offset ("1e-5+1e-1") reads badly
+        ax.ticklabel_format(useOffset=False, style="plain")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -95,14 +95,7 @@ def motion_view(m: Mapping, thresholds: Mapping | None, units: Mapping[str, str]
         s = series[name]
         ref, lo, hi = s["reference"][0], s["band_low"][0], s["band_high"][0]
         value = float(p["value"])
-        if not m.get("validated"):
-            status = "not judged"
-        elif name in diagnosed:
-            status = "diagnosed"
-        elif ref is not None and abs(value - ref) > (hi - lo) / 4:  # beyond half the band's half-width
-            status = "drifting"
-        else:
-            status = "healthy"
+        status = parameter_status(bool(m.get("validated")), name in diagnosed, value, ref, lo, hi)
         rows.append({"name": name, "unit": p.get("unit") or units.get(name, ""), "value": value,
                      "repr": repr(value), "std": p.get("std"), "ci95": list(p.get("ci95") or (None, None)),
                      "reference": ref, "band": None if ref is None else (lo, hi),
@@ -113,6 +106,18 @@ def motion_view(m: Mapping, thresholds: Mapping | None, units: Mapping[str, str]
             "within_budget": None if processing is None or budget_s is None else processing <= budget_s,
             "mismatch": _flat(m.get("mismatch")) if m.get("mismatch") else None,
             "residues": m.get("residues") or {}, "figures": []}
+
+
+def parameter_status(validated: bool, diagnosed: bool, value: float, ref: float | None, lo: float | None,
+                     hi: float | None) -> str:
+    """``healthy``, ``drifting`` (beyond half the alarm band's half-width), ``diagnosed`` or ``not judged``."""
+    if not validated:
+        return "not judged"
+    if diagnosed:
+        return "diagnosed"
+    if ref is not None and abs(value - ref) > (hi - lo) / 4:
+        return "drifting"
+    return "healthy"
 
 
 def _motion_status(m: Mapping) -> str:
@@ -217,7 +222,18 @@ def write_history_page(path: str | Path, axis: str, motions: Sequence[Mapping], 
     history = {"axis": axis, "db": db, "n": len(motions), "validated": sum(bool(m.get("validated")) for m in motions),
                "first": min(times, default=None), "last": max(times, default=None),
                "diagnosed": [m for m in motions if m.get("diagnosis")]}
-    rows = [{"number": k, "m": m} for k, m in enumerate(motions, 1)]
+    index = {name: {k: j for j, k in enumerate(s["number"])} for name, s in series.items()}
+    rows = []
+    for k, m in enumerate(motions, 1):
+        cells = {}
+        for name in units:
+            s, j = series.get(name), index.get(name, {}).get(k)
+            if j is None:
+                continue
+            cells[name] = {"value": s["value"][j], "status": parameter_status(
+                s["validated"][j], s["diagnosed"][j], s["value"][j], s["reference"][j], s["band_low"][j],
+                s["band_high"][j])}
+        rows.append({"number": k, "m": m, "cells": cells})
     html = _ENV.get_template("report.html.j2").render(
         kind="history", title=f"axis {axis}", report={}, motions=[], figures=figures, thresholds=thresholds,
         units=units, history=history, rows=rows, data_json=json.dumps({"axis": axis, "thresholds": thresholds, "trends": series}).replace("</", "<\\/"))

@@ -3,8 +3,9 @@ calls (the second with ``--out``: its report.json holds the diagnosis thresholds
 healthy baseline and alarm band.
 
 Plant data: the closed-loop CasADi model with redundant sensors of tests/estimator/test_validation.py.
-Truth: Cd (paper Table I: wear, lubrication) healthy for motions 1-6, +3 % for 7-10 (significant but
-below the 5 % minimum change: not a fault), +10 % for 11-15, then +20 % with ft +30 % for 16-20.
+Truth: Cd (paper Table I: wear, lubrication) healthy for motions 1-6, +3.75 % for 7-10 (significant,
+beyond half the alarm band but below the 5 % minimum change: drifting, not a fault), +10 % for
+11-15, then +20 % with ft +30 % for 16-20.
 """
 from __future__ import annotations
 
@@ -43,7 +44,7 @@ def changes(k: int) -> tuple:
     if k <= 6:
         return ()
     if k <= 10:
-        return (("Cd", 1.03 * CD, 0.0),)
+        return (("Cd", 1.0375 * CD, 0.0),)
     if k <= 15:
         return (("Cd", 1.10 * CD, 0.0),)
     return (("Cd", 1.20 * CD, 0.0), ("ft", 1.30 * FT, 0.0))
@@ -125,11 +126,17 @@ def test_history_page_alarm_band_is_the_diagnosis_thresholds_of_report_json(drif
             outside = not s["band_low"][j] <= s["value"][j] <= s["band_high"][j]
             # the band is exactly the diagnosis' test: outside it <=> diagnosed (first motion: nothing to test)
             assert s["diagnosed"][j] == (outside and m.get("drift_reference") is not None), (name, j + 1)
+    # the motions' table colours each value as the band does: Cd +3.75 % (7-10) is drifting, not diagnosed
+    table = root.find(".//table[@id='history']")
+    colour = [{td.get("data-parameter"): td.get("class") for td in tr.findall("td[@data-parameter]")}
+              for tr in table.iter("tr") if tr.find("td") is not None]
+    assert [c["Cd"] for c in colour] == ["num healthy"] * 6 + ["num drifting"] * 4 + ["num diagnosed"] * 10
+    assert {c["R"] for c in colour} == {c["K"] for c in colour} == {"num healthy"}
     diagnosed = [k for k, m in enumerate(motions, 1) if m["diagnosis"]]
-    assert diagnosed == list(range(11, 21))  # +3 % is significant but below 5 %: not a fault
+    assert diagnosed == list(range(11, 21))  # +3.75 % is significant but below 5 %: not a fault
     cd = data["trends"]["Cd"]
     assert all(cd["diagnosed"][k - 1] for k in diagnosed)
-    for k, truth in ((8, 0.03), (13, 0.10), (18, 0.20)):
+    for k, truth in ((8, 0.0375), (13, 0.10), (18, 0.20)):
         assert cd["value"][k - 1] / cd["reference"][k - 1] - 1 == pytest.approx(truth, abs=0.01)
     assert all(data["trends"]["ft"]["diagnosed"][k - 1] for k in range(16, 21))
     # every diagnosis is listed with its evidence, at the machine time it occurred
