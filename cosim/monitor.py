@@ -28,6 +28,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.nc import describe_validation_error
@@ -232,7 +233,9 @@ class MonitorPipeline:
         result["notes"] += list(v.notes) + [n for p in v.pairs.values() for n in p.notes]
         est = estimate_motion(MotionData(h, u=v.u, i=v.i, w=v.w, t0=start), self.estimation_options)
         params = est.parameters
-        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95)} for k, p in params.items()}
+        units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
+        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units[k]}
+                                for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
         mismatch = check_model(v.u, v.i, v.w, h, {k: p.value for k, p in params.items()}, self.config.filter,
                                self.config.alpha, rms_tol=self.config.mismatch_rms_tol, covariance=est.covariance,
