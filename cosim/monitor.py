@@ -61,8 +61,11 @@ class MonitorConfig(BaseModel):
         Estimation method whose parameters are validated and stored.
     filter_cutoff_hz, filter_order : float, int
         The identical low-pass of every signal (eq. 8), used by validation and estimation.
-    speed_threshold : float
-        Samples with ``|w|`` below it [rad/s] are excluded from the sign(w) term.
+    speed_threshold : float or None
+        Samples with ``|w|`` below it [rad/s] are excluded from the sign(w) term; None (default):
+        ``speed_fraction`` of each motion's largest speed (relative to the data, not to a nominal plant).
+    speed_fraction : float
+        The relative threshold used when ``speed_threshold`` is None.
     alpha : float
         Level of every statistical test (residues, model whiteness, drifts).
     window_s, gain_tol, offset_tol : float
@@ -102,7 +105,8 @@ class MonitorConfig(BaseModel):
     method: Literal["ls", "iv", "oe"] = "iv"
     filter_cutoff_hz: float = Field(100.0, gt=0)
     filter_order: int = Field(4, ge=1)
-    speed_threshold: float = Field(2.0, ge=0)
+    speed_threshold: float | None = Field(None, ge=0)
+    speed_fraction: float = Field(0.03, ge=0, lt=1)
     alpha: float = Field(1e-3, gt=0, lt=0.5)
     window_s: float = Field(0.05, gt=0)
     gain_tol: float = Field(0.005, gt=0)
@@ -154,7 +158,8 @@ class MonitorPipeline:
         self.nominal = feed_drive().nominal(("physical",))
         self.validation_options = ValidationOptions(config.alpha, config.window_s, config.gain_tol, config.offset_tol)
         self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
-                                                    speed_threshold=config.speed_threshold)
+                                                    speed_threshold=config.speed_threshold,
+                                                    speed_fraction=config.speed_fraction)
         self.diagnosis_options = DiagnosisOptions(config.alpha, config.min_relative_drift)
         last = history.last_validated(axis)
         self.last_validated: dict | None = last["parameters"] if last else None
