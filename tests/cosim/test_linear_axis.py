@@ -39,18 +39,14 @@ def test_linear_axis_in_si_gives_mass_friction_and_offset(data, tmp_path, capsys
         assert p[name]["value"] == pytest.approx(TRUTH[name], rel=0.02), name
     assert abs(p["T0"]["value"] - TRUTH["T0"]) < 0.3
     assert {n: p[n]["unit"] for n in p} == {"Jt": "kg", "ft": "N.s/m", "Cd": "N", "T0": "N"}
-    # the same data written in mm, semicolon-separated with a decimal comma: the same numbers
-    code, mm = estimate(capsys, write_csv(tmp_path / "rec_mm.csv", data, mm=True, sep=";", decimal=","), "--json")
-    assert code == 0
-    for name, q in mm["segments"][0]["parameters"].items():
-        assert q["value"] == pytest.approx(p[name]["value"], rel=1e-3), name
-        assert q["unit"] == p[name]["unit"]
-
-
-def test_table_prints_the_table_side_units(data, tmp_path, capsys):
-    code, out = estimate(capsys, write_csv(tmp_path / "rec.csv", data))
-    assert code == 0
-    assert "kg " in out and "N.s/m" in out and "kg.m2" not in out and "N.m" not in out
+    # the same data written in mm (semicolon-separated, decimal comma): the same numbers, printed with the
+    # table side's units ("name value unit 95 % CI [lo, hi]")
+    code, out = estimate(capsys, write_csv(tmp_path / "rec_mm.csv", data, mm=True, sep=";", decimal=","))
+    assert code == 0 and "kg.m2" not in out and "N.m" not in out
+    rows = {line.split()[0]: line.split()[1:3] for line in out.splitlines()[1:]}
+    for name, q in p.items():
+        assert float(rows[name][0]) == pytest.approx(q["value"], rel=1e-3), name
+        assert rows[name][1] == q["unit"]
 
 
 def test_an_absolute_threshold_from_another_scale_is_refused_with_the_numbers(data, tmp_path, capsys):
