@@ -81,7 +81,7 @@ def plot_trends(motions: Sequence[dict], path: Path, title: str = "") -> Path:
         ax.plot(k, val, color="C0", lw=0.8)
         ax.plot(k[ok], val[ok], "o", color="C0", ms=4, label="validated")
         ax.plot(k[~ok], val[~ok], "o", mfc="none", color="C3", ms=4, label="not validated")
-        ax.set_ylabel(f"{name} [{unit}]")
+        ax.set_ylabel(f"{name} [{pts[-1][1].get('unit', unit)}]")  # the unit stored with the motion
     axes[0, 0].legend(fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("motion (in history order)")

@@ -133,7 +133,8 @@ def table(results: list[dict]) -> str:
         if r["gain_ratio"] is not None:
             lines.append(f"  current gain ratio a1/a2 = {r['gain_ratio']:.4f}")
         for name, p in r["parameters"].items():
-            lines.append(f"  {name:3} {p['value']:12.6g}  95 % CI [{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")
+            lines.append(f"  {name:3} {p['value']:12.6g} {p.get('unit', ''):10} 95 % CI "
+                         f"[{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")
         if r["mismatch"]:
             m = r["mismatch"]
             worst = max(m["peak_rms_relative"].values())
