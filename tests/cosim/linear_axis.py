@@ -45,3 +45,9 @@ def write_csv(path: Path, data: dict[str, np.ndarray], *, mm: bool = False, sep:
         lines.append(sep.join(c.replace(".", decimal) for c in cells))
     path.write_text(("\ufeff" if bom else "") + "\n".join(lines) + "\n", encoding="utf-8")
     return path
+
+
+if __name__ == "__main__":  # python tests/cosim/linear_axis.py rec.csv [--mm]: the recording for the README
+    import sys
+
+    print(write_csv(Path(sys.argv[1]), linear_axis(), mm="--mm" in sys.argv))
