@@ -240,6 +240,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
         raise scenario.error(("step",), f"{scenario.step:g} s is longer than the run ({stop:g} s, {what}); "
                                         "expected a communication step <= the stop time")
     plant, md = _resolve_plant(scenario)
+    _check_drive_chain(scenario, md)
     _check_events(scenario, md)
     return scenario.model_copy(update={"plant": plant})
 
@@ -371,6 +372,22 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
             _check_range(s, ("plant", key, name), v, getattr(p, key)[name], path.name)
     plant = p.model_copy(update={"fmu": str(path), "sha256": digest, "map": role_map, "input_hold": hold})
     return plant, md
+
+
+def _check_drive_chain(s: Scenario, md: Any) -> None:
+    """A plant FMU with ``pitch`` / ``belt_ratio`` parameters must agree with the scenario's axis (a vendor
+    FMU built for a 10 mm screw under a scenario left at 20 mm would give a false encoder fault)."""
+    variables = {v.name: v for v in md.modelVariables}
+    for fmu_name, key in (("pitch", "pitch"), ("belt_ratio", "ratio")):
+        v = variables.get(fmu_name)
+        if v is None or v.causality != "parameter" or v.type != "Real" or s.axis.kind != "linear":
+            continue
+        value = s.plant.parameters.get(fmu_name, v.start)
+        ours = getattr(s.axis, key)
+        if value not in (None, "") and not math.isclose(float(value), ours, rel_tol=1e-9):
+            where = f"plant.parameters.{fmu_name}" if fmu_name in s.plant.parameters else f"the FMU's {fmu_name}"
+            raise s.error(("axis", key), f"axis.{key} = {ours:g} contradicts {where} = {float(value):g}; expected "
+                                         f"axis: {{{key}: {float(value):g}}}")
 
 
 def _check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str) -> None:

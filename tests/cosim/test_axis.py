@@ -101,6 +101,10 @@ def test_vendor_axis_with_10_mm_pitch_has_no_false_sensor_fault(vendor_fmu_10mm,
     # the old way: nc.pitch alone now reaches the encoder too (it used to keep 20 mm: "w_enc gain 0.5")
     old = scenario_from_dict(data(plant=plant, nc={"pitch": 0.01}, pitch=0.01))
     assert old.sensors.encoder.pitch == 0.01 and old.axis.pitch == 0.01
+    # the scenario left at the built-in 20 mm is refused before the run, naming the FMU's parameter
+    with pytest.raises(ScenarioError, match=r"axis.pitch = 0.02 contradicts the FMU's pitch = 0.01; expected "
+                                            r"axis: \{pitch: 0.01\}"):
+        scenario_from_dict(data(plant=plant, pitch=0.01))
     for seed in range(5):
         s = scenario_from_dict(data(axis={"pitch": 0.01}, plant=plant, pitch=0.01, seed=seed))
         report = run_scenario(s, tmp_path / str(seed), plots=False).report
