@@ -48,7 +48,8 @@ def slow_run(tmp_path_factory, feeddrive_fmu):
 
 def test_slow_healthy_motion_is_validated(slow_run):
     """Validated with the 95 % CIs of all six parameters covering the plant's values; friction poorly
-    determined (ft +-48 %); the speed residue is coloured (Ljung-Box rejects it) but within the band."""
+    determined (ft +-30 %; +-48 % with the former absolute 2 rad/s speed threshold, which left out the
+    samples below 2 rad/s of this 6.3 rad/s motion); the speed residue is coloured (Ljung-Box rejects it) but within the band."""
     m, _ = slow_run
     assert m["error"] is None and m["measurements_valid"] and m["sensor_faults"] == []
     assert m["end"] - m["start"] == pytest.approx(10.5, abs=0.01)
@@ -58,7 +59,7 @@ def test_slow_healthy_motion_is_validated(slow_run):
     for name, value in TRUTH.items():
         assert p[name]["ci95"][0] <= value <= p[name]["ci95"][1], (name, p[name])
     ft = p["ft"]
-    assert (ft["ci95"][1] - ft["ci95"][0]) / 2 > 0.4 * ft["value"]
+    assert (ft["ci95"][1] - ft["ci95"][0]) / 2 > 0.25 * ft["value"]
     mm = m["mismatch"]
     assert mm["passed"] and mm["test"] == "size" and mm["p_value"] < 1e-3
     assert mm["band_factor"] == {"speed": pytest.approx(np.sqrt(stats.chi2.isf(1e-3, 4))),
