@@ -24,6 +24,7 @@ pytestmark = pytest.mark.slow
 TRUTH = {"R": 0.6, "L": 4.0e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
 H = 1e-4
 WINDOW = 500  # 50 ms
+SPEED_THRESHOLD = 2.0  # [rad/s]
 
 
 @pytest.fixture(scope="module")
@@ -35,21 +36,22 @@ def slow_run(tmp_path_factory, feeddrive_fmu):
         "sensors": {"seed": 1, "current": [{"noise": 0.05}, {"noise": 0.05}]},
         "nc": {"program": [{"dwell": {"time": 0.2}},
                            {"tool_change": {"position": 0.1, "v_max": 0.02, "accel": 0.2, "time": 0.3}}]},
-        "monitor": {"db": ":memory:"}})
+        # the former absolute speed threshold (2 rad/s of this 6.3 rad/s motion): it keeps friction poorly
+        # determined, which is what this test is about; the default (3 % of the peak speed) gives ft +-30 %
+        "monitor": {"db": ":memory:", "speed_threshold": SPEED_THRESHOLD}})
     run = run_scenario(scenario, tmp_path_factory.mktemp("slow") / "run", plots=False)
     (motion,) = run.report["motions"]
     rows = np.flatnonzero(run.signals["nc.state"] == 1)
     signals = {k: run.signals[f"sensors.{k}"][rows] for k in MEASUREMENTS}
     signals["w_enc"] = centred_speed(signals["theta_enc"], signals["w_enc"], H, MonitorConfig().encoder_window_s)
     with History(":memory:") as history:
-        trace = MonitorPipeline(MonitorConfig(), history, "X").process(signals, H, motion["start"], 1, 0.0)
+        trace = MonitorPipeline(MonitorConfig(speed_threshold=SPEED_THRESHOLD), history, "X").process(signals, H, motion["start"], 1, 0.0)
     return motion, trace
 
 
 def test_slow_healthy_motion_is_validated(slow_run):
     """Validated with the 95 % CIs of all six parameters covering the plant's values; friction poorly
-    determined (ft +-30 %; +-48 % with the former absolute 2 rad/s speed threshold, which left out the
-    samples below 2 rad/s of this 6.3 rad/s motion); the speed residue is coloured (Ljung-Box rejects it) but within the band."""
+    determined (ft +-48 %); the speed residue is coloured (Ljung-Box rejects it) but within the band."""
     m, _ = slow_run
     assert m["error"] is None and m["measurements_valid"] and m["sensor_faults"] == []
     assert m["end"] - m["start"] == pytest.approx(10.5, abs=0.01)
@@ -59,7 +61,7 @@ def test_slow_healthy_motion_is_validated(slow_run):
     for name, value in TRUTH.items():
         assert p[name]["ci95"][0] <= value <= p[name]["ci95"][1], (name, p[name])
     ft = p["ft"]
-    assert (ft["ci95"][1] - ft["ci95"][0]) / 2 > 0.25 * ft["value"]
+    assert (ft["ci95"][1] - ft["ci95"][0]) / 2 > 0.4 * ft["value"]
     mm = m["mismatch"]
     assert mm["passed"] and mm["test"] == "size" and mm["p_value"] < 1e-3
     assert mm["band_factor"] == {"speed": pytest.approx(np.sqrt(stats.chi2.isf(1e-3, 4))),

@@ -5,6 +5,7 @@ Every dialect is read back to the exact values written (a round trip); every bad
 """
 from __future__ import annotations
 
+import argparse
 import math
 from pathlib import Path
 
@@ -12,8 +13,9 @@ import numpy as np
 import pytest
 
 from feeddrive.cosim.cli import main
+from feeddrive.cosim.cli.estimate import ROLES
 from feeddrive.cosim.errors import DataError
-from feeddrive.cosim.recorded import load_recording
+from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles, to_motor_side
 
 N = 20
 T = np.arange(N) * 1e-3
@@ -105,13 +107,25 @@ def test_a_decimal_comma_in_a_comma_file_is_named(tmp_path):
 def test_map_takes_several_pairs(tmp_path, capsys):
     path = tmp_path / "d.csv"
     path.write_text("t,a,b\n" + "".join(f"{t},{u},{2 * u}\n" for t, u in zip(T, U)), encoding="utf-8")
-    import argparse
-
-    from feeddrive.cosim.cli.estimate import ROLES
-    from feeddrive.cosim.recorded import add_recording_arguments, mapped_roles
     parser = argparse.ArgumentParser()
     add_recording_arguments(parser, ROLES, 50.0)
     args = parser.parse_args([str(path), "--map", "time=t", "voltage=a", "--map", "current=b*0.5"])
     assert mapped_roles(args, ROLES) == {"time": "t", "voltage": "a", "current": "b*0.5"}
     rec = load_recording(path, mapped_roles(args, ROLES))
     np.testing.assert_allclose(rec.signals["current"], U, rtol=1e-15)
+
+
+def test_monitor_refuses_a_table_side_position_without_a_pitch(tmp_path, capsys):
+    path = tmp_path / "lin.csv"
+    path.write_text("t [s],u [V],i [A],x [mm]\n" + "".join(f"{t},{u},{u / 2},{t * 100}\n" for t, u in zip(T, U)),
+                    encoding="utf-8")
+    assert main(["monitor", str(path), "--map", "time=t", "voltage=u", "current1=i", "position=x",
+                 "--db", ":memory:"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "table side" in err and "--pitch" in err
+    # with the pitch, the table position [m] becomes the motor angle [rad]: 2 pi ratio / pitch per m
+    rec = load_recording(path, {"time": "t", "position": "x"})
+    args = argparse.Namespace(pitch=0.01, ratio=2.0)
+    motor = to_motor_side(rec, args)
+    np.testing.assert_allclose(motor.signals["position"], T * 0.1 * 2 * math.pi * 2 / 0.01, rtol=1e-12)
+    assert motor.side == "motor"
