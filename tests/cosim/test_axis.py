@@ -120,3 +120,13 @@ def test_builtin_plant_with_another_pitch_gives_no_false_alarm(feeddrive_fmu, tm
     assert s.plant.parameters["pitch"] == pitch
     (motion,) = run_scenario(s, tmp_path, plots=False).report["motions"]
     _check_healthy(motion, TRUTH)
+
+
+def test_rotary_axis_hands_one_turn_per_pitch_to_the_nc_and_encoder(feeddrive_fmu):
+    """A rotary table: position in rad, motor angle = ratio x table angle (pitch 2 pi rad per turn)."""
+    s = scenario_from_dict(data(axis={"kind": "rotary", "ratio": 10.0}))
+    assert s.axis.pitch is None and s.nc.pitch == s.sensors.encoder.pitch == pytest.approx(2 * math.pi)
+    assert s.plant.parameters["pitch"] == pytest.approx(2 * math.pi) and s.plant.parameters["belt_ratio"] == 10.0
+    assert s.axis.motor_rad_per_unit() == pytest.approx(10.0)
+    with pytest.raises(ScenarioError, match=r"nc.pitch contradicts axis.kind = rotary"):
+        scenario_from_dict(data(axis={"kind": "rotary"}, nc={"pitch": 0.01}))
