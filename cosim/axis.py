@@ -169,9 +169,12 @@ def resolve_drive_chain(data: dict, builtin: bool, nominal: tuple[float, float],
     stated = {}
     for what, places in _PLACES.items():
         found = [(p, _get(data, p)) for p in places if (builtin or p[0] != "plant") and _get(data, p) is not None]
-        found = [(p, v) for p, v in found if isinstance(v, (int, float)) and not isinstance(v, bool)]
+        for p, v in found:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                raise error(p, f"expected a positive number [{'m' if what == 'pitch' else '1'}], got {v!r}")
         if axis.kind == "rotary" and what == "pitch":
-            bad = [p for p, _ in found if p[0] != "axis"]
+            # 2 pi is what a resolved rotary scenario holds there (rad per turn): it reads back
+            bad = [p for p, v in found if p[0] != "axis" and not math.isclose(float(v), 2 * math.pi, rel_tol=1e-12)]
             if bad:
                 raise error(bad[0], f"{'.'.join(bad[0])} contradicts axis.kind = rotary (no ball screw); expected "
                                     "no pitch, or axis.kind: linear")

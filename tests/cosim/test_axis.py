@@ -36,7 +36,7 @@ def data(axis="X", plant=None, nc=None, sensors=None, pitch=0.02, seed=1):
 def test_units_follow_the_side():
     assert parameter_units("motor") == {"R": "Ohm", "L": "H", "K": "N.m/A", "Jt": "kg.m2", "ft": "N.m.s/rad",
                                         "Cd": "N.m", "T0": "N.m"}
-    assert Axis(kind="linear", side="table").parameter_units() | {} == parameter_units("table", "linear")
+    assert Axis(kind="linear", side="table").parameter_units() == parameter_units("table", "linear")
     assert parameter_units("table", "linear")["Jt"] == "kg" and parameter_units("table", "rotary")["Jt"] == "kg.m2"
     assert Axis.model_validate("Y").name == "Y"  # the old ``axis: Y``
     assert Axis(pitch=0.01, ratio=2.0).motor_rad_per_unit() == pytest.approx(2 * math.pi * 2 / 0.01)
@@ -128,5 +128,8 @@ def test_rotary_axis_hands_one_turn_per_pitch_to_the_nc_and_encoder(feeddrive_fm
     assert s.axis.pitch is None and s.nc.pitch == s.sensors.encoder.pitch == pytest.approx(2 * math.pi)
     assert s.plant.parameters["pitch"] == pytest.approx(2 * math.pi) and s.plant.parameters["belt_ratio"] == 10.0
     assert s.axis.motor_rad_per_unit() == pytest.approx(10.0)
+    assert scenario_from_dict(s.to_dict()).axis == s.axis  # the resolved scenario reads back
+    with pytest.raises(ScenarioError, match=r"nc.pitch: expected a positive number \[m\], got 'fast'"):
+        scenario_from_dict(data(nc={"pitch": "fast"}))
     with pytest.raises(ScenarioError, match=r"nc.pitch contradicts axis.kind = rotary"):
         scenario_from_dict(data(axis={"kind": "rotary"}, nc={"pitch": 0.01}))
