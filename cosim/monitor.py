@@ -80,6 +80,9 @@ class MonitorConfig(BaseModel):
         healthy motions accepted so far (from the second validated motion on; the same test), and a
         motion with a diagnosis is not added to it.
     baseline_motions : int
+    nominal : dict of str to float
+        The axis's design values of ``R, L, K, Jt, ft, Cd`` (motor side, SI) where they differ from the
+        built-in model's: the first motion's sensor isolation and ``baseline: nominal`` use them.
     min_relative_drift : float
         Smallest relative parameter change diagnosed.
     min_motion_s, max_motion_s : float
@@ -114,6 +117,7 @@ class MonitorConfig(BaseModel):
     mismatch_rms_tol: float = Field(0.01, gt=0)
     baseline: Literal["motions", "nominal"] = "motions"
     baseline_motions: int = Field(3, ge=1)
+    nominal: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
     min_relative_drift: float = Field(0.05, gt=0)
     min_motion_s: float = Field(1.0, gt=0)
     max_motion_s: float = Field(30.0, gt=0)
@@ -155,7 +159,8 @@ class MonitorPipeline:
         from feeddrive.models import feed_drive
 
         self.config, self.history, self.axis = config, history, axis
-        self.nominal = feed_drive().nominal(("physical",))
+        # the axis's own design values when given (a vendor motor), else the built-in model's
+        self.nominal = feed_drive().nominal(("physical",)) | dict(config.nominal)
         self.validation_options = ValidationOptions(config.alpha, config.window_s, config.gain_tol, config.offset_tol)
         self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
                                                     speed_threshold=config.speed_threshold,

@@ -133,3 +133,16 @@ def test_rotary_axis_hands_one_turn_per_pitch_to_the_nc_and_encoder(feeddrive_fm
         scenario_from_dict(data(nc={"pitch": "fast"}))
     with pytest.raises(ScenarioError, match=r"nc.pitch contradicts axis.kind = rotary"):
         scenario_from_dict(data(axis={"kind": "rotary"}, nc={"pitch": 0.01}))
+
+
+def test_monitor_nominal_values_are_the_axis_own(feeddrive_fmu):
+    """``monitor: {nominal: ...}`` replaces the built-in model's design values for the axis's motor."""
+    from feeddrive.cosim.monitor import MonitorPipeline
+    from feeddrive.estimator.history import History
+
+    s = scenario_from_dict(data() | {"monitor": {"db": ":memory:", "baseline": "nominal", "nominal": {"R": 1.2}}})
+    with History(":memory:") as history:
+        pipe = MonitorPipeline(s.monitor.config, history, "X")
+        assert pipe.baseline()["R"] == (1.2, 0.0) and pipe.baseline()["K"] == (1.05, 0.0)
+    with pytest.raises(ScenarioError, match=r"monitor.nominal"):
+        scenario_from_dict(data() | {"monitor": {"nominal": {"Q": 1.0}}})
