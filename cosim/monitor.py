@@ -28,6 +28,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.nc import describe_validation_error
@@ -60,8 +61,11 @@ class MonitorConfig(BaseModel):
         Estimation method whose parameters are validated and stored.
     filter_cutoff_hz, filter_order : float, int
         The identical low-pass of every signal (eq. 8), used by validation and estimation.
-    speed_threshold : float
-        Samples with ``|w|`` below it [rad/s] are excluded from the sign(w) term.
+    speed_threshold : float or None
+        Samples with ``|w|`` below it [rad/s] are excluded from the sign(w) term; None (default):
+        ``speed_fraction`` of each motion's largest speed (relative to the data, not to a nominal plant).
+    speed_fraction : float
+        The relative threshold used when ``speed_threshold`` is None.
     alpha : float
         Level of every statistical test (residues, model whiteness, drifts).
     window_s, gain_tol, offset_tol : float
@@ -76,6 +80,9 @@ class MonitorConfig(BaseModel):
         healthy motions accepted so far (from the second validated motion on; the same test), and a
         motion with a diagnosis is not added to it.
     baseline_motions : int
+    nominal : dict of str to float
+        The axis's design values of ``R, L, K, Jt, ft, Cd`` (motor side, SI) where they differ from the
+        built-in model's: the first motion's sensor isolation and ``baseline: nominal`` use them.
     min_relative_drift : float
         Smallest relative parameter change diagnosed.
     min_motion_s, max_motion_s : float
@@ -101,7 +108,8 @@ class MonitorConfig(BaseModel):
     method: Literal["ls", "iv", "oe"] = "iv"
     filter_cutoff_hz: float = Field(100.0, gt=0)
     filter_order: int = Field(4, ge=1)
-    speed_threshold: float = Field(2.0, ge=0)
+    speed_threshold: float | None = Field(None, ge=0)
+    speed_fraction: float = Field(0.03, ge=0, lt=1)
     alpha: float = Field(1e-3, gt=0, lt=0.5)
     window_s: float = Field(0.05, gt=0)
     gain_tol: float = Field(0.005, gt=0)
@@ -109,6 +117,7 @@ class MonitorConfig(BaseModel):
     mismatch_rms_tol: float = Field(0.01, gt=0)
     baseline: Literal["motions", "nominal"] = "motions"
     baseline_motions: int = Field(3, ge=1)
+    nominal: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
     min_relative_drift: float = Field(0.05, gt=0)
     min_motion_s: float = Field(1.0, gt=0)
     max_motion_s: float = Field(30.0, gt=0)
@@ -150,10 +159,12 @@ class MonitorPipeline:
         from feeddrive.models import feed_drive
 
         self.config, self.history, self.axis = config, history, axis
-        self.nominal = feed_drive().nominal(("physical",))
+        # the axis's own design values when given (a vendor motor), else the built-in model's
+        self.nominal = feed_drive().nominal(("physical",)) | dict(config.nominal)
         self.validation_options = ValidationOptions(config.alpha, config.window_s, config.gain_tol, config.offset_tol)
         self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
-                                                    speed_threshold=config.speed_threshold)
+                                                    speed_threshold=config.speed_threshold,
+                                                    speed_fraction=config.speed_fraction)
         self.diagnosis_options = DiagnosisOptions(config.alpha, config.min_relative_drift)
         last = history.last_validated(axis)
         self.last_validated: dict | None = last["parameters"] if last else None
@@ -242,7 +253,9 @@ class MonitorPipeline:
         result["notes"] += list(v.notes) + [n for p in v.pairs.values() for n in p.notes]
         est = estimate_motion(MotionData(h, u=v.u, i=v.i, w=v.w, t0=start), self.estimation_options)
         params = est.parameters
-        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95)} for k, p in params.items()}
+        units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
+        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units[k]}
+                                for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
         mismatch = check_model(v.u, v.i, v.w, h, {k: p.value for k, p in params.items()}, self.config.filter,
                                self.config.alpha, rms_tol=self.config.mismatch_rms_tol, covariance=est.covariance,

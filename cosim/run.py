@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.master import Master
 from feeddrive.cosim.scenario import Scenario, load_scenario
@@ -113,7 +114,10 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         old.unlink(missing_ok=True)
     paths: dict[str, Any] = {"signals": out_dir / "signals.csv", "resolved": out_dir / "scenario.resolved.yaml",
                              "report": out_dir / "report.json", "page": out_dir / "report.html", "plots": []}
-    report: dict[str, Any] = {"scenario": scenario.name, "axis": scenario.axis, "source": scenario.source,
+    report: dict[str, Any] = {"scenario": scenario.name, "axis": scenario.axis.name,
+                              # the drive chain, and the units of the parameters (estimated on the motor side)
+                              "drive_chain": scenario.axis.model_dump(),
+                              "parameter_units": parameter_units("motor", scenario.axis.kind), "source": scenario.source,
                               "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                               "status": "running", "versions": _versions(),
                               "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,

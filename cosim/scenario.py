@@ -12,8 +12,11 @@ Roles (the plant's ports, always in SI units)::
 
 A map entry ``{var, scale, offset}`` converts between a role and an FMU variable: for an input
 role the FMU receives ``scale * x + offset``; for an output role the master reads
-``scale * y + offset``. The built-in plant has a default map, and its ``pitch`` and ``belt_ratio``
-parameters, when given, are also the defaults of the NC's and the encoder's drive chain.
+``scale * y + offset``. The built-in plant has a default map. The drive chain (ball-screw pitch, belt
+ratio, rotary or linear table) is stated once, in ``axis:`` (``cosim.axis``); the NC, the encoder and
+the built-in plant's ``pitch`` and ``belt_ratio`` parameters get it from there. The older places
+(``plant.parameters.pitch``, ``nc.pitch``, ``sensors.encoder.pitch``) still work; two of them that
+disagree are a ScenarioError naming both keys.
 """
 from __future__ import annotations
 
@@ -25,9 +28,10 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
+from feeddrive.cosim.axis import Axis, resolve_drive_chain
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.fmu_inspect import fmi_version, model_description, sha256
-from feeddrive.cosim.nc import SETTLING, NCConfig, plan_program
+from feeddrive.cosim.nc import SETTLING, NCConfig, drive_chain_nominal, plan_program
 from feeddrive.cosim.sensors import ChannelConfig, SensorsConfig
 from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error, read_yaml
 
@@ -125,7 +129,7 @@ class Scenario(_Strict):
     """A validated scenario; build it with :func:`load_scenario` or :func:`scenario_from_dict`."""
 
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
-    axis: str = "X"
+    axis: Axis = Axis()  # ``axis: X`` (a name) or the drive chain ``{name, kind, pitch, ratio, side}``
     step: float = Field(1.0e-4, gt=0, description="communication step [s]")
     stop_time: float | None = Field(None, gt=0, description="[s]; default: NC program duration + 0.3 s")
     plant: PlantConfig = PlantConfig()
@@ -216,7 +220,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     lines = dict(lines or {})
     if not isinstance(data, dict):
         raise located_error(source, lines, (), f"expected a mapping of scenario keys, got {type(data).__name__}")
-    data = _follow_builtin_drive_chain(dict(data))
+    data = _drive_chain(dict(data), source, lines)
     base_dir = Path(base_dir or ".").resolve()
     data["monitor"] = _monitor_spec(data.get("monitor"), data, base_dir, source, lines)
     try:
@@ -236,23 +240,21 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
         raise scenario.error(("step",), f"{scenario.step:g} s is longer than the run ({stop:g} s, {what}); "
                                         "expected a communication step <= the stop time")
     plant, md = _resolve_plant(scenario)
+    _check_drive_chain(scenario, md)
     _check_events(scenario, md)
     return scenario.model_copy(update={"plant": plant})
 
 
-def _follow_builtin_drive_chain(data: dict) -> dict:
-    """With the built-in plant, ``pitch`` and ``belt_ratio`` given in ``plant.parameters`` become the defaults
-    of the NC's and the encoder's (which otherwise default to the model's nominal drive chain)."""
+def _drive_chain(data: dict, source: str, lines: dict) -> dict:
+    """The scenario with its axis's drive chain stated once (``cosim.axis.resolve_drive_chain``)."""
     plant = data.get("plant")
-    params = (plant.get("parameters") if isinstance(plant, dict) and plant.get("fmu", "builtin") in BUILTIN_PLANTS
-              else None)
-    chain = {k: params[k] for k in ("pitch", "belt_ratio") if k in params} if isinstance(params, dict) else {}
-    nc, sensors = data.get("nc"), data.get("sensors") or {}
-    if chain and isinstance(nc, dict):
-        data["nc"] = chain | nc
-    if chain and isinstance(sensors, dict) and isinstance(sensors.get("encoder") or {}, dict):
-        data["sensors"] = sensors | {"encoder": chain | (sensors.get("encoder") or {})}
-    return data
+    builtin = (plant.get("fmu", "builtin") if isinstance(plant, dict) else "builtin") in BUILTIN_PLANTS
+    try:
+        return resolve_drive_chain(data, builtin, drive_chain_nominal(),
+                                   lambda key, message: located_error(source, lines, key, message))
+    except ValidationError as exc:
+        raw = data.get("axis")
+        raise from_validation(exc, raw, source, lines, prefix=("axis",), model=Axis) from None
 
 
 def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict) -> ComponentSpec | None:
@@ -280,7 +282,9 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     if "class" in raw:
         raw, prefix = raw.get("config") or {}, ("monitor", "config")
     fields = MonitorConfig.model_fields
-    implied = {k: v for k, v in (("axis", data.get("axis", "X")), ("scenario", data.get("name")))
+    name = data.get("axis", "X")
+    name = name.get("name", "X") if isinstance(name, dict) else name
+    implied = {k: v for k, v in (("axis", name), ("scenario", data.get("name")))
                if k in fields and isinstance(v, str)}
     if isinstance(raw, dict) and isinstance(raw.get("db"), str) and raw["db"] != ":memory:" and "db" in fields:
         raw = raw | {"db": str(base_dir / Path(raw["db"]).expanduser())}
@@ -368,6 +372,22 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
             _check_range(s, ("plant", key, name), v, getattr(p, key)[name], path.name)
     plant = p.model_copy(update={"fmu": str(path), "sha256": digest, "map": role_map, "input_hold": hold})
     return plant, md
+
+
+def _check_drive_chain(s: Scenario, md: Any) -> None:
+    """A plant FMU with ``pitch`` / ``belt_ratio`` parameters must agree with the scenario's axis (a vendor
+    FMU built for a 10 mm screw under a scenario left at 20 mm would give a false encoder fault)."""
+    variables = {v.name: v for v in md.modelVariables}
+    for fmu_name, key in (("pitch", "pitch"), ("belt_ratio", "ratio")):
+        v = variables.get(fmu_name)
+        if v is None or v.causality != "parameter" or v.type != "Real" or s.axis.kind != "linear":
+            continue
+        value = s.plant.parameters.get(fmu_name, v.start)
+        ours = getattr(s.axis, key)
+        if value not in (None, "") and not math.isclose(float(value), ours, rel_tol=1e-9):
+            where = f"plant.parameters.{fmu_name}" if fmu_name in s.plant.parameters else f"the FMU's {fmu_name}"
+            raise s.error(("axis", key), f"axis.{key} = {ours:g} contradicts {where} = {float(value):g}; expected "
+                                         f"axis: {{{key}: {float(value):g}}}")
 
 
 def _check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str) -> None:

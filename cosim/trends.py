@@ -160,7 +160,10 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
     if not series:
         raise InputError(f"no motion with estimated parameters to plot{' for ' + title if title else ''}")
     dates = use_dates(motions) if x == "auto" else x == "date"
-    units = {**UNITS, **(units or {})}
+    # the unit stored with the newest motion (a linear axis's Jt is in kg), then the caller's
+    stored = {n: p["unit"] for m in motions for n, p in (m.get("parameters") or {}).items()
+              if isinstance(p, dict) and p.get("unit")}
+    units = {**UNITS, **stored, **(units or {})}
     fig, axes = plt.subplots(3, 2, figsize=(11, 8.2), sharex=True)
     for ax, (name, _) in zip(axes.T.ravel(), PARAMETERS):
         s = series.get(name)

@@ -41,8 +41,6 @@ from feeddrive.estimator.simulation import MODEL, simulate
 __all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionData", "MotionEstimate",
            "ParameterEstimate", "Prepared", "estimate_motion", "instrumental_variables", "least_squares", "prepare"]
 
-_NOMINAL = {v.name: float(v.nominal) for v in PHYSICAL}
-
 
 def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
     """Filter, differentiate and align the signals; derive the regressions the data allow.
@@ -91,12 +89,22 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
     if not regressions:
         raise EstimatorInputError(f"no model equation can be used with the signals {sorted(raw)}")
     rows = {}
+    speed = np.abs(sig["w"])
+    peak = float(speed.max())
+    # relative to the motion's own speed range unless the user sets an absolute value
+    threshold = options.speed_threshold if options.speed_threshold is not None else options.speed_fraction * peak
     for reg in regressions:
         r = np.ones(len(sig["w"]), dtype=bool)
         if "sgn_w" in reg.signals:
+            fast = speed >= threshold
+            if fast.sum() < 20 * len(reg.names):  # the real cause, with numbers, rather than "too short"
+                raise NotEnoughExcitation(
+                    list(reg.names) + ([reg.normaliser] if reg.normaliser else []),
+                    f"{int((~fast).sum())} of {fast.size} samples have |speed| < speed_threshold {threshold:.3g} "
+                    f"{options.speed_unit} (largest |speed| {peak:.3g} {options.speed_unit}); the {reg.equation} "
+                    f"equation needs at least {20 * len(reg.names)} faster ones")
             # the filter smears sign(w) over about 1/cutoff around each zero crossing: widen the gap
-            r &= binary_erosion(np.abs(sig["w"]) >= options.speed_threshold,
-                                iterations=int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h))),
+            r &= binary_erosion(fast, iterations=int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h))),
                                 border_value=True)
         rows[reg.equation] = r
     block = max(1, int(round(options.block() / h)))
@@ -116,7 +124,30 @@ class _Fit:
     fit: float
 
 
-def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions) -> _Fit:
+def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: float) -> np.ndarray:
+    """The norm each regressor column would have if its signals kept their own RMS level (a derivative
+    ``Dx``: the RMS of ``x`` per motion duration; sign(w): 1). A column far below it (1e-9) is rounding
+    noise, e.g. the derivative of a constant speed. Unit-free: nothing refers to nominal parameters."""
+    n = len(signals["w"])
+    duration = n * h
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(np.square(x)))) or 1.0
+
+    proxy = {}
+    for name in reg.signals:
+        if name == "sgn_w":
+            proxy[name] = 1.0
+        elif name.startswith("D") and signals.get(name[1:]) is not None:
+            proxy[name] = rms(signals[name[1:]]) / duration
+        else:
+            proxy[name] = rms(signals[name])
+    _, Phi = reg.evaluate({k: np.full(n, v) for k, v in proxy.items()})
+    return np.sqrt(np.einsum("ij,ij->j", Phi, Phi))
+
+
+def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
+           reference: np.ndarray | None = None) -> _Fit:
     """LS or basic IV on the usable rows of one or more sample sets, column-scaled.
 
     Each part is ``(y (n,), Phi (n, p), Z (n, p) or None, rows (n,) bool)``. With ``Z`` None: LS
@@ -136,11 +167,9 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     Xr = [rows(Phi, r) for _, Phi, _, r in parts]
     ys = [rows(y, r) for y, _, _, r in parts]
     scale = np.sqrt(sum(np.einsum("ij,ij->j", X, X) for X in Xr))
-    # a column whose contribution at the nominal parameter is rounding noise (a derivative at constant
-    # speed) is empty, however well conditioned column scaling makes it look
-    nominal = np.array([abs(_NOMINAL[n] / (_NOMINAL[reg.normaliser] if reg.normaliser else 1.0)) or 1.0
-                        for n in reg.names])
-    empty = scale * nominal <= 1e-9 * np.sqrt(sum(y @ y for y in ys))
+    # a column that is rounding noise (a derivative at constant speed) is empty, however well conditioned
+    # column scaling makes it look; judged against the column's own scale (see _column_reference)
+    empty = scale <= 1e-9 * reference if reference is not None else np.zeros(p, dtype=bool)
     scale[empty] = 1.0
     Xs = [X / scale for X in Xr]
     # singular values of the scaled regressor from its p x p Gram matrix (cheap; fine up to cond ~1e7)
@@ -222,7 +251,8 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
     for reg in p.regressions:  # every equation is checked, so a refusal names all it cannot identify
         y, Phi = reg.evaluate(_signals_for(p, reg))
         try:
-            fits[reg.equation] = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, options)
+            fits[reg.equation] = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, options,
+                                        _column_reference(reg, _signals_for(p, reg), p.h))
         except NotEnoughExcitation as exc:
             refused.append(exc)
     if refused:
@@ -301,7 +331,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
         for reg in halves[0].regressions:
             parts = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
                       half.rows[reg.equation]) for k, (half, zh) in enumerate(zip(halves, z))]
-            fits[reg.equation] = _solve(reg, parts, halves[0].block, options)
+            fits[reg.equation] = _solve(reg, parts, halves[0].block, options,
+                                        _column_reference(reg, _signals_for(halves[0], reg), halves[0].h))
         new = _combine("iv", halves[0], fits, it)
         change = np.max(np.abs(new.values - cur.values) / np.maximum(np.abs(cur.values), 1e-12))
         cur = new

@@ -198,10 +198,12 @@ class History:
         if not motion_ids:
             return out
         marks = ",".join("?" * len(motion_ids))
-        for mid, name, value, std, lo, hi in self._db.execute(
-                f"SELECT motion_id, name, value, std, ci_low, ci_high FROM parameters WHERE motion_id IN ({marks})",
-                motion_ids):
-            out[mid][name] = {"value": value, "std": std, "ci95": [lo, hi]}
+        # the unit is kept in the motion's JSON (no schema change): a parameter reads back as it was stored
+        for mid, name, value, std, lo, hi, unit in self._db.execute(
+                "SELECT p.motion_id, p.name, p.value, p.std, p.ci_low, p.ci_high, "
+                "json_extract(m.result, '$.parameters.\"' || p.name || '\".unit') FROM parameters p "
+                f"JOIN motions m ON m.id = p.motion_id WHERE p.motion_id IN ({marks})", motion_ids):
+            out[mid][name] = {"value": value, "std": std, "ci95": [lo, hi]} | ({"unit": unit} if unit else {})
         return out
 
     def _validated(self, axis: str, order: str, n: int | None, healthy: bool = False) -> list[dict]:

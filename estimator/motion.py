@@ -88,8 +88,16 @@ class EstimationOptions:
         Parameters known in advance (e.g. ``{"K": 1.05}`` for the mechanical equation alone).
     offset : bool
         Also estimate the optional constant torque offset ``T0`` (needs a speed reversal).
-    speed_threshold : float
-        Samples with ``|w| <`` this [rad/s] are excluded from the equations that use sign(w) ...
+    speed_threshold : float or None
+        Samples with ``|w| <`` this (in the speed's own unit, rad/s or m/s) are excluded from the
+        equations that use sign(w) ... None (default): ``speed_fraction`` of the motion's largest
+        ``|w|``, so the threshold follows the data's scale (a linear axis at 0.13 m/s as well as a
+        motor at 70 rad/s) ...
+    speed_fraction : float
+        ... the relative threshold used when ``speed_threshold`` is None (0.03: 2.1 rad/s at the
+        built-in plant's 70 rad/s, close to the absolute 2 rad/s used before) ...
+    speed_unit : str
+        Unit of the speed, for messages only.
     sign_guard : float
         ... and so are ``sign_guard / cutoff_hz`` seconds on either side of them (filter smearing).
     edge_guard : float
@@ -111,7 +119,9 @@ class EstimationOptions:
     filter: FilterSpec = FilterSpec(50.0)
     known: Mapping[str, float] = field(default_factory=dict)
     offset: bool = False
-    speed_threshold: float = 2.0
+    speed_threshold: float | None = None
+    speed_fraction: float = 0.03
+    speed_unit: str = "rad/s"
     sign_guard: float = 2.0
     edge_guard: float = 3.0
     iv_iterations: int = 10
@@ -130,8 +140,10 @@ class EstimationOptions:
                 raise EstimatorInputError(f"known parameter {k!r} is not one of {sorted(names)}")
             if not np.isfinite(v):
                 raise EstimatorInputError(f"known parameter {k!r} must be finite, got {v}")
-        if not self.speed_threshold >= 0:
-            raise EstimatorInputError(f"speed_threshold must be >= 0 rad/s, got {self.speed_threshold}")
+        if self.speed_threshold is not None and not self.speed_threshold >= 0:
+            raise EstimatorInputError(f"speed_threshold must be >= 0 {self.speed_unit}, got {self.speed_threshold}")
+        if not 0 <= self.speed_fraction < 1:
+            raise EstimatorInputError(f"speed_fraction must be in [0, 1), got {self.speed_fraction}")
         object.__setattr__(self, "known", dict(self.known))
 
     def block(self) -> float:

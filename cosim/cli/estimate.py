@@ -1,12 +1,16 @@
 """``cosim estimate DATA.csv --map ROLE=COLUMN ...``: R, L, K, Jt, ft, Cd from a recorded CSV.
 
-Roles: ``time``, ``voltage`` [V], ``current`` [A], ``speed`` [rad/s], ``position`` (motor angle, rad),
-``torque`` [N.m], ``state`` (NC state, 1 = rapid). The recording is cut into high-speed motions
-(``--segment``), each estimated on its own; the output is a table per motion with 95 % confidence
-intervals, or with ``--json``::
+Roles: ``time``, ``voltage`` [V], ``current`` [A], ``speed``, ``position``, ``torque``, ``state``
+(NC state, 1 = rapid). Columns are converted to SI from the unit in their header (``x [mm]``) or an
+explicit ``--map ROLE=COLUMN*SCALE``. The mechanical parameters are estimated on the side the data are
+on: the motor side (position in rad, speed in rad/s, torque in N.m: Jt in kg.m2, ft in N.m.s/rad, Cd in
+N.m), or the table side of a linear axis when the headers say m, m/s or N (Jt is then the moving mass
+in kg, ft in N.s/m, Cd in N); ``--pitch``/``--ratio`` convert table-side data to the motor side.
+The recording is cut into high-speed motions (``--segment``), each estimated on its own; the output is
+a table per motion with 95 % confidence intervals, or with ``--json``::
 
-    {"segments": [{"start": s, "end": s, "method": m, "parameters": {"R": {"value": v, "ci95": [lo, hi]}, ...},
-                   "condition_number": c, "fit_error": e}]}
+    {"side": "motor"|"table", "segments": [{"start": s, "end": s, "method": m,
+      "parameters": {"R": {"value": v, "ci95": [lo, hi], "unit": u}, ...}, "condition_number": c, "fit_error": e}]}
 
 holding only the parameters the data determine. When there are several motions, one that cannot
 be estimated (too short, not exciting every parameter) is reported on stderr and left out; if no
@@ -20,8 +24,16 @@ import sys
 
 import numpy as np
 
+from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
-from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles, pairs
+from feeddrive.cosim.recorded import (
+    add_recording_arguments,
+    filter_cutoff,
+    load_recording,
+    mapped_roles,
+    pairs,
+    to_motor_side,
+)
 from feeddrive.estimator import (
     EstimationOptions,
     EstimatorInputError,
@@ -31,7 +43,6 @@ from feeddrive.estimator import (
     estimate_motion,
 )
 from feeddrive.estimator.segmentation import segment
-from feeddrive.models import feed_drive
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
          "state": None}
@@ -52,9 +63,12 @@ def main(args: argparse.Namespace) -> int:
             known[name] = float(value)
         except ValueError:
             raise InputError(f"--known {name}={value!r}: expected a number") from None
-    options = EstimationOptions(method=args.method, filter=FilterSpec(args.filter_cutoff), known=known,
-                                offset=args.offset)
-    rec = load_recording(args.data, roles, args.sample_time)
+    rec = to_motor_side(load_recording(args.data, roles, args.sample_time, args.delimiter, args.decimal), args)
+    side = rec.side or "motor"
+    units = parameter_units(side, "linear" if side == "table" else "rotary")
+    options = EstimationOptions(method=args.method, filter=FilterSpec(filter_cutoff(args, rec.h)), known=known,
+                                offset=args.offset, speed_threshold=args.speed_threshold,
+                                speed_unit="m/s" if side == "table" else "rad/s")
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     speed = sig.get("w")
     if speed is None and "position" in sig:
@@ -76,15 +90,18 @@ def main(args: argparse.Namespace) -> int:
     if not results:
         raise InputError(f"{args.data}: no motion could be estimated (see above)")
     if args.json:
-        print(json.dumps({"segments": [r.to_dict() for r in results]}))
+        segments = [r.to_dict() for r in results]
+        for seg in segments:
+            for name, p in seg["parameters"].items():
+                p["unit"] = units[name]
+        print(json.dumps({"side": side, "segments": segments}))
     else:
-        print(table(results))
+        print(table(results, units))
     return 0
 
 
-def table(results) -> str:  # noqa: ANN001 - list of estimator.MotionEstimate
-    """One block per motion: parameter, value, unit, 95 % confidence interval."""
-    units = {v.name: v.unit for v in feed_drive().parameters}
+def table(results, units: dict[str, str]) -> str:  # noqa: ANN001 - list of estimator.MotionEstimate
+    """One block per motion: parameter, value, unit (``units``: the data's side), 95 % confidence interval."""
     lines = []
     for k, r in enumerate(results, 1):
         lines.append(f"motion {k}: {r.start:.4g}-{r.end:.4g} s, {r.method.upper()}, condition number "

@@ -89,7 +89,9 @@ def thresholds(db: Path, axis: str, motions: list[dict]) -> dict:
 
 def format_table(axis: str, motions: list[dict]) -> str:
     """One line per motion: time, validation, each parameter as value +- half its 95 % CI, faults, diagnosis."""
-    head = f"{'id':>4} {'motion':>6} {'time (UTC)':19} {'valid':5} " + " ".join(f"{n:>17}" for n in NAMES)
+    units = {n: p["unit"] for m in motions for n, p in m.get("parameters", {}).items() if "unit" in p}
+    head = f"{'id':>4} {'motion':>6} {'time (UTC)':19} {'valid':5} " + " ".join(
+        f"{n + (' [' + units[n] + ']' if n in units else ''):>17}" for n in NAMES)
     lines = [f"axis {axis}: {len(motions)} motion(s)", head + "  sensor faults / diagnosis"]
     for m in motions:
         when = _dt.datetime.fromtimestamp(m["time"], _dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")

@@ -1,7 +1,8 @@
 """``cosim monitor DATA.csv --map ROLE=COLUMN ...``: the monitor's pipeline on a recorded CSV.
 
 Roles: ``time``, ``voltage`` (terminal) and ``voltage_ref`` (regulator reference) [V], ``current1`` and
-``current2`` [A], ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad],
+``current2`` [A], ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
+position in m with ``--pitch``/``--ratio``],
 ``state`` (NC state, 1 = rapid). Required: ``voltage``, ``current1`` and ``speed`` or ``position``;
 each missing second sensor leaves its quantity unchecked (said in the notes). The encoder angle is
 differentiated (central differences) into the second speed.
@@ -28,7 +29,13 @@ import numpy as np
 from feeddrive.cosim.cli.history import DEFAULT_DB
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
-from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles
+from feeddrive.cosim.recorded import (
+    add_recording_arguments,
+    filter_cutoff,
+    load_recording,
+    mapped_roles,
+    to_motor_side,
+)
 from feeddrive.cosim.run import _versions
 from feeddrive.estimator.segmentation import segment
 
@@ -55,7 +62,10 @@ def main(args: argparse.Namespace) -> int:
         missing.append("speed or position")
     if missing:
         raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
-    rec = load_recording(args.data, role_map, args.sample_time)
+    rec = to_motor_side(load_recording(args.data, role_map, args.sample_time, args.delimiter, args.decimal), args)
+    if rec.side == "table":  # the monitor's model is the motor's: u = R i + L di/dt + K w, w in rad/s
+        raise InputError(f"{args.data}: the position/speed columns are on the table side ({rec.units}); the "
+                         "monitor needs the motor side: give --pitch (and --ratio) to convert them")
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     if "position" in rec.signals:
         w_enc = np.gradient(rec.signals["position"], rec.h)
@@ -67,7 +77,7 @@ def main(args: argparse.Namespace) -> int:
     out = _out_folder(args.out, args.overwrite) if args.out else None
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     config = MonitorConfig(axis=args.axis, scenario=str(rec.path), db=args.db, method=args.method,
-                           filter_cutoff_hz=args.filter_cutoff)
+                           filter_cutoff_hz=filter_cutoff(args, rec.h), speed_threshold=args.speed_threshold)
     end_clock = rec.path.stat().st_mtime - (rec.n - 1) * rec.h  # machine time of sample 0
     traces = []
     if args.db == DEFAULT_DB:
@@ -163,7 +173,8 @@ def table(results: list[dict]) -> str:
         if r["gain_ratio"] is not None:
             lines.append(f"  current gain ratio a1/a2 = {r['gain_ratio']:.4f}")
         for name, p in r["parameters"].items():
-            lines.append(f"  {name:3} {p['value']:12.6g}  95 % CI [{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")
+            lines.append(f"  {name:3} {p['value']:12.6g} {p.get('unit', ''):10} 95 % CI "
+                         f"[{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")
         if r["mismatch"]:
             m = r["mismatch"]
             worst = max(m["peak_rms_relative"].values())

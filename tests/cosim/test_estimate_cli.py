@@ -77,7 +77,7 @@ def good_rows(n: int = 20) -> list[list[str]]:
 @pytest.mark.parametrize("case, needle", [
     ("missing", "column 'current_A' (role current) not found"),
     ("time", "'time [s]' is not strictly increasing at row 7"),
-    ("nan", "column 'i [A]' row 4: NaN"),
+    ("nan", "column 'i [A]' row 4: 'nan' is not a finite number"),
     ("short", "5 samples, need at least 10"),
 ])
 def test_bad_csv_gives_one_line_and_exit_status_2(tmp_path, capsys, case, needle):

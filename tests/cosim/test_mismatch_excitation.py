@@ -24,6 +24,7 @@ pytestmark = pytest.mark.slow
 TRUTH = {"R": 0.6, "L": 4.0e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
 H = 1e-4
 WINDOW = 500  # 50 ms
+SPEED_THRESHOLD = 2.0  # [rad/s]
 
 
 @pytest.fixture(scope="module")
@@ -35,14 +36,16 @@ def slow_run(tmp_path_factory, feeddrive_fmu):
         "sensors": {"seed": 1, "current": [{"noise": 0.05}, {"noise": 0.05}]},
         "nc": {"program": [{"dwell": {"time": 0.2}},
                            {"tool_change": {"position": 0.1, "v_max": 0.02, "accel": 0.2, "time": 0.3}}]},
-        "monitor": {"db": ":memory:"}})
+        # the former absolute speed threshold (2 rad/s of this 6.3 rad/s motion): it keeps friction poorly
+        # determined, which is what this test is about; the default (3 % of the peak speed) gives ft +-30 %
+        "monitor": {"db": ":memory:", "speed_threshold": SPEED_THRESHOLD}})
     run = run_scenario(scenario, tmp_path_factory.mktemp("slow") / "run", plots=False)
     (motion,) = run.report["motions"]
     rows = np.flatnonzero(run.signals["nc.state"] == 1)
     signals = {k: run.signals[f"sensors.{k}"][rows] for k in MEASUREMENTS}
     signals["w_enc"] = centred_speed(signals["theta_enc"], signals["w_enc"], H, MonitorConfig().encoder_window_s)
     with History(":memory:") as history:
-        trace = MonitorPipeline(MonitorConfig(), history, "X").process(signals, H, motion["start"], 1, 0.0)
+        trace = MonitorPipeline(MonitorConfig(speed_threshold=SPEED_THRESHOLD), history, "X").process(signals, H, motion["start"], 1, 0.0)
     return motion, trace
 
 

@@ -134,5 +134,6 @@ def test_builtin_drive_chain_is_the_default_of_nc_and_encoder(tmp_path, feeddriv
     s = load_scenario(write(tmp_path, text))
     assert (s.nc.pitch, s.nc.belt_ratio) == (0.01, 2.0)
     assert (s.sensors.encoder.pitch, s.sensors.encoder.belt_ratio) == (0.01, 2.0)
-    s = load_scenario(write(tmp_path, text.replace("nc:\n", "nc:\n  pitch: 0.005\n")))
-    assert (s.nc.pitch, s.nc.belt_ratio) == (0.005, 2.0)  # explicit values win
+    # a second, different value is a contradiction naming both keys (it used to win silently)
+    with pytest.raises(ScenarioError, match=r"nc\.pitch = 0\.005 contradicts plant\.parameters\.pitch = 0\.01"):
+        load_scenario(write(tmp_path, text.replace("nc:\n", "nc:\n  pitch: 0.005\n")))
