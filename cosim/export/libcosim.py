@@ -1,0 +1,99 @@
+"""Run an exported system with OSP libcosim (libcosimpy): the system description as another master reads it.
+
+libcosimpy is an optional dependency (``pip install libcosimpy``, in the ``test`` extra).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from xml.etree import ElementTree
+
+from feeddrive.cosim.errors import InputError, SimulationError
+from feeddrive.cosim.export.system import OSP_NS, SCENARIO_FILE, SYSTEM_FILE
+
+
+@dataclass
+class OspRun:
+    """An exported system run by libcosim.
+
+    Attributes
+    ----------
+    values : dict
+        ``"simulator.variable"`` -> its value at the stop time, for the observed variables.
+    wall_s : float
+        Wall time of ``simulate_until`` [s] (loading and FMU instantiation excluded).
+    steps : int
+    """
+
+    values: dict[str, float | int] = field(default_factory=dict)
+    wall_s: float = 0.0
+    steps: int = 0
+
+
+def run_osp(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]], *, events: bool = True) -> OspRun:
+    """Load ``folder/OspSystemStructure.xml`` (and ``OspScenario.json`` when ``events``) into libcosim, run it
+    to ``stop`` [s] and return the last values of the ``observe``\\ d variables (simulator -> names).
+
+    Only the observed variables are read from the FMUs at each step (a last-value observer would read all
+    of them, which for the monitor's 50 variables costs more than the step itself).
+
+    Raises
+    ------
+    InputError
+        libcosimpy is missing, the folder holds no exported system, an observed variable does not exist.
+    SimulationError
+        libcosim refused the system or a step failed.
+    """
+    try:
+        from libcosimpy.CosimEnums import CosimVariableType
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+        from libcosimpy.CosimManipulator import CosimManipulator
+        from libcosimpy.CosimObserver import CosimObserver
+    except ImportError:
+        raise InputError("libcosimpy is not installed; expected 'pip install libcosimpy'") from None
+    folder = Path(folder)
+    if not (folder / SYSTEM_FILE).is_file():
+        raise InputError(f"{folder}: no {SYSTEM_FILE}; expected a folder written by 'cosim export-system'")
+    log_output_level(CosimLogLevel.ERROR)
+    try:
+        execution = CosimExecution.from_osp_config_file(str(folder))
+    except AssertionError as exc:  # libcosimpy asserts on a refused configuration
+        raise SimulationError(f"libcosim refused {folder / SYSTEM_FILE}: {exc}") from None
+    slaves = {s.name.decode(): s.index for s in execution.slave_infos()}
+    observer = CosimObserver.create_time_series(buffer_size=4)
+    execution.add_observer(observer)
+    watched = []
+    for sim, names in observe.items():
+        if sim not in slaves:
+            raise InputError(f"observe: no simulator {sim!r}; the system has {', '.join(slaves)}")
+        variables = {v.name.decode(): v for v in execution.slave_variables(slaves[sim])}
+        for name in names:
+            v = variables.get(name)
+            if v is None:
+                raise InputError(f"observe: simulator {sim!r} has no variable {name!r}")
+            kind = CosimVariableType(v.type)
+            if kind not in (CosimVariableType.REAL, CosimVariableType.INTEGER):
+                raise InputError(f"observe: {sim}.{name} is a {kind.name}; expected a Real or Integer variable")
+            observer.start_time_series(slaves[sim], v.reference, kind)
+            watched.append((sim, name, v.reference, kind))
+    if events and (folder / SCENARIO_FILE).is_file():
+        manager = CosimManipulator.create_scenario_manager()
+        execution.add_manipulator(manager)
+        if not execution.load_scenario(manager, str(folder / SCENARIO_FILE)):
+            raise SimulationError(f"libcosim refused {folder / SCENARIO_FILE}")
+    wall = time.perf_counter()
+    if not execution.simulate_until(round(stop * 1e9)):
+        raise SimulationError(f"libcosim: the run of {folder / SYSTEM_FILE} failed before {stop:g} s")
+    step_ns = round(float(ElementTree.parse(folder / SYSTEM_FILE).getroot().findtext(f"{{{OSP_NS}}}BaseStepSize"))
+                    * 1e9)
+    run = OspRun(wall_s=time.perf_counter() - wall, steps=execution.status().current_time // step_ns)
+    for sim, name, ref, kind in watched:
+        get = (observer.time_series_real_samples if kind == CosimVariableType.REAL
+               else observer.time_series_integer_samples)
+        _, steps, values = get(slaves[sim], ref, from_step=max(run.steps - 1, 0), sample_count=2)
+        run.values[f"{sim}.{name}"] = values[-1]
+    del execution  # unload the FMUs (terminate) before the caller reads their files
+    return run
