@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -108,8 +109,14 @@ def build_component_fmu(kind: str, scenario: Scenario, out_dir: str | Path, *, o
         script.write_text(_SCRIPT.format(base=base, name=name, doc=doc), encoding="utf-8")
         cfg = folder / CONFIG_FILE
         cfg.write_text(json.dumps(spec, indent=2), encoding="utf-8")
-        built = FmuBuilder.build_FMU(script, dest=Path(tmp), project_files=[cfg],
-                                     canHandleVariableCommunicationStepSize=False)
+        # pythonfmu imports the script by its module name: an FMU of the same kind loaded (or built) earlier in
+        # this process would be found in sys.modules instead of this script
+        sys.modules.pop(script.stem, None)
+        try:
+            built = FmuBuilder.build_FMU(script, dest=Path(tmp), project_files=[cfg],
+                                         canHandleVariableCommunicationStepSize=False)
+        finally:
+            sys.modules.pop(script.stem, None)
         target.unlink(missing_ok=True)
         shutil.move(str(built), str(target))
     return target

@@ -4,6 +4,7 @@ libcosimpy is an optional dependency (``pip install libcosimpy``, in the ``test`
 """
 from __future__ import annotations
 
+import ctypes
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -95,5 +96,10 @@ def run_osp(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]
                else observer.time_series_integer_samples)
         _, steps, values = get(slaves[sim], ref, from_step=max(run.steps - 1, 0), sample_count=2)
         run.values[f"{sim}.{name}"] = values[-1]
-    del execution  # unload the FMUs (terminate) before the caller reads their files
+    # Destroying an execution unloads pythonfmu's binary, which leaves Python objects pointing into it, and
+    # frees its instances from a thread without the interpreter's lock: the process then crashes later (in
+    # garbage collection). The execution is leaked on purpose, with an extra reference so that not even the
+    # interpreter's shutdown destroys it; the FMUs have written their results (the monitor's history and
+    # report are committed at the end of every motion).
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(execution))
     return run
