@@ -1,6 +1,11 @@
 """Run an exported system with OSP libcosim (libcosimpy): the system description as another master reads it.
 
 libcosimpy is an optional dependency (``pip install libcosimpy``, in the ``test`` extra).
+
+pythonfmu 0.7's binary is not safe to unload from, or outlive in, a Python process that hosts it (the
+process crashes on a later garbage collection or at exit), so ``run_osp_isolated`` runs the system in a
+child process (``python -m feeddrive.cosim.export.libcosim``), which prints the results as JSON and
+leaves with ``os._exit`` before any of that happens.
 """
 from __future__ import annotations
 
@@ -103,3 +108,45 @@ def run_osp(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]
     # report are committed at the end of every motion).
     ctypes.pythonapi.Py_IncRef(ctypes.py_object(execution))
     return run
+
+
+def run_osp_isolated(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]], *,
+                     events: bool = True, timeout: float | None = None) -> OspRun:
+    """``run_osp`` in a child process (see the module docstring); same arguments and result."""
+    import json
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "feeddrive.cosim.export.libcosim", str(folder), repr(float(stop)),
+           json.dumps({k: list(v) for k, v in observe.items()})] + ([] if events else ["--no-events"])
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
+    if proc.returncode != 0 or not lines:
+        last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
+        raise SimulationError(f"libcosim run of {folder} failed (exit status {proc.returncode}): {last}")
+    result = json.loads(lines[-1])
+    if "error" in result:
+        raise (InputError if result["kind"] == "input" else SimulationError)(result["error"])
+    return OspRun(**result)
+
+
+def _child(argv: list[str]) -> None:
+    import json
+    import os
+    import sys
+
+    folder, stop, observe = argv[0], float(argv[1]), json.loads(argv[2])
+    try:
+        run = run_osp(folder, stop, observe, events="--no-events" not in argv)
+        out = {"values": run.values, "wall_s": run.wall_s, "steps": run.steps}
+    except (InputError, SimulationError) as exc:
+        out = {"error": str(exc), "kind": "input" if isinstance(exc, InputError) else "simulation"}
+    sys.stdout.write(json.dumps(out) + "\n")
+    sys.stdout.flush()
+    os._exit(0)  # skip the interpreter's shutdown, which pythonfmu's loaded binary would crash
+
+
+if __name__ == "__main__":  # pragma: no cover - run by run_osp_isolated
+    import sys
+
+    _child(sys.argv[1:])

@@ -11,7 +11,7 @@ pytest.importorskip("pythonfmu")
 
 from export_helpers import HERE, scenario  # noqa: E402
 
-from feeddrive.cosim.export.libcosim import run_osp  # noqa: E402
+from feeddrive.cosim.export.libcosim import run_osp_isolated as run_osp  # noqa: E402
 from feeddrive.cosim.export.slave import FAULT_SENSORS, PARAMETERS  # noqa: E402
 from feeddrive.cosim.export.system import export_system, stop_time  # noqa: E402
 
