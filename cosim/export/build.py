@@ -120,3 +120,15 @@ def build_component_fmu(kind: str, scenario: Scenario, out_dir: str | Path, *, o
         target.unlink(missing_ok=True)
         shutil.move(str(built), str(target))
     return target
+
+
+def exported_component(path: str | Path) -> dict | None:
+    """The ``component.json`` of an FMU built by ``build_component_fmu`` (kind, name, step, scenario, config),
+    or None for any other FMU."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            return json.loads(z.read(f"resources/{CONFIG_FILE}").decode("utf-8"))
+    except (KeyError, zipfile.BadZipFile, ValueError, OSError):
+        return None
