@@ -2,8 +2,8 @@
 
 Writes the plant FMU, the NC, sensors and monitor FMUs, OspSystemStructure.xml (connections, step,
 initial values), OspScenario.json (the timed events) and an SSP archive into DIR; see
-cosim/export/system.py. Open it with OSP's cosim-cli (``cosim run DIR/OspSystemStructure.xml -d STOP
---scenario DIR/OspScenario.json``) or libcosimpy (``CosimExecution.from_osp_config_file(DIR)``).
+cosim/export/system.py. Open it with OSP's cosim-cli (``cosim run DIR``, the stop time and OspScenario.json as its ``cosim help
+run`` says) or libcosimpy (``CosimExecution.from_osp_config_file(DIR)``, ``load_scenario``).
 """
 from __future__ import annotations
 
@@ -33,6 +33,6 @@ def main(args: argparse.Namespace) -> int:
     if scenario.plant.input_hold == "foh":
         print("  note: OSP masters set no input derivatives: the plant holds its speed reference over each step "
               "(input_hold zoh; R and L come out ~0.2 % lower than with cosim run's foh)")
-    print(f"  run: cosim run {Path(args.out) / 'OspSystemStructure.xml'} -d {stop:.12g} "
-          f"--scenario {Path(args.out) / 'OspScenario.json'}   (OSP cosim-cli)")
+    print(f"  open it: libcosimpy CosimExecution.from_osp_config_file({str(Path(args.out))!r}), run to {stop:.12g} s, "
+          "or OSP's cosim-cli 'cosim run' on the folder (README)")
     return 0
