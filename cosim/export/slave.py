@@ -38,8 +38,7 @@ CONFIG_FILE = "component.json"
 #: steps announced to ``Component.setup`` (an FMU does not know its stop time; the components only use
 #: it to size buffers, which they cap by their own limits)
 OPEN_END_STEPS = 2**31
-#: parameters of the Table I diagnosis code: bit k set for the k-th fault of TABLE_I, the last bit for
-#: an unexplained drift (see ``diagnosis_code``)
+#: the six estimated parameters, in the order of the monitor FMU's outputs
 PARAMETERS = ("R", "L", "K", "Jt", "ft", "Cd")
 PARAMETER_UNITS = {"R": "Ohm", "L": "H", "K": "N.m/A", "Jt": "kg.m2", "ft": "N.m.s/rad", "Cd": "N.m"}
 #: the six measured signals a sensor-fault flag can name (estimator.validation.PAIRS)

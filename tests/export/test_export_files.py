@@ -97,3 +97,18 @@ def test_cli_refuses_what_an_osp_system_cannot_hold(feeddrive_fmu, tmp_path, cap
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1 and message in err, err
     assert not (tmp_path / "out" / "OspSystemStructure.xml").exists()
+
+
+def test_an_fmu_refuses_a_step_other_than_the_scenarios(healthy_system, tmp_path):
+    """The NC's feed-forward and the sensors' encoder window are built on the step: another one is an error."""
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    _, paths = healthy_system
+    np.savez(tmp_path / "table.npz", names=["position", "request"], table=np.zeros((3, 2)), h=2e-4, outputs=[])
+    proc = subprocess.run([sys.executable, str(HERE / "fmpy_driver.py"), str(paths["nc"]), str(tmp_path / "table.npz"),
+                           str(tmp_path / "out.json")], capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0 and "doStep" in proc.stderr
+    assert not (tmp_path / "out.json").exists()
