@@ -9,11 +9,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from feeddrive.cosim.export.build import KINDS
+#: the exportable components (feeddrive.cosim.export.build.KINDS; not imported here, so that the other
+#: subcommands do not load pythonfmu)
+COMPONENTS = ("nc", "sensors", "monitor")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("component", choices=tuple(KINDS), help="the component to export")
+    parser.add_argument("component", choices=COMPONENTS, help="the component to export")
     parser.add_argument("scenario", type=Path, help="scenario YAML file whose section configures the FMU")
     parser.add_argument("--out", type=Path, required=True, help="folder for the .fmu (created)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing FMU of the same name")
