@@ -38,9 +38,11 @@ class OspRun:
     steps: int = 0
 
 
-def run_osp(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]], *, events: bool = True) -> OspRun:
+def run_osp(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]], *, events: bool = True,
+            ssp: bool = False) -> OspRun:
     """Load ``folder/OspSystemStructure.xml`` (and ``OspScenario.json`` when ``events``) into libcosim, run it
-    to ``stop`` [s] and return the last values of the ``observe``\\ d variables (simulator -> names).
+    to ``stop`` [s] and return the last values of the ``observe``\\ d variables (simulator -> names). With
+    ``ssp``, the system comes from the folder's SSP archive instead (the step from OspSystemStructure.xml).
 
     Only the observed variables are read from the FMUs at each step (a last-value observer would read all
     of them, which for the monitor's 50 variables costs more than the step itself).
@@ -64,10 +66,16 @@ def run_osp(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]
     if not (folder / SYSTEM_FILE).is_file():
         raise InputError(f"{folder}: no {SYSTEM_FILE}; expected a folder written by 'cosim export-system'")
     log_output_level(CosimLogLevel.ERROR)
+    step_ns = round(float(ElementTree.parse(folder / SYSTEM_FILE).getroot().findtext(f"{{{OSP_NS}}}BaseStepSize"))
+                    * 1e9)
+    archives = sorted(folder.glob("*.ssp"))
+    if ssp and len(archives) != 1:
+        raise InputError(f"{folder}: expected one .ssp archive, found {len(archives)}")
     try:
-        execution = CosimExecution.from_osp_config_file(str(folder))
+        execution = (CosimExecution.from_ssp_file(str(archives[0]), step_size=step_ns) if ssp
+                     else CosimExecution.from_osp_config_file(str(folder)))
     except AssertionError as exc:  # libcosimpy asserts on a refused configuration
-        raise SimulationError(f"libcosim refused {folder / SYSTEM_FILE}: {exc}") from None
+        raise SimulationError(f"libcosim refused the system in {folder}: {exc}") from None
     slaves = {s.name.decode(): s.index for s in execution.slave_infos()}
     observer = CosimObserver.create_time_series(buffer_size=4)
     execution.add_observer(observer)
@@ -93,8 +101,6 @@ def run_osp(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]
     wall = time.perf_counter()
     if not execution.simulate_until(round(stop * 1e9)):
         raise SimulationError(f"libcosim: the run of {folder / SYSTEM_FILE} failed before {stop:g} s")
-    step_ns = round(float(ElementTree.parse(folder / SYSTEM_FILE).getroot().findtext(f"{{{OSP_NS}}}BaseStepSize"))
-                    * 1e9)
     run = OspRun(wall_s=time.perf_counter() - wall, steps=execution.status().current_time // step_ns)
     for sim, name, ref, kind in watched:
         get = (observer.time_series_real_samples if kind == CosimVariableType.REAL
@@ -111,14 +117,15 @@ def run_osp(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]
 
 
 def run_osp_isolated(folder: str | Path, stop: float, observe: Mapping[str, Sequence[str]], *,
-                     events: bool = True, timeout: float | None = None) -> OspRun:
+                     events: bool = True, ssp: bool = False, timeout: float | None = None) -> OspRun:
     """``run_osp`` in a child process (see the module docstring); same arguments and result."""
     import json
     import subprocess
     import sys
 
     cmd = [sys.executable, "-m", "feeddrive.cosim.export.libcosim", str(folder), repr(float(stop)),
-           json.dumps({k: list(v) for k, v in observe.items()})] + ([] if events else ["--no-events"])
+           json.dumps({k: list(v) for k, v in observe.items()})] + ([] if events else ["--no-events"]) \
+        + (["--ssp"] if ssp else [])
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
     if proc.returncode != 0 or not lines:
@@ -137,7 +144,7 @@ def _child(argv: list[str]) -> None:
 
     folder, stop, observe = argv[0], float(argv[1]), json.loads(argv[2])
     try:
-        run = run_osp(folder, stop, observe, events="--no-events" not in argv)
+        run = run_osp(folder, stop, observe, events="--no-events" not in argv, ssp="--ssp" in argv)
         out = {"values": run.values, "wall_s": run.wall_s, "steps": run.steps}
     except (InputError, SimulationError) as exc:
         out = {"error": str(exc), "kind": "input" if isinstance(exc, InputError) else "simulation"}

@@ -196,6 +196,15 @@ def write_ssp(scenario: Scenario, out_dir: Path, sims: list[str], sources: dict[
                           type="application/x-fmu-sharedlibrary")
         values = [(v, "Real", x) for v, x in initial.get(name, {}).items()]
         values += [(v, "String", x) for v, x in strings.get(name, {}).items()]
+        # SSP readers (libcosim) resolve connections and parameter values through declared connectors
+        connectors = {d_var: "input" for _, _, d, d_var in links if d == name}
+        connectors |= {s_var: "output" for s, s_var, _, _ in links if s == name}
+        connectors |= {var: ("parameter", typ) for var, typ, _ in values if var not in connectors}
+        if connectors:
+            node = SubElement(comp, "ssd:Connectors")
+            for var, kind in connectors.items():
+                kind, typ = kind if isinstance(kind, tuple) else (kind, "Real")
+                SubElement(SubElement(node, "ssd:Connector", name=var, kind=kind), f"ssc:{typ}")
         if values:
             binding = SubElement(SubElement(comp, "ssd:ParameterBindings"), "ssd:ParameterBinding")
             pset = SubElement(SubElement(binding, "ssd:ParameterValues"), "ssv:ParameterSet", version="1.0",

@@ -79,3 +79,14 @@ def test_sensor_fault_event_from_the_osp_scenario_flags_the_first_current_sensor
     (motion,) = json.loads((tmp_path / "history.report.json").read_text())["motions"]
     (fault,) = motion["sensor_faults"]
     assert fault["gain"] == pytest.approx(1.03, abs=3e-3) and fault["offset"] == pytest.approx(0.2, abs=0.03)
+
+
+def test_the_ssp_archive_runs_like_the_osp_system(healthy_system, tmp_path, monkeypatch):
+    """libcosim reads the SSP archive into the same system: identical signals after 0.3 s (the motion's start)."""
+    _, paths = healthy_system
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    watch = {"plant": ["x", "i"], "sensors": ["Im1", "w_enc"], "nc": ["speed_ref"]}
+    osp = run_osp(paths["system"].parent, 0.3, watch)
+    ssp = run_osp(paths["system"].parent, 0.3, watch, ssp=True)
+    assert osp.values == ssp.values
+    assert abs(osp.values["plant.x"]) > 1e-3  # the axis is moving: the connections carry the NC's reference
