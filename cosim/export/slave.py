@@ -245,15 +245,20 @@ class SensorsSlave(ComponentSlave):
 
     kind = "sensors"
     FIELDS = ("gain", "offset", "noise")
+    #: unit of each channel's offset and noise (the encoder's are angles)
+    CHANNEL_UNITS = {"Im1": "A", "Im2": "A", "u": "V", "u_ref": "V", "w_tach": "rad/s", "encoder": "rad"}
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         channels = self.model.model_validate(self.section).channels()
         self._channels = {f"{c}.{f}": float(getattr(cfg, f)) for c, cfg in channels.items() for f in self.FIELDS}
         for name in self._channels:
-            self._add(Real(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable,
-                           description=f"sensor channel {name} (a change during the run is a sensor fault)",
-                           getter=lambda n=name: self._channels[n], setter=lambda v, n=name: self._set_channel(n, v)))
+            channel, _, field = name.partition(".")
+            unit = "1" if field == "gain" else self.CHANNEL_UNITS[channel]
+            self._add(UnitReal(name, unit, causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable,
+                               description=f"sensor channel {name} (a change during the run is a sensor fault)",
+                               getter=lambda n=name: self._channels[n],
+                               setter=lambda v, n=name: self._set_channel(n, v)))
 
     def input_units(self) -> tuple[str, ...]:
         return ("V", "V", "A", "rad/s", "m")

@@ -41,6 +41,7 @@ def test_ports_units_and_parameters_come_from_the_components_and_the_scenario(he
     assert (md["sensors"]["Im1"].unit, md["sensors"]["theta_enc"].unit) == ("A", "rad")
     assert int(md["sensors"]["seed"].start) == 1  # the scenario's seed
     assert md["sensors"]["Im1.gain"].variability == "tunable"
+    assert (md["sensors"]["Im1.offset"].unit, md["sensors"]["w_tach.noise"].unit) == ("A", "rad/s")
     assert (md["monitor"]["R"].unit, md["monitor"]["Cd_std"].unit) == ("Ohm", "N.m")
     assert md["monitor"]["db"].type == "String" and md["monitor"]["motions"].type == "Integer"
     assert float(md["monitor"]["step_size"].start) == 1e-4
