@@ -112,7 +112,8 @@ class History:
             if not parent.is_dir():
                 raise EstimatorInputError(f"history database {self.path}: folder {parent} does not exist")
         try:
-            self._db = sqlite3.connect(self.path, isolation_level=None, timeout=30.0)
+            # check_same_thread off: an FMU's calls come from its master's worker threads (libcosim), one at a time
+            self._db = sqlite3.connect(self.path, isolation_level=None, timeout=30.0, check_same_thread=False)
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.execute("PRAGMA foreign_keys=ON")

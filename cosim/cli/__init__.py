@@ -27,6 +27,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "history": ("feeddrive.cosim.cli.history", "print and plot the parameter history of an axis"),
     "campaign": ("feeddrive.cosim.cli.campaign", "run a Monte Carlo / sweep campaign of scenarios"),
     "design": ("feeddrive.cosim.cli.design", "choose the rapid-move acceleration that minimises parameter variance"),
+    "export-fmu": ("feeddrive.cosim.cli.export_fmu", "build an FMU of the scenario's NC, sensors or monitor (pythonfmu)"),
+    "export-system": ("feeddrive.cosim.cli.export_system",
+                      "write the scenario as an OSP system (FMUs, OspSystemStructure.xml, events, SSP)"),
 }
 
 
