@@ -75,6 +75,8 @@ class PlantConfig(_Strict):
     sha256: str | None = None
     interface: Literal["cs", "me"] = "cs"
     tolerance: float = Field(1e-8, gt=0, description="relative tolerance of CVode (interface: me)")
+    call_timeout: float = Field(60.0, gt=0, description="watchdog of `cosim run` [s]: a single FMI call "
+                                "running longer stops the run as hung (report.json status: hung)")
     parameters: dict[str, float] = {}
     start: dict[str, float] = {}
     map: dict[Role, MapEntry] = {}
