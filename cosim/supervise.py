@@ -133,6 +133,7 @@ def _child(target: Callable[..., Any], args: tuple, rec: fmi_progress.Record, fd
     try:
         fmi_progress.install(rec)
         log = open(log_path, "a", encoding="utf-8", buffering=1) if log_path else None  # noqa: SIM115
+        faulthandler.disable()  # an inherited handler (PYTHONFAULTHANDLER, pytest) would print to the terminal
         if log is not None:
             faulthandler.enable(log)  # the Python stack at SIGSEGV / SIGABRT, then the signal proceeds
             handler = logging.StreamHandler(log)

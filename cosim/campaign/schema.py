@@ -19,6 +19,7 @@ estimates are from the truth. A campaign file says which runs to make::
     run: cosim.campaign:run_cosim      # the run function (``package.module:function``)
     run_options: {methods: [ls, iv]}   # passed to the run function as ``spec.options``
     keep_signals: false                # keep each run's signals.csv and plots under OUT/runs/<id>/
+    timeout: 600                       # optional wall-time limit of each run [s] (also --timeout)
 
 Runs are numbered grid point by grid point (``index = grid_index * repetitions + repetition``). The
 run seed and the draws come from ``numpy.random.SeedSequence(seed, spawn_key=(index, stream))``, and
@@ -29,7 +30,9 @@ Execution: in this process (``workers=1``), on a local process pool (``workers >
 existing ``dask.distributed`` cluster (``scheduler="tcp://host:port"``). Each run's outcome depends
 only on its spec, so the three give the same results. Every finished run is written at once, atomically,
 to ``OUT/runs/<id>.json``; a campaign started again on the same out dir runs only what is missing.
-A run that raises is recorded as ``failed`` with its reason and the campaign goes on.
+Each run is a supervised child process (cosim/supervise.py): a run that raises, crashes (an FMU's
+segmentation fault) or hangs (over its ``plant.call_timeout`` or the campaign's ``timeout``) is recorded
+as ``failed`` with its reason and the campaign goes on.
 
 Run function protocol: ``fn(spec: RunSpec) -> dict`` (JSON-serialisable), shaped as::
 
@@ -132,6 +135,8 @@ class Campaign(_Frozen):
     run: str = "feeddrive.cosim.campaign:run_cosim"
     run_options: dict[str, Any] = {}
     keep_signals: bool = False
+    timeout: float | None = Field(default=None, gt=0, description="wall-time limit of each run [s]: a run over "
+                                  "it is killed and recorded as failed (hung)")
     root: str = "."
 
     @field_validator("sweep")

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
 from faulty import MAP, MODES, build
+
 from feeddrive.cosim.cli import main
 from feeddrive.cosim.supervise import last_recorded_time, supervise
 
