@@ -20,6 +20,8 @@ from feeddrive.cosim.errors import DataError, InputError
 
 #: Fewest samples a recording must have.
 MIN_SAMPLES = 10
+#: Largest CSV file read [bytes] (the rows are held in memory as text, ~10 times the file's size).
+MAX_BYTES = 512 << 20
 #: Largest relative deviation of a time step from the median step.
 TIME_JITTER = 0.01
 
@@ -85,13 +87,22 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
         raise DataError(f"{path}: no such file")
     if sample_time is not None and not sample_time > 0:
         raise DataError(f"{path}: sample time must be > 0 s, got {sample_time}")
+    size = path.stat().st_size
+    if size > MAX_BYTES:
+        raise DataError(f"{path}: {size} bytes; expected a CSV file of at most {MAX_BYTES} bytes "
+                        "(split the recording)")
     raw = path.read_bytes()
+    reader = None
     try:  # utf-8-sig: a byte-order mark (spreadsheet exports) must not end up in the first header
-        rows = list(csv.reader(io.StringIO(raw.decode("utf-8-sig"), newline="")))
+        reader = csv.reader(io.StringIO(raw.decode("utf-8-sig"), newline=""))
+        rows = list(reader)
     except UnicodeDecodeError as exc:
         line = raw[:exc.start].count(b"\n") + 1
         raise DataError(f"{path}: line {line}: byte 0x{exc.object[exc.start]:02x} is not UTF-8; "
                         "expected a UTF-8 CSV file") from None
+    except csv.Error as exc:  # a NUL byte, a field over the csv module's limit
+        line = reader.line_num if reader is not None else 1
+        raise DataError(f"{path}: line {line}: {exc}; expected a CSV text file") from None
     if not rows:
         raise DataError(f"{path}: empty file, expected a header row")
     header = [h.strip() for h in rows[0]]

@@ -65,6 +65,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, PositiveInt, ValidationError, field_validator, model_validator
 
 from feeddrive.cosim.errors import InputError
+from feeddrive.cosim.yaml_source import read_yaml
 from feeddrive.models import feed_drive
 
 #: the physical parameters the monitor estimates (the optional offset T0 left out)
@@ -186,7 +187,7 @@ class Campaign(_Frozen):
         path = Path(self.root, self.base)
         if not path.is_file():
             raise CampaignError(f"campaign {self.name}: base: scenario file {path} not found")
-        data = yaml.safe_load(path.read_text())
+        data, _ = read_yaml(path, "scenario", CampaignError)
         if not isinstance(data, dict):
             raise CampaignError(f"{path}: expected a scenario mapping at the top level")
         return data
@@ -223,11 +224,9 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
     path = Path(path)
     if not path.is_file():
         raise CampaignError(f"{path}: campaign file not found")
-    text = path.read_text()
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise CampaignError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from None
+    # size limit, UTF-8, bounded aliases and nesting, YAML errors with their line (cosim/yaml_source.py)
+    data, _ = read_yaml(path, "campaign", CampaignError)
+    text = path.read_text(encoding="utf-8-sig")
     if not isinstance(data, dict):
         raise CampaignError(f"{path}: expected a mapping at the top level")
     if "root" in data:
