@@ -60,10 +60,11 @@ def read_yaml(path: Path, kind: str = "scenario", error: type[ValueError] = Scen
         line = raw[:exc.start].count(b"\n") + 1
         raise error(f"{path}:{line}: byte 0x{raw[exc.start]:02x} is not UTF-8; expected a UTF-8 {kind} file") from None
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        _check_depth(text, path, error)
+        root = yaml.compose(text, Loader=_LOADER)
         if root is not None:
             _check_size(root, path, error)
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_LOADER)  # noqa: S506 - a safe loader (CSafeLoader or SafeLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark else str(path)
@@ -79,6 +80,24 @@ def read_yaml(path: Path, kind: str = "scenario", error: type[ValueError] = Scen
     if root is not None:
         _line_map(root, (), lines)
     return data, lines
+
+
+#: libyaml's loader when PyYAML was built with it (faster, and not recursive in Python)
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+def _check_depth(text: str, path: Path, error: type[ValueError]) -> None:
+    """Refuse a document nested deeper than ``MAX_DEPTH``, from the parser's events (no recursion, and
+    it stops at the first level too deep instead of composing thousands)."""
+    depth = 0
+    for event in yaml.parse(text, Loader=_LOADER):
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise error(f"{path}:{event.start_mark.line + 1}: YAML nested too deeply; expected at most "
+                            f"{MAX_DEPTH} levels")
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
 
 
 def _check_size(root: yaml.Node, path: Path, error: type[ValueError]) -> None:
