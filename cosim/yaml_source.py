@@ -144,7 +144,9 @@ def located_error(source: str, lines: Mapping[KeyPath, int], path: KeyPath, mess
     path = tuple(path)
     line = next((lines[path[:k]] for k in range(len(path), -1, -1) if path[:k] in lines), None)
     where = f"{source}:{line}" if line else source
-    key = f" {format_path(path)}:" if path else ""
+    # a key with a newline or a control character is shown as its repr: the message stays one line
+    key = f" {format_path(tuple(p if not isinstance(p, str) or p.isprintable() else repr(p) for p in path))}:" \
+        if path else ""
     return ScenarioError(f"{where}:{key} {message}")
 
 

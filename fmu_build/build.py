@@ -1,6 +1,7 @@
 """Compile generated sources with the system C compiler, pack the FMU, and cache the built-in plant."""
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import shlex
@@ -95,6 +96,14 @@ def cache_key(sources: Sources) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
+@functools.lru_cache(maxsize=2)
+def _generated(backlash: bool) -> tuple[Model, Sources]:
+    """The model and its generated sources, once per process (~60 ms each: every scenario load needs
+    the cache key; the model code cannot change while the process runs)."""
+    model = feed_drive(backlash=backlash)
+    return model, generate(model)
+
+
 def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False) -> Path:
     """The built-in feed-drive plant FMU, built once and cached.
 
@@ -116,8 +125,7 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False) 
     pathlib.Path
         Path of the cached ``FeedDrive.fmu``.
     """
-    model = feed_drive(backlash=backlash)
-    sources = generate(model)
+    model, sources = _generated(backlash)
     root = Path(cache_dir or os.environ.get("FEEDDRIVE_CACHE") or Path.home() / ".cache" / "feeddrive")
     target = root / cache_key(sources) / f"{model.name}.fmu"
     if target.is_file():
