@@ -9,6 +9,7 @@ import subprocess
 import tempfile
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import fmpy
 
@@ -96,11 +97,19 @@ def cache_key(sources: Sources) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-@functools.lru_cache(maxsize=2)
 def _generated(backlash: bool) -> tuple[Model, Sources]:
-    """The model and its generated sources, once per process (~60 ms each: every scenario load needs
-    the cache key; the model code cannot change while the process runs)."""
-    model = feed_drive(backlash=backlash)
+    """The model and its generated sources, generated once per process and input (~60 ms each: every
+    scenario load needs the cache key). The memo's key is what they are made of: the model function,
+    the variant and the wrapper source file with its modification time."""
+    from feeddrive.fmu_build import codegen
+
+    wrapper = Path(codegen.WRAPPER_SOURCE)
+    return _generate(feed_drive, backlash, wrapper, wrapper.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=4)
+def _generate(model_function: Any, backlash: bool, wrapper: Path, wrapper_mtime_ns: int) -> tuple[Model, Sources]:
+    model = model_function(backlash=backlash)
     return model, generate(model)
 
 
