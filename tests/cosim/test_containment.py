@@ -136,3 +136,29 @@ def test_history_written_before_a_crash_is_kept(tmp_path, faulty_fmu, capfd):
     assert after[:1] == before and len(after) == 2 and json.loads(after[1][1])["end"] == pytest.approx(0.2999)
 
 
+
+
+def _cli(argv: list[str]) -> None:
+    import os
+
+    os._exit(main(argv))
+
+
+def test_two_cosim_runs_at_once_on_one_history_both_store_their_motions(tmp_path, faulty_fmu, capfd):
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    path = scenario(tmp_path, faulty_fmu, "none")
+    procs = [ctx.Process(target=_cli, args=(["run", str(path), "--out", str(tmp_path / f"out{k}"), "--no-progress"],))
+             for k in (1, 2)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(120)
+    capfd.readouterr()
+    assert [p.exitcode for p in procs] == [0, 0]
+    with sqlite3.connect(tmp_path / "history.sqlite") as db:
+        assert db.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+        ends = [json.loads(r)["end"] for (r,) in db.execute("SELECT result FROM motions").fetchall()]
+    reports = [json.loads((tmp_path / f"out{k}" / "report.json").read_text()) for k in (1, 2)]
+    assert len(ends) == 2 and ends == pytest.approx([r["motions"][0]["end"] for r in reports])
