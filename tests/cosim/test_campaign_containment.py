@@ -3,6 +3,7 @@ and are aggregated, the 2 are recorded failed with their reason, on the local po
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 from faulty import MAP, MODES, build
@@ -88,3 +89,29 @@ def test_cli_prints_the_failures_and_exits_0(tmp_path, faulty_campaign, capsys):
     out = capsys.readouterr().out
     assert "2 runs (2 run now, 1 failed)" in out
     assert "crashed: plant: the process crashed by signal SIGABRT in fmi2DoStep at t=0.5 s" in out
+
+
+def kill_my_worker(spec):
+    """A run function that kills the process running it from outside its containment: the Dask worker
+    (the supervised child's parent), as the kernel's OOM killer would."""
+    import os
+    import signal
+
+    if spec.index == 1:
+        os.kill(os.getppid(), signal.SIGKILL)
+    return {"truth": {}, "injected": {"plant": {}, "sensors": {}}, "motions": []}
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("FEEDDRIVE_DASK_PROCESSES"), reason="starts Dask worker processes (~30 s "
+                    "here); FEEDDRIVE_DASK_PROCESSES=1 runs it")
+def test_dask_worker_killed_under_a_run_is_recorded_not_retried_forever(tmp_path):
+    import dask
+    from distributed import LocalCluster
+
+    c = Campaign(name="killer", base={"name": "s"}, run="test_campaign_containment:kill_my_worker", repetitions=3)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}), \
+            LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        res = run_campaign(c, tmp_path / "out", scheduler=cluster.scheduler_address, plots=False)
+    assert [r["status"] for r in res.records] == ["ok", "failed", "ok"]
+    assert res.records[1]["reason"].startswith("crashed: Dask workers died running it")
