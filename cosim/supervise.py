@@ -12,7 +12,7 @@ pipe. The parent waits on the pipe and watches the record:
   60 s), or the whole target longer than ``timeout``: the parent kills the child (SIGKILL): ``hung``.
 
 The fork costs a few milliseconds and nothing per step (the record is written by the adapter either
-way): ``benchmarks/bench_containment.py`` measures it. Python tracebacks of the child, and the
+way): ``python benchmarks/bench_cosim.py --containment`` measures it. Python tracebacks of the child, and the
 Python stack at a fatal signal (faulthandler), go to the run's log file, never to the user's terminal.
 
 :func:`run_supervised` is ``cosim run``'s use of it: it writes report.json with ``status: crashed``
@@ -261,6 +261,8 @@ def run_supervised(scenario: Any, out_dir: str | Path, *, progress: bool = False
     if outcome.status == "error":
         raise outcome.error
     message = outcome.describe()
+    if progress and sys.stderr.isatty():
+        sys.stderr.write("\r\x1b[K")  # the killed child's progress bar would share the error's line
     with open(log, "a", encoding="utf-8") as f:
         f.write(f"supervisor: {message}\n")
     _write_failure_report(scenario, out_dir, outcome, message)
