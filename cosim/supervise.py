@@ -218,6 +218,17 @@ def _kill(pid: int) -> None:
         pass
 
 
+def _reported() -> tuple[type[BaseException], ...]:
+    from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+
+    return (InputError, SimulationError, EstimatorInputError, NotEnoughExcitation, FileNotFoundError, FileExistsError,
+            IsADirectoryError, NotADirectoryError, PermissionError)
+
+
+#: exceptions the CLI turns into one line itself (cosim/cli/__init__.py); any other is wrapped
+_REPORTED = _reported()
+
+
 # -- cosim run -------------------------------------------------------------------------------------------
 def _run_child(scenario: Any, out_dir: Path, progress: bool, default_history: Path | None, plots: bool) -> Any:
     from feeddrive.cosim.run import RunResult, run_scenario
@@ -259,7 +270,12 @@ def run_supervised(scenario: Any, out_dir: str | Path, *, progress: bool = False
     if outcome.status == "ok":
         return outcome.value
     if outcome.status == "error":
-        raise outcome.error
+        exc = outcome.error
+        if isinstance(exc, _REPORTED) or not isinstance(exc, Exception):
+            raise exc
+        # a bug, not a user's mistake: one line for the user, the traceback is in run.log
+        text = " ".join((str(exc) or type(exc).__name__).split())
+        raise SimulationError(f"{type(exc).__name__}: {text} (the traceback is in {log})")
     message = outcome.describe()
     if progress and sys.stderr.isatty():
         sys.stderr.write("\r\x1b[K")  # the killed child's progress bar would share the error's line

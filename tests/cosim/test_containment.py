@@ -17,6 +17,7 @@ import yaml
 from faulty import MAP, MODES, build
 
 from feeddrive.cosim.cli import main
+from feeddrive.cosim.component import Component
 from feeddrive.cosim.supervise import last_recorded_time, supervise
 
 FAIL_TIME = 0.5
@@ -162,3 +163,34 @@ def test_two_cosim_runs_at_once_on_one_history_both_store_their_motions(tmp_path
         ends = [json.loads(r)["end"] for (r,) in db.execute("SELECT result FROM motions").fetchall()]
     reports = [json.loads((tmp_path / f"out{k}" / "report.json").read_text()) for k in (1, 2)]
     assert len(ends) == 2 and ends == pytest.approx([r["motions"][0]["end"] for r in reports])
+
+
+class BrokenReport(Component):
+    """A user component with a bug in report(): a Python exception outside the stepping loop."""
+
+    output_names = ("n",)
+    output_units = ("1",)
+
+    def setup(self, t0, h, n_steps):
+        pass
+
+    def step(self, n):
+        pass
+
+    def get_outputs(self):
+        return [1.0]
+
+    def report(self):
+        return {}["missing"]
+
+
+def test_a_bug_in_the_run_is_one_line_and_its_traceback_is_in_the_log(tmp_path, faulty_fmu, capfd):
+    path = scenario(tmp_path, faulty_fmu, "none")
+    text = path.read_text() + "components:\n- {name: broken, class: 'test_containment:BrokenReport'}\n"
+    path.write_text(text)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 1
+    err = capfd.readouterr().err
+    assert err == f"cosim run: failed: KeyError: 'missing' (the traceback is in {out / 'run.log'})\n"
+    log = (out / "run.log").read_text()
+    assert "Traceback (most recent call last)" in log and "return {}[\"missing\"]" in log
