@@ -129,7 +129,10 @@ def supervise(target: Callable[..., Any], *args: Any, timeout: float | None = No
     finally:
         os.close(read_fd)
         del rec
-        mapping.close()
+        try:
+            mapping.close()
+        except BufferError:  # the record is still referenced (e.g. by a traceback): freed with it
+            pass
 
 
 def _child(target: Callable[..., Any], args: tuple, rec: fmi_progress.Record, fd: int,
