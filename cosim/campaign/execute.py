@@ -71,6 +71,8 @@ def execute(run: str | Callable[[RunSpec], dict], spec: RunSpec, timeout: float 
             result, status = json.loads(outcome.value), "ok"
         elif outcome.status == "error":
             exc = outcome.error
+            if not isinstance(exc, Exception):  # Ctrl-C in the run stops the campaign, as without a child
+                raise exc
             reason = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
         else:
             reason = f"{outcome.status}: {outcome.describe()}"
