@@ -12,9 +12,12 @@ Three runs of the same length and communication step:
 Prints seconds (best of ``--repeat``), microseconds per step and the ratio cosim / fmpy (target
 <= 1.5), also without the monitor (whose end-of-motion processing is a fixed cost per motion) and
 against fmpy without an input table (its floor). ``--profile`` prints the cProfile table of one
-co-simulation run.
+co-simulation run. ``--containment`` also measures the cost of running the whole run
+(``cosim.run.run_scenario``, CSV and report included, plots excluded) in a supervised child process as
+``cosim run`` does (``cosim.supervise.run_supervised``) against the same run in this process, alternated
+in the same run, best of ``--repeat`` (target: at most 5 % more wall time).
 
-    python benchmarks/bench_cosim.py [--scenario examples/tool_change.yaml] [--repeat 3] [--profile]
+    python benchmarks/bench_cosim.py [--scenario examples/tool_change.yaml] [--repeat 3] [--profile] [--containment]
 """
 from __future__ import annotations
 
@@ -104,7 +107,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--scenario", type=Path, default=ROOT / "examples" / "tool_change.yaml")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--containment", action="store_true", help="also measure the supervised child process")
     args = parser.parse_args(argv)
+    if args.containment:
+        containment(load_scenario(args.scenario), args.repeat)
     scenario = load_scenario(args.scenario)
     loop = scenario.model_copy(update={"monitor": None})
     best: dict[str, float] = {}
@@ -143,6 +149,25 @@ def main(argv: list[str] | None = None) -> None:
         profile.runcall(master.run)
         master.terminate()
         pstats.Stats(profile).sort_stats("tottime").print_stats(15)
+
+
+def containment(scenario, repeat: int) -> None:
+    """Wall time of a run in this process against the same run in a supervised child (cosim run)."""
+    from feeddrive.cosim.run import run_scenario
+    from feeddrive.cosim.supervise import run_supervised
+
+    best = {"in process": float("inf"), "supervised child": float("inf")}
+    with tempfile.TemporaryDirectory() as tmp:
+        run_scenario(scenario, Path(tmp, "warm-up"), plots=False)  # imports and FMU cache, for both
+        for k in range(repeat):
+            for label, fn in (("in process", run_scenario), ("supervised child", run_supervised)):
+                t = time.perf_counter()
+                fn(scenario, Path(tmp, f"{label}-{k}"), plots=False)
+                best[label] = min(best[label], time.perf_counter() - t)
+    for label, wall in best.items():
+        print(f"  containment: {label:16s} {wall:7.3f} s")
+    print(f"  containment overhead = {100 * (best['supervised child'] / best['in process'] - 1):+.1f} % "
+          "(target <= 5 %)")
 
 
 if __name__ == "__main__":

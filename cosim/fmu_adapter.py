@@ -38,10 +38,13 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
+from feeddrive.cosim import fmi_progress
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import FMIError, ScenarioError, SimulationError
 from feeddrive.cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, PlantConfig
 
+_SET_REAL, _DO_STEP, _GET_REAL = (fmi_progress.CODE[f] for f in ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal"))
+_SET_DERIVATIVES = fmi_progress.CODE["fmi2SetRealInputDerivatives"]
 STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
 _LOG_LEVEL = (logging.DEBUG, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
 
@@ -54,6 +57,26 @@ class FMUDiscard(FMIError):
         log = f" ({last_log})" if last_log else ""
         self.args = (f"{component}: {function} returned fmi2Discard at t={time:.6g} s: the FMU could not "
                      f"complete it{log}; the run stops (fixed communication step, no retry)",)
+
+
+class NonFiniteOutput(FMIError):
+    """fmi2GetReal returned NaN or an infinity for an output: the run stops (nothing downstream can use it)."""
+
+    def __init__(self, component: str, output: str, variable: str, value: float, time: float) -> None:
+        super().__init__(component, "fmi2GetReal", "a non-finite value", time)
+        self.args = (f"{component}: fmi2GetReal returned {value} for {output} (FMU variable {variable}) at "
+                     f"t={time:.6g} s; expected a finite number",)
+
+
+def _marked(rec: fmi_progress.Record, code: int, function: Any) -> Any:
+    """``function`` (one of fmpy's wrappers of an FMI function) recording itself in progress in ``rec``."""
+    def call(*args: Any) -> Any:
+        rec.function = code
+        try:
+            return function(*args)
+        finally:
+            rec.function = fmi_progress.IDLE
+    return call
 
 
 class _HeldInputs:
@@ -128,6 +151,13 @@ class FMUComponent(Component):
         kind = md.coSimulation if cs else md.modelExchange
         self._fmu = fmu = cls(guid=md.guid, unzipDirectory=self._unzip, modelIdentifier=kind.modelIdentifier,
                               instanceName=self.name)
+        # the supervisor (cosim/supervise.py) reads which FMI function is in progress from this record
+        self._rec = rec = fmi_progress.record()
+        rec.component = self.name.encode("utf-8")[:63]
+        rec.call_timeout, rec.time = cfg.call_timeout, t0
+        for fname, code in fmi_progress.CODE.items():
+            if code and callable(getattr(fmu, fname, None)):
+                setattr(fmu, fname, _marked(rec, code, getattr(fmu, fname)))
         for fname in dir(cls):
             if fname.startswith("fmi2"):
                 f = getattr(fmu.dll, fname)
@@ -202,11 +232,16 @@ class FMUComponent(Component):
         self._u[:] = values
 
     def step(self, n: int) -> None:
-        c, h = self._c, self._h
+        c, h, rec = self._c, self._h, self._rec
+        rec.time = t = self._t0 + n * h
+        rec.function = _SET_REAL
         self._set_real(c, self._uvr, self._nu, self._u)
-        self._do_step(c, self._t0 + n * h, h, 1)
+        rec.function = _DO_STEP
+        self._do_step(c, t, h, 1)
         self._k = n + 1
+        rec.function = _GET_REAL
         self._get_real(c, self._yvr, self._ny, self._y)
+        rec.function = 0
 
     def _start_foh(self, variables: dict, in_vars: list[str]) -> None:
         cont = [k for k, name in enumerate(in_vars) if variables[name].variability == "continuous"]
@@ -231,19 +266,45 @@ class FMUComponent(Component):
             prev[k] = v
 
     def _step_foh(self, n: int) -> None:
-        c, h = self._c, self._h
+        c, h, rec = self._c, self._h, self._rec
+        rec.time = t = self._t0 + n * h
+        rec.function = _SET_REAL
         self._set_real(c, self._uvr, self._nu, self._u)
         self._update_slopes()
+        rec.function = _SET_DERIVATIVES
         self._set_derivatives(c, self._dvr, len(self._du), self._order, self._du)
-        self._do_step(c, self._t0 + n * h, h, 1)
+        rec.function = _DO_STEP
+        self._do_step(c, t, h, 1)
         self._k = n + 1
+        rec.function = _GET_REAL
         self._get_real(c, self._yvr, self._ny, self._y)
+        rec.function = 0
 
     def get_outputs(self) -> list[float]:
-        return [s * y + o for (s, o), y in zip(self._out_lin, self._y)]
+        y = [s * y + o for (s, o), y in zip(self._out_lin, self._y)]
+        total = sum(y)
+        if total - total != 0:  # NaN or an infinity somewhere (one subtraction: the per-step cost)
+            self._non_finite(y)
+        return y
 
     def _get_outputs_identity(self) -> list[float]:
-        return self._y[:]
+        y = self._y[:]
+        total = sum(y)
+        if total - total != 0:
+            self._non_finite(y)
+        return y
+
+    def _non_finite(self, y: list[float]) -> None:
+        import math
+
+        bad = next((k for k, v in enumerate(y) if not math.isfinite(v)), None)
+        if bad is None:  # finite values whose sum overflowed
+            return
+        role_or_var = self.output_names[bad]
+        entry = self.config.map.get(role_or_var)
+        variable = entry.var if entry is not None else role_or_var
+        self._state = "failed"
+        raise NonFiniteOutput(self.name, role_or_var, variable, y[bad], self._t0 + self._k * self._h)
 
     # -- Model Exchange: CVode over each communication step --------------------------------------------
     def _start_me(self, md: Any, t0: float) -> None:
@@ -282,6 +343,7 @@ class FMUComponent(Component):
     def _step_me(self, n: int) -> None:
         fmu, solver = self._fmu, self._solver
         t, t1 = self._t0 + n * self._h, self._t0 + (n + 1) * self._h
+        self._rec.time = t
         self._set_real(self._c, self._uvr, self._nu, self._u)
         if self.input_hold == "foh":
             self._update_slopes()

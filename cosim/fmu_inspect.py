@@ -44,3 +44,32 @@ def sha256(path: Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def check_archive(path: Path, model_identifier: str | None = None) -> None:
+    """Refuse an FMU archive that is unsafe to extract or cannot run on this platform.
+
+    Raises
+    ------
+    ValueError
+        An entry with an absolute path or a ``..`` component (it would be written outside the
+        extraction folder); no ``binaries/<platform>/<model_identifier><ext>`` for this platform
+        (checked when ``model_identifier`` is given). The message says what was expected.
+    """
+    import fmpy
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise ValueError(f"not an FMU (a zip file with a modelDescription.xml): {exc}") from None
+    for name in names:
+        parts = name.replace("\\", "/").split("/")
+        if name.startswith(("/", "\\")) or ".." in parts or (parts and parts[0].endswith(":")):
+            raise ValueError(f"archive entry {name!r} points outside the FMU; expected relative paths only")
+    if model_identifier is not None:
+        binary = f"binaries/{fmpy.platform}/{model_identifier}{fmpy.sharedLibraryExtension}"
+        if binary not in names:
+            have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+            raise ValueError(f"no binary for this platform: expected {binary} in the FMU"
+                             f"{' (it has binaries for ' + ', '.join(have) + ')' if have else ' (it has no binaries)'}")

@@ -30,10 +30,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.component import Component
-from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.errors import InputError, ScenarioError
 from feeddrive.cosim.nc import describe_validation_error
 from feeddrive.estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
-from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.errors import EstimatorInputError, HistoryError, NotEnoughExcitation
 from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.history import History
@@ -352,7 +352,10 @@ class Monitor(Component):
     def setup(self, t0: float, h: float, n_steps: int) -> None:
         cfg = self.config
         self.t0, self.h = t0, h
-        self.history = History(cfg.db or ":memory:")
+        try:
+            self.history = History(cfg.db or ":memory:")
+        except HistoryError as exc:  # an unusable monitor.db is bad input (exit 2), found before the run
+            raise InputError(f"monitor.db: {exc}") from None
         self.pipeline = MonitorPipeline(cfg, self.history, self.axis)
         self.clock0 = _time.time() - t0  # machine time of simulated time 0
         capacity = min(n_steps + 1, int(round(cfg.max_motion_s / h)) + 1)

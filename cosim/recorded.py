@@ -21,6 +21,8 @@ from feeddrive.cosim.errors import DataError, InputError
 
 #: Fewest samples a recording must have.
 MIN_SAMPLES = 10
+#: Largest CSV file read [bytes] (the rows are held in memory as text, ~10 times the file's size).
+MAX_BYTES = 512 << 20
 #: Largest relative deviation of a time step from the median step.
 TIME_JITTER = 0.01
 
@@ -196,6 +198,10 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
         raise DataError(f"{path}: no such file")
     if sample_time is not None and not sample_time > 0:
         raise DataError(f"{path}: sample time must be > 0 s, got {sample_time}")
+    size = path.stat().st_size
+    if size > MAX_BYTES:
+        raise DataError(f"{path}: {size} bytes; expected a CSV file of at most {MAX_BYTES} bytes "
+                        "(split the recording)")
     raw = path.read_bytes()
     try:  # utf-8-sig: a byte-order mark (spreadsheet exports) must not end up in the first header
         text = raw.decode("utf-8-sig")
@@ -204,7 +210,11 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
         raise DataError(f"{path}: line {line}: byte 0x{exc.object[exc.start]:02x} is not UTF-8; "
                         "expected a UTF-8 CSV file") from None
     sep, dec = _dialect(text, delimiter, decimal, path)
-    rows = list(csv.reader(io.StringIO(text, newline=""), delimiter=sep))
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=sep)
+    try:
+        rows = list(reader)
+    except csv.Error as exc:  # a NUL byte, a field over the csv module's limit
+        raise DataError(f"{path}: line {reader.line_num}: {exc}; expected a CSV text file") from None
     while rows and not any(c.strip() for c in rows[-1]):
         rows.pop()  # trailing empty lines
     if not rows:

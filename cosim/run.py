@@ -105,11 +105,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    out_dir = Path(out_dir)
-    if out_dir.is_dir() and any(out_dir.iterdir()) and not overwrite:
-        raise OutputExistsError(f"output directory {out_dir} is not empty; choose another one or allow "
-                                "overwriting (--overwrite)")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = prepare_out_dir(out_dir, overwrite)
     for old in [out_dir / n for n in OUTPUTS] + sorted((out_dir / "plots").glob("*.png")):
         old.unlink(missing_ok=True)
     paths: dict[str, Any] = {"signals": out_dir / "signals.csv", "resolved": out_dir / "scenario.resolved.yaml",
@@ -132,6 +128,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
                                          "connections": master.connections}
         paths["resolved"].write_text(yaml.safe_dump(resolved, sort_keys=False), encoding="utf-8")
         report |= {"step_s": master.h, "stop_time_s": master.stop_time, "steps": master.n_steps}
+        master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
         recorder = master.run(progress=progress, signals_path=paths["signals"])
         report["components"] = master.reports()
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
@@ -174,6 +171,16 @@ def _write_page(out_dir: Path, report: dict) -> None:
         write_run_page(out_dir, json.loads((out_dir / "report.json").read_text(encoding="utf-8")))
     except Exception as exc:  # noqa: BLE001 - the run's outcome is what matters here
         print(f"{out_dir / 'report.html'}: not written ({type(exc).__name__}: {exc})", file=sys.stderr)
+
+
+def prepare_out_dir(out_dir: str | Path, overwrite: bool) -> Path:
+    """Create ``out_dir``; refuse a non-empty one unless ``overwrite`` (raises OutputExistsError)."""
+    out_dir = Path(out_dir)
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not overwrite:
+        raise OutputExistsError(f"output directory {out_dir} is not empty; choose another one or allow "
+                                "overwriting (--overwrite)")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return out_dir
 
 
 def _with_default_history(scenario: Scenario, db: Path) -> Scenario:

@@ -30,7 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 
 from feeddrive.cosim.axis import Axis, resolve_drive_chain
 from feeddrive.cosim.errors import ScenarioError
-from feeddrive.cosim.fmu_inspect import fmi_version, model_description, sha256
+from feeddrive.cosim.fmu_inspect import check_archive, fmi_version, model_description, sha256
 from feeddrive.cosim.nc import SETTLING, NCConfig, drive_chain_nominal, plan_program
 from feeddrive.cosim.sensors import ChannelConfig, SensorsConfig
 from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error, read_yaml
@@ -79,6 +79,8 @@ class PlantConfig(_Strict):
     sha256: str | None = None
     interface: Literal["cs", "me"] = "cs"
     tolerance: float = Field(1e-8, gt=0, description="relative tolerance of CVode (interface: me)")
+    call_timeout: float = Field(60.0, gt=0, description="watchdog of `cosim run` [s]: a single FMI call "
+                                "running longer stops the run as hung (report.json status: hung)")
     parameters: dict[str, float] = {}
     start: dict[str, float] = {}
     map: dict[Role, MapEntry] = {}
@@ -341,6 +343,10 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
     if version != "2.0":
         raise s.error(("plant", "fmu"), f"{path.name} is an FMI {version or '(unknown)'} FMU; expected FMI 2.0")
+    try:
+        check_archive(path)
+    except ValueError as exc:
+        raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
     digest = sha256(path)
     if p.sha256 and p.sha256 != digest:
         raise s.error(("plant", "sha256"), f"{path.name} has sha256 {digest}, expected {p.sha256} "
@@ -353,6 +359,10 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         kind = {"cs": "Co-Simulation", "me": "Model Exchange"}[p.interface]
         raise s.error(("plant", "interface"), f"{path.name} does not support {kind}; expected interface "
                                               f"{'me' if p.interface == 'cs' else 'cs'}")
+    try:
+        check_archive(path, (md.coSimulation if p.interface == "cs" else md.modelExchange).modelIdentifier)
+    except ValueError as exc:
+        raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
     problems = check_map(md, role_map, path.name)
     if problems:
         raise s.error(*problems[0])

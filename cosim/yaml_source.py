@@ -20,23 +20,110 @@ from feeddrive.cosim.errors import ScenarioError, format_path
 KeyPath = tuple[Any, ...]
 
 
-def read_yaml(path: Path) -> tuple[Any, dict[KeyPath, int]]:
-    """The data of a YAML file and its key path -> line map."""
+#: largest scenario or campaign file [bytes]: a real one is a few kB
+MAX_BYTES = 1 << 20
+#: largest number of YAML nodes after alias expansion ("billion laughs": a few hundred bytes of nested
+#: aliases expand to 10^9 nodes, which the key map and the validation would walk one by one)
+MAX_NODES = 100_000
+#: deepest nesting of YAML collections (PyYAML composes recursively)
+MAX_DEPTH = 100
+
+
+def read_yaml(path: Path, kind: str = "scenario", error: type[ValueError] = ScenarioError
+              ) -> tuple[Any, dict[KeyPath, int]]:
+    """The data of a YAML file and its key path -> line map.
+
+    Parameters
+    ----------
+    path : Path
+    kind : str
+        What the file is, for the messages (``scenario``, ``campaign``).
+    error : exception class
+        Raised with one line naming the file (and line) and what was expected.
+
+    Raises
+    ------
+    error
+        Unreadable, larger than ``MAX_BYTES``, not UTF-8, invalid YAML, nested deeper than
+        ``MAX_DEPTH`` or expanding (aliases) to more than ``MAX_NODES`` nodes.
+    """
     try:
-        text = path.read_text(encoding="utf-8")
+        size = path.stat().st_size
+        if size > MAX_BYTES:
+            raise error(f"{path}: {kind} file of {size} bytes; expected at most {MAX_BYTES} bytes")
+        raw = path.read_bytes()
     except OSError as exc:
-        raise ScenarioError(f"{path}: cannot read scenario file ({exc.strerror or exc})") from None
+        raise error(f"{path}: cannot read {kind} file ({exc.strerror or exc})") from None
     try:
-        root = yaml.compose(text)
-        data = yaml.safe_load(text)
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise error(f"{path}:{line}: byte 0x{raw[exc.start]:02x} is not UTF-8; expected a UTF-8 {kind} file") from None
+    try:
+        _check_depth(text, path, error)
+        root = yaml.compose(text, Loader=_LOADER)
+        if root is not None:
+            _check_size(root, path, error)
+        data = yaml.load(text, Loader=_LOADER)  # noqa: S506 - a safe loader (CSafeLoader or SafeLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise ScenarioError(f"{where}: invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+        problem = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        raise error(f"{where}: invalid YAML: {problem}") from None
+    except error:
+        raise
+    except RecursionError:
+        raise error(f"{path}: YAML nested too deeply; expected at most {MAX_DEPTH} levels") from None
+    except (ValueError, TypeError, OverflowError) as exc:  # constructors: timestamps, huge ints, bad keys
+        raise error(f"{path}: invalid YAML value: {' '.join(str(exc).split())}") from None
     lines: dict[KeyPath, int] = {}
     if root is not None:
         _line_map(root, (), lines)
     return data, lines
+
+
+#: libyaml's loader when PyYAML was built with it (faster, and not recursive in Python)
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+def _check_depth(text: str, path: Path, error: type[ValueError]) -> None:
+    """Refuse a document nested deeper than ``MAX_DEPTH``, from the parser's events (no recursion, and
+    it stops at the first level too deep instead of composing thousands)."""
+    depth = 0
+    for event in yaml.parse(text, Loader=_LOADER):
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise error(f"{path}:{event.start_mark.line + 1}: YAML nested too deeply; expected at most "
+                            f"{MAX_DEPTH} levels")
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+
+
+def _check_size(root: yaml.Node, path: Path, error: type[ValueError]) -> None:
+    """Refuse a document too deep, or too large once its aliases are expanded (linear time: a node
+    shared through aliases is counted from a memo, never walked twice)."""
+    sizes: dict[int, int] = {}
+
+    def size(node: yaml.Node, depth: int) -> int:
+        if depth > MAX_DEPTH:
+            raise error(f"{path}:{node.start_mark.line + 1}: YAML nested too deeply; expected at most "
+                        f"{MAX_DEPTH} levels")
+        key = id(node)
+        if key not in sizes:
+            sizes[key] = -1  # in progress: a recursive alias
+            children = [n for kv in node.value for n in kv] if isinstance(node, yaml.MappingNode) else \
+                node.value if isinstance(node, yaml.SequenceNode) else []
+            total = 1 + sum(size(c, depth + 1) for c in children)
+            sizes[key] = total
+        elif sizes[key] < 0:
+            raise error(f"{path}:{node.start_mark.line + 1}: recursive YAML alias; expected a tree")
+        if sizes[key] > MAX_NODES:
+            raise error(f"{path}:{node.start_mark.line + 1}: YAML aliases expand to more than {MAX_NODES} "
+                        "values; expected a plain scenario (expand fewer aliases)")
+        return sizes[key]
+
+    size(root, 0)
 
 
 def _line_map(node: yaml.Node, path: KeyPath, out: dict[KeyPath, int]) -> None:
@@ -57,7 +144,9 @@ def located_error(source: str, lines: Mapping[KeyPath, int], path: KeyPath, mess
     path = tuple(path)
     line = next((lines[path[:k]] for k in range(len(path), -1, -1) if path[:k] in lines), None)
     where = f"{source}:{line}" if line else source
-    key = f" {format_path(path)}:" if path else ""
+    # a key with a newline or a control character is shown as its repr: the message stays one line
+    key = f" {format_path(tuple(p if not isinstance(p, str) or p.isprintable() else repr(p) for p in path))}:" \
+        if path else ""
     return ScenarioError(f"{where}:{key} {message}")
 
 

@@ -21,3 +21,11 @@ class NotEnoughExcitation(ValueError):
         self.reason = reason
         self.condition_number = condition_number
         super().__init__(f"not enough excitation to identify {', '.join(self.unidentifiable)}: {reason}")
+
+
+class HistoryError(EstimatorInputError):
+    """The history database cannot be used: not SQLite or corrupt, read-only, disk full, locked too long.
+
+    The message names the file and what happened; a motion whose transaction failed is not stored and
+    the motions stored before are kept (one transaction per motion).
+    """

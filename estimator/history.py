@@ -30,9 +30,38 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.errors import EstimatorInputError, HistoryError
 
 SCHEMA_VERSION = 1
+#: how long a writer waits for another one's transaction (SQLite's busy timeout) [s]
+BUSY_TIMEOUT_S = 30.0
+#: attempts of a transaction that still finds the database locked after the busy timeout
+RETRIES = 3
+_MAGIC = b"SQLite format 3\x00"
+
+
+def _retry(fn: Any) -> Any:
+    """``fn()``, again (up to ``RETRIES`` times, after a short pause) while SQLite says locked or busy."""
+    for attempt in range(RETRIES):
+        try:
+            return fn()
+        except sqlite3.OperationalError as exc:
+            if attempt == RETRIES - 1 or not any(w in str(exc) for w in ("locked", "busy")):
+                raise
+            _time.sleep(0.05 * (attempt + 1))
+    return None  # pragma: no cover - the loop returns or raises
+
+
+def _why(exc: sqlite3.DatabaseError) -> str:
+    """SQLite's reason, with what a user can do about it."""
+    text = str(exc)
+    if "readonly" in text or "read-only" in text:
+        return f"{text}; expected a writable file and folder"
+    if "full" in text:
+        return f"{text}; free some space or choose another monitor.db"
+    if "not a database" in text or "malformed" in text:
+        return f"{text}; the file is not overwritten: expected a history written by the monitor, or a new file name"
+    return text
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS motions (
@@ -111,24 +140,34 @@ class History:
             parent = Path(self.path).expanduser().resolve().parent
             if not parent.is_dir():
                 raise EstimatorInputError(f"history database {self.path}: folder {parent} does not exist")
+        if self.path != ":memory:" and Path(self.path).is_file():
+            with open(self.path, "rb") as f:
+                head = f.read(16)
+            if head and head != _MAGIC:  # never let SQLite touch (or a retry overwrite) a foreign file
+                raise HistoryError(f"history database {self.path}: not an SQLite file (it starts with "
+                                   f"{head[:8]!r}); expected a history written by the monitor, or a new file name")
         try:
             # check_same_thread off: an FMU's calls come from its master's worker threads (libcosim), one at a time
-            self._db = sqlite3.connect(self.path, isolation_level=None, timeout=30.0, check_same_thread=False)
-            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db = sqlite3.connect(self.path, isolation_level=None, timeout=BUSY_TIMEOUT_S,
+                                       check_same_thread=False)
+            _retry(lambda: self._db.execute("PRAGMA journal_mode=WAL"))
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.execute("PRAGMA foreign_keys=ON")
-            with self._transaction():
-                for stmt in _SCHEMA.split(";"):
-                    if stmt.strip():
-                        self._db.execute(stmt)
-                row = self._db.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
-                if row is None:
-                    self._db.execute("INSERT INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
-                elif int(row[0]) != SCHEMA_VERSION:
-                    raise EstimatorInputError(
-                        f"history database {self.path}: schema version {row[0]}, this program reads {SCHEMA_VERSION}")
+            _retry(self._create)
         except sqlite3.DatabaseError as exc:
-            raise EstimatorInputError(f"history database {self.path}: not a usable SQLite file ({exc})") from None
+            raise HistoryError(f"history database {self.path}: {_why(exc)}") from None
+
+    def _create(self) -> None:
+        with self._transaction():
+            for stmt in _SCHEMA.split(";"):
+                if stmt.strip():
+                    self._db.execute(stmt)
+            row = self._db.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+            if row is None:
+                self._db.execute("INSERT INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
+            elif int(row[0]) != SCHEMA_VERSION:
+                raise EstimatorInputError(
+                    f"history database {self.path}: schema version {row[0]}, this program reads {SCHEMA_VERSION}")
 
     # -- writing -------------------------------------------------------------------
     @contextmanager
@@ -136,10 +175,11 @@ class History:
         self._db.execute("BEGIN IMMEDIATE")
         try:
             yield
+            self._db.execute("COMMIT")  # may fail too (disk full): then roll back as well
         except BaseException:
-            self._db.execute("ROLLBACK")
+            if self._db.in_transaction:
+                self._db.execute("ROLLBACK")
             raise
-        self._db.execute("COMMIT")
 
     def record(self, axis: str, result: Mapping[str, Any], scenario: str = "", time: float | None = None) -> int:
         """Store one motion's result in one transaction.
@@ -165,6 +205,13 @@ class History:
         for key in ("parameters", "validated"):
             if key not in result:
                 raise EstimatorInputError(f"history: motion result has no {key!r}")
+        try:
+            return _retry(lambda: self._record(axis, result, scenario, time))
+        except sqlite3.DatabaseError as exc:
+            raise HistoryError(f"history database {self.path}: motion {result.get('motion')} not stored: "
+                               f"{_why(exc)}; the motions stored before are kept") from None
+
+    def _record(self, axis: str, result: Mapping[str, Any], scenario: str, time: float | None) -> int:
         mismatch = result.get("mismatch") or {}
         payload = json.dumps(result, default=_jsonable, allow_nan=True)
         with self._transaction():

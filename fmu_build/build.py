@@ -1,6 +1,7 @@
 """Compile generated sources with the system C compiler, pack the FMU, and cache the built-in plant."""
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import shlex
@@ -8,6 +9,7 @@ import subprocess
 import tempfile
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import fmpy
 
@@ -95,6 +97,22 @@ def cache_key(sources: Sources) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
+def _generated(backlash: bool) -> tuple[Model, Sources]:
+    """The model and its generated sources, generated once per process and input (~60 ms each: every
+    scenario load needs the cache key). The memo's key is what they are made of: the model function,
+    the variant and the wrapper source file with its modification time."""
+    from feeddrive.fmu_build import codegen
+
+    wrapper = Path(codegen.WRAPPER_SOURCE)
+    return _generate(feed_drive, backlash, wrapper, wrapper.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=4)
+def _generate(model_function: Any, backlash: bool, wrapper: Path, wrapper_mtime_ns: int) -> tuple[Model, Sources]:
+    model = model_function(backlash=backlash)
+    return model, generate(model)
+
+
 def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False) -> Path:
     """The built-in feed-drive plant FMU, built once and cached.
 
@@ -116,8 +134,7 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False) 
     pathlib.Path
         Path of the cached ``FeedDrive.fmu``.
     """
-    model = feed_drive(backlash=backlash)
-    sources = generate(model)
+    model, sources = _generated(backlash)
     root = Path(cache_dir or os.environ.get("FEEDDRIVE_CACHE") or Path.home() / ".cache" / "feeddrive")
     target = root / cache_key(sources) / f"{model.name}.fmu"
     if target.is_file():

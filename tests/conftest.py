@@ -22,3 +22,11 @@ def fmu_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
 def feeddrive_fmu(fmu_cache_dir: Path) -> Path:
     """The built-in feed-drive plant FMU (FMI 2.0, CS + ME), built once per test session."""
     return builtin_fmu(fmu_cache_dir)
+
+
+# hypothesis profiles: the fuzz tests (tests/cosim/test_fuzz.py) run 500 examples each by default;
+# `pytest --hypothesis-profile=fuzz tests/cosim/test_fuzz.py` runs 10 000 each
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+settings.register_profile("fuzz", max_examples=10_000, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow])

@@ -148,3 +148,13 @@ def _validate(spec: RunSpec) -> None:
 
 #: ``run_campaign`` checks every pending run's options and scenario with it before running any
 run_cosim.validate = _validate
+
+
+def _prepare() -> None:
+    """The imports of a run, once per worker process before its runs are forked (cosim/supervise.py)."""
+    import feeddrive.cosim.monitor
+    import feeddrive.cosim.run
+    import feeddrive.estimator.estimate  # noqa: F401
+
+
+run_cosim.prepare = _prepare

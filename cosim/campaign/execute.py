@@ -9,6 +9,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
@@ -42,20 +43,49 @@ def _jsonable(obj: Any) -> Any:
     raise TypeError(f"run result holds a {type(obj).__name__}, which is not JSON-serialisable")
 
 
-def execute(run: str | Callable[[RunSpec], dict], spec: RunSpec) -> dict[str, Any]:
-    """Run one spec and return its record; any exception becomes a ``failed`` record with its reason.
+def _call(fn: Callable[[RunSpec], dict], spec: RunSpec) -> str:
+    """In the supervised child: the run's result as JSON text (a str pickles fast and always)."""
+    return json.dumps(fn(spec), default=_jsonable)
 
-    The result goes through a JSON round trip here, in the worker, so records are identical whichever
-    executor ran them.
+
+def execute(run: str | Callable[[RunSpec], dict], spec: RunSpec, timeout: float | None = None) -> dict[str, Any]:
+    """Run one spec in a supervised child process and return its record; never raises for the run's sake.
+
+    The run function's optional ``prepare()`` runs first, here (e.g. the imports of every run, done
+    once per worker process). A run that raises, crashes (an FMU's segmentation fault kills only the child), hangs (a call over
+    its ``plant.call_timeout``, or the whole run over ``timeout`` seconds) becomes a ``failed`` record
+    with its reason. The result goes through a JSON round trip in the child, so records are identical
+    whichever executor ran them.
     """
+    from feeddrive.cosim.supervise import supervise
+
     start = time.perf_counter()
+    result, status, reason = None, "failed", ""
     try:
         fn = resolve_function(run) if isinstance(run, str) else run
-        result, status, reason = json.loads(json.dumps(fn(spec), default=_jsonable)), "ok", ""
+        prepare = getattr(fn, "prepare", None)
+        if callable(prepare):  # imports done once in this worker, not again in every forked child
+            prepare()
+        outcome = supervise(_call, fn, spec, timeout=timeout)
+        if outcome.status == "ok":
+            result, status = json.loads(outcome.value), "ok"
+        elif outcome.status == "error":
+            exc = outcome.error
+            if not isinstance(exc, Exception):  # Ctrl-C in the run stops the campaign, as without a child
+                raise exc
+            reason = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        else:
+            reason = f"{outcome.status}: {outcome.describe()}"
     except Exception as exc:  # a failing run must not stop the campaign: it is recorded with its reason
-        result, status, reason = None, "failed", f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        reason = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
     return {"id": spec.id, "index": spec.index, "seed": spec.seed, "overrides": spec.overrides,
             "status": status, "reason": reason, "elapsed_s": time.perf_counter() - start, "result": result}
+
+
+def _lost(spec: RunSpec, reason: str) -> dict[str, Any]:
+    """The record of a run whose worker process died under it (not retried: it may die again)."""
+    return {"id": spec.id, "index": spec.index, "seed": spec.seed, "overrides": spec.overrides,
+            "status": "failed", "reason": reason, "elapsed_s": None, "result": None}
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -101,17 +131,21 @@ def _open_store(campaign: Campaign, out: Path, overwrite: bool) -> dict[str, dic
     return done
 
 
-def _local(run, specs, workers, on_done) -> None:
+def _local(run, specs, workers, on_done, timeout=None) -> None:
     if workers == 1:
         for spec in specs:
-            on_done(execute(run, spec))
+            on_done(execute(run, spec, timeout))
         return
-    # spawn, not fork: CasADi, FMU libraries and the progress bar's thread do not survive a fork safely
+    # spawn, not fork, for the pool: CasADi and the progress bar's thread do not survive a fork safely
+    # (each run then forks from its single-threaded worker, see cosim/supervise.py)
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"))
     try:
-        futures = [pool.submit(execute, run, spec) for spec in specs]
+        futures = {pool.submit(execute, run, spec, timeout): spec for spec in specs}
         for future in as_completed(futures):
-            on_done(future.result())
+            try:
+                on_done(future.result())
+            except BrokenProcessPool as exc:  # a worker died outside a run's containment (killed, OOM)
+                on_done(_lost(futures[future], f"crashed: its worker process died ({exc}); not retried"))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
 
@@ -127,9 +161,10 @@ def _check_scheduler(scheduler: str) -> None:
                             "Dask scheduler, such as tcp://host:8786") from None
 
 
-def _dask(run, specs, scheduler, on_done) -> None:
+def _dask(run, specs, scheduler, on_done, timeout=None) -> None:
     from distributed import Client
     from distributed import as_completed as dask_completed
+    from distributed.scheduler import KilledWorker
 
     try:
         client = Client(scheduler, timeout="20s")
@@ -137,9 +172,14 @@ def _dask(run, specs, scheduler, on_done) -> None:
         raise CampaignError(f"--scheduler {scheduler}: cannot connect to the Dask scheduler ({exc})") from None
     futures = []
     try:
-        futures = [client.submit(execute, run, spec, key=f"campaign-{spec.id}", pure=False) for spec in specs]
+        futures = [client.submit(execute, run, spec, timeout, key=f"campaign-{spec.id}", pure=False)
+                   for spec in specs]
+        by_key = {f.key: spec for f, spec in zip(futures, specs)}
         for future in dask_completed(futures):
-            on_done(future.result())
+            try:
+                on_done(future.result())
+            except KilledWorker as exc:  # the scheduler gave up after its allowed-failures: no endless retry
+                on_done(_lost(by_key[future.key], f"crashed: Dask workers died running it ({exc})"))
     finally:
         client.cancel(futures)
         client.close()
@@ -161,7 +201,8 @@ class CampaignResult:
 
 def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int = 1, scheduler: str | None = None,
                  progress: bool = False, overwrite: bool = False, retry_failed: bool = False,
-                 run: Callable[[RunSpec], dict] | None = None, plots: bool = True) -> CampaignResult:
+                 run: Callable[[RunSpec], dict] | None = None, plots: bool = True,
+                 timeout: float | None = None) -> CampaignResult:
     """Run (or resume) a campaign and write its records, aggregates and plots to ``out_dir``.
 
     Parameters
@@ -184,11 +225,17 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
         Run function; default the campaign's ``run`` entry.
     plots : bool
         Draw the plots.
+    timeout : float or None
+        Wall-time limit of each run [s] (default the campaign's ``timeout``); a run over it is killed
+        and recorded as failed (``hung``).
     """
     from tqdm import tqdm
 
     if workers < 1:
         raise CampaignError(f"--workers: expected >= 1, got {workers}")
+    if timeout is not None and not timeout > 0:
+        raise CampaignError(f"--timeout: expected a number of seconds > 0, got {timeout}")
+    timeout = timeout if timeout is not None else campaign.timeout
     if scheduler:
         _check_scheduler(scheduler)
     out = Path(out_dir)
@@ -213,9 +260,9 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
         if not pending:
             pass
         elif scheduler:
-            _dask(fn, pending, scheduler, on_done)
+            _dask(fn, pending, scheduler, on_done, timeout)
         else:
-            _local(fn, pending, min(workers, len(pending)), on_done)
+            _local(fn, pending, min(workers, len(pending)), on_done, timeout)
     finally:
         bar.close()
     records = sorted(finished.values(), key=lambda r: r["index"])

@@ -19,6 +19,7 @@ estimates are from the truth. A campaign file says which runs to make::
     run: cosim.campaign:run_cosim      # the run function (``package.module:function``)
     run_options: {methods: [ls, iv]}   # passed to the run function as ``spec.options``
     keep_signals: false                # keep each run's signals.csv and plots under OUT/runs/<id>/
+    timeout: 600                       # optional wall-time limit of each run [s] (also --timeout)
 
 Runs are numbered grid point by grid point (``index = grid_index * repetitions + repetition``). The
 run seed and the draws come from ``numpy.random.SeedSequence(seed, spawn_key=(index, stream))``, and
@@ -29,7 +30,9 @@ Execution: in this process (``workers=1``), on a local process pool (``workers >
 existing ``dask.distributed`` cluster (``scheduler="tcp://host:port"``). Each run's outcome depends
 only on its spec, so the three give the same results. Every finished run is written at once, atomically,
 to ``OUT/runs/<id>.json``; a campaign started again on the same out dir runs only what is missing.
-A run that raises is recorded as ``failed`` with its reason and the campaign goes on.
+Each run is a supervised child process (cosim/supervise.py): a run that raises, crashes (an FMU's
+segmentation fault) or hangs (over its ``plant.call_timeout`` or the campaign's ``timeout``) is recorded
+as ``failed`` with its reason and the campaign goes on.
 
 Run function protocol: ``fn(spec: RunSpec) -> dict`` (JSON-serialisable), shaped as::
 
@@ -62,6 +65,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, PositiveInt, ValidationError, field_validator, model_validator
 
 from feeddrive.cosim.errors import InputError
+from feeddrive.cosim.yaml_source import read_yaml
 from feeddrive.models import feed_drive
 
 #: the physical parameters the monitor estimates (the optional offset T0 left out)
@@ -132,6 +136,8 @@ class Campaign(_Frozen):
     run: str = "feeddrive.cosim.campaign:run_cosim"
     run_options: dict[str, Any] = {}
     keep_signals: bool = False
+    timeout: float | None = Field(default=None, gt=0, description="wall-time limit of each run [s]: a run over "
+                                  "it is killed and recorded as failed (hung)")
     root: str = "."
 
     @field_validator("sweep")
@@ -181,7 +187,7 @@ class Campaign(_Frozen):
         path = Path(self.root, self.base)
         if not path.is_file():
             raise CampaignError(f"campaign {self.name}: base: scenario file {path} not found")
-        data = yaml.safe_load(path.read_text())
+        data, _ = read_yaml(path, "scenario", CampaignError)
         if not isinstance(data, dict):
             raise CampaignError(f"{path}: expected a scenario mapping at the top level")
         return data
@@ -218,11 +224,9 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
     path = Path(path)
     if not path.is_file():
         raise CampaignError(f"{path}: campaign file not found")
-    text = path.read_text()
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise CampaignError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from None
+    # size limit, UTF-8, bounded aliases and nesting, YAML errors with their line (cosim/yaml_source.py)
+    data, _ = read_yaml(path, "campaign", CampaignError)
+    text = path.read_text(encoding="utf-8-sig")
     if not isinstance(data, dict):
         raise CampaignError(f"{path}: expected a mapping at the top level")
     if "root" in data:

@@ -22,6 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--retry-failed", action="store_true", help="run the failed runs again")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--no-plots", action="store_true", help="do not draw the plots")
+    parser.add_argument("--timeout", type=float, metavar="SECONDS",
+                        help="wall-time limit of each run (default: the campaign's timeout, else none)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -29,11 +31,12 @@ def main(args: argparse.Namespace) -> int:
     out = args.out or Path("campaigns", campaign.name)
     result = run_campaign(campaign, out, workers=args.workers, scheduler=args.scheduler,
                           progress=not args.no_progress and sys.stderr.isatty(), overwrite=args.overwrite,
-                          retry_failed=args.retry_failed, plots=not args.no_plots)
+                          retry_failed=args.retry_failed, plots=not args.no_plots,
+                          timeout=args.timeout)
     print(result.aggregates.table())
     failed = result.failed
     print(f"\n{campaign.name}: {len(result.records)} runs ({result.executed} run now, {len(failed)} failed) -> {out}")
-    for record in failed[:5]:
+    for record in failed:
         print(f"  failed {record['id']}: {record['reason']}")
     if failed and len(failed) == len(result.records):
         print(f"cosim campaign: failed: every run failed (first: {failed[0]['reason']})", file=sys.stderr)

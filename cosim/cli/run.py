@@ -2,7 +2,8 @@
 
 Writes signals.csv, scenario.resolved.yaml, report.json and plots/ into the output directory
 (default ``runs/<name>-<YYYYmmdd-HHMMSS>``) and prints a short summary.
-Exit status: 0 success, 2 bad input, 1 simulation failure (see cosim/cli.py).
+Exit status: 0 success, 2 bad input, 1 simulation failure (see cosim/cli.py), including an FMU that
+crashes or hangs: the run is a supervised child process (cosim/supervise.py).
 """
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ import logging
 import sys
 from pathlib import Path
 
-from feeddrive.cosim.run import DEFAULT_HISTORY, run_scenario
+from feeddrive.cosim.run import DEFAULT_HISTORY
 from feeddrive.cosim.scenario import load_scenario
+from feeddrive.cosim.supervise import run_supervised
 
 
 class _ReportedElsewhere(logging.Filter):
@@ -38,8 +40,9 @@ def main(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.WARNING, handlers=[handler])
     scenario = load_scenario(args.scenario)
     out = args.out or _fresh_run_dir(Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}")
-    result = run_scenario(scenario, out, progress=not args.no_progress, overwrite=args.overwrite,
-                          default_history=Path(out).parent / DEFAULT_HISTORY)
+    # in a supervised child process: an FMU that crashes or hangs is reported in one line (exit 1)
+    result = run_supervised(scenario, out, progress=not args.no_progress, overwrite=args.overwrite,
+                            default_history=Path(out).parent / DEFAULT_HISTORY)
     print(summary(result))
     return 0
 
