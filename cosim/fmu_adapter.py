@@ -85,8 +85,10 @@ class FMUComponent(Component):
     Exchange inside an event iteration).
     """
 
-    def __init__(self, name: str, config: PlantConfig) -> None:
+    def __init__(self, name: str, config: PlantConfig, input_period: int = 1) -> None:
         super().__init__(name, config)
+        #: plant steps per change of the inputs (the NC's cycle): a first-order hold ramps over the whole cycle
+        self.input_period = int(input_period)
         self.log = logging.getLogger(f"cosim.fmu.{name}")
         self.last_log = ""
         self._fmu: Any = None
@@ -220,20 +222,29 @@ class FMUComponent(Component):
             self._set_derivatives = self._fmu.dll.fmi2SetRealInputDerivatives
             self.step = self._step_foh
 
-    def _update_slopes(self) -> None:
-        """``du <- (u_n - u_(n-1)) / h`` for the continuous inputs (0 at the first step)."""
-        u, du, prev, h = self._u, self._du, self._u_prev, self._h
+    def _update_slopes(self, n: int) -> None:
+        """``du <- (u_n - u_(n-r)) / (r h)`` for the continuous inputs (0 at the first step), at the start of
+        each input period of r = ``input_period`` steps; inside it the inputs continue that ramp."""
+        u, du, r = self._u, self._du, self.input_period
+        j = n % r
+        if j:  # the inputs are held between the NC's cycles: continue the ramp started at its cycle
+            dt = j * self._h
+            for k, i in self._foh:
+                u[k] += du[i] * dt
+            return
+        prev = self._u_prev
         if prev is None:
             prev = self._u_prev = u[:]
-        for k, j in self._foh:
+        inv = 1.0 / (r * self._h)
+        for k, i in self._foh:
             v = u[k]
-            du[j] = (v - prev[k]) / h
+            du[i] = (v - prev[k]) * inv
             prev[k] = v
 
     def _step_foh(self, n: int) -> None:
         c, h = self._c, self._h
+        self._update_slopes(n)
         self._set_real(c, self._uvr, self._nu, self._u)
-        self._update_slopes()
         self._set_derivatives(c, self._dvr, len(self._du), self._order, self._du)
         self._do_step(c, self._t0 + n * h, h, 1)
         self._k = n + 1
@@ -282,10 +293,10 @@ class FMUComponent(Component):
     def _step_me(self, n: int) -> None:
         fmu, solver = self._fmu, self._solver
         t, t1 = self._t0 + n * self._h, self._t0 + (n + 1) * self._h
-        self._set_real(self._c, self._uvr, self._nu, self._u)
-        if self.input_hold == "foh":
-            self._update_slopes()
+        if self.input_hold == "foh" and n % self.input_period == 0:
+            self._update_slopes(n)
             self._ramp_start = t
+        self._set_real(self._c, self._uvr, self._nu, self._u)
         solver.reset(t)  # the inputs' value or slope changes at each step: restart at the discontinuity
         while t < t1 - 1e-9 * self._h:
             t_stop = t1 if self._next_event is None else min(t1, self._next_event)

@@ -28,7 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.fmu_inspect import fmi_version, model_description, sha256
 from feeddrive.cosim.nc import SETTLING, NCConfig, plan_program
-from feeddrive.cosim.sensors import ChannelConfig, SensorsConfig
+from feeddrive.cosim.sensors import EVENT_FIELDS, SensorsConfig
 from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error, read_yaml
 
 Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
@@ -74,6 +74,8 @@ class PlantConfig(_Strict):
     fmu: str = "builtin"
     sha256: str | None = None
     interface: Literal["cs", "me"] = "cs"
+    oversample: int = Field(1, ge=1, description="plant and sensor steps per recording step: the plant's "
+                            "communication step is step / oversample")
     tolerance: float = Field(1e-8, gt=0, description="relative tolerance of CVode (interface: me)")
     parameters: dict[str, float] = {}
     start: dict[str, float] = {}
@@ -150,6 +152,14 @@ class Scenario(_Strict):
     def base_dir(self) -> Path:
         """Directory against which relative paths of the scenario are resolved."""
         return self._base_dir
+
+    def nc_cycle_ticks(self) -> int:
+        """The NC's cycle in ticks of the plant's step ``step / plant.oversample`` (default: one ``step``)."""
+        m = self.plant.oversample
+        if self.nc.cycle is None:
+            return m
+        ticks = self.nc.cycle * m / self.step
+        return max(1, round(ticks))
 
     def error(self, path: KeyPath, message: str) -> ScenarioError:
         """A ScenarioError naming the file, the YAML line of ``path`` (or its nearest parent) and the key."""
@@ -235,6 +245,12 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     if scenario.step > stop:
         raise scenario.error(("step",), f"{scenario.step:g} s is longer than the run ({stop:g} s, {what}); "
                                         "expected a communication step <= the stop time")
+    if scenario.nc.cycle is not None:
+        ticks, hf = scenario.nc.cycle * scenario.plant.oversample / scenario.step, scenario.step / scenario.plant.oversample
+        if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-6 * max(1.0, ticks):
+            raise scenario.error(("nc", "cycle"), f"{scenario.nc.cycle:g} s is not an integer multiple of the plant's "
+                                                  f"step {hf:g} s (step / plant.oversample); expected e.g. "
+                                                  f"{max(1, round(ticks)) * hf:g}")
     plant, md = _resolve_plant(scenario)
     _check_events(scenario, md)
     return scenario.model_copy(update={"plant": plant})
@@ -410,7 +426,7 @@ def _check_events(s: Scenario, md: Any) -> None:
 
 def _check_sensor_event(s: Scenario, k: int, name: str, value: float | str) -> None:
     """``sensors.<channel>.<field>`` with the channels and fields ``SensorsComponent.set_parameter`` accepts."""
-    channels, fields = tuple(s.sensors.channels()), tuple(ChannelConfig.model_fields)
+    channels, fields = tuple(s.sensors.channels()), EVENT_FIELDS
     channel, _, field = name.partition(".")
     if channel not in channels or field not in fields:
         raise s.error(("events", k, "target"), f"sensors.{name}: expected sensors.<channel>.<field> with channel "
