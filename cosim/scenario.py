@@ -298,6 +298,8 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     fields = MonitorConfig.model_fields
     implied = {k: v for k, v in (("axis", data.get("axis", "X")), ("scenario", data.get("name")))
                if k in fields and isinstance(v, str)}
+    if "sampling" in fields:
+        implied["sampling"] = _implied_sampling(data)
     if isinstance(raw, dict) and isinstance(raw.get("db"), str) and raw["db"] != ":memory:" and "db" in fields:
         raw = raw | {"db": str(base_dir / Path(raw["db"]).expanduser())}
     try:
@@ -305,6 +307,23 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     except ValidationError as exc:
         raise from_validation(exc, raw, source, lines, prefix=prefix, model=MonitorConfig) from None
     return ComponentSpec(name="monitor", class_=DEFAULT_MONITOR, config={}).model_copy(update={"config": config})
+
+
+def _implied_sampling(data: dict) -> dict[str, str]:
+    """The monitor's default ``sampling``: a quantity is an interval mean when the plant is oversampled and
+    every sensor of it samples the mean (the default); bad values are left to the sections' own checks."""
+    plant, sensors = data.get("plant"), data.get("sensors")
+    m = plant.get("oversample", 1) if isinstance(plant, dict) else 1
+    if not isinstance(m, int) or m <= 1:
+        return {}
+    sensors = sensors if isinstance(sensors, dict) else {}
+    current = sensors.get("current")
+    channels = {"voltage": [sensors.get("voltage"), sensors.get("voltage_ref")],
+                "current": list(current) if isinstance(current, list) else [None, None],
+                "speed": [sensors.get("tachometer")]}
+    return {q: "mean" for q, chans in channels.items()
+            if all((c or {}).get("sampling", "mean") == "mean" if isinstance(c, dict) or c is None else False
+                   for c in chans)}
 
 
 # -- the plant FMU -------------------------------------------------------------------------------
