@@ -171,7 +171,25 @@ def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str
     parser.add_argument("--method", choices=("ls", "iv", "oe"), default="iv", help="estimator (default iv)")
     parser.add_argument("--filter-cutoff", type=float, default=filter_cutoff_hz, metavar="HZ",
                         help="cut-off of the identical low-pass filter [Hz] (default %(default)s)")
+    parser.add_argument("--sampling", action="append", default=[], metavar="QUANTITY=MODE",
+                        help="what a sample of voltage, current or speed is: instant (default) or mean (the mean "
+                             "over the interval before its time stamp, aligned to the interval's middle), "
+                             "e.g. voltage=mean; repeat for each quantity")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+
+#: quantities ``--sampling`` accepts and their estimator signal
+SAMPLED = {"voltage": "u", "current": "i", "speed": "w"}
+
+
+def sampling_modes(args: argparse.Namespace) -> dict[str, str]:
+    """The ``--sampling`` options as quantity -> mode, refusing unknown quantities and modes."""
+    modes = pairs(args.sampling, "--sampling")
+    for q, mode in modes.items():
+        if q not in SAMPLED or mode not in ("instant", "mean"):
+            raise InputError(f"--sampling {q}={mode}: expected QUANTITY=MODE with QUANTITY one of "
+                             f"{', '.join(SAMPLED)} and MODE instant or mean")
+    return modes
 
 
 def mapped_roles(args: argparse.Namespace, roles: Iterable[str]) -> dict[str, str]:

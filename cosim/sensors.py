@@ -30,9 +30,10 @@ scenario's ``plant.oversample``); each analogue channel hands the monitor one sa
 step, taken as its ``sampling`` says:
 
 - ``instant``: the true signal at the recording instant t_(n+1) (a sample-and-hold ADC);
-- ``mean`` (default): the mean of the m sub-samples at t_n + j h/m, j = 1..m, over the recording
-  interval (an integrating or oversampling ADC, or a drive's per-cycle averaged voltage); with
-  ``oversample: 1`` it is the instantaneous sample, so the default changes nothing there;
+- ``mean`` (default): the mean over the recording interval (an integrating ADC, or a drive's per-cycle
+  averaged voltage), from the m sub-samples at t_n + j h/m, j = 1..m, by the quadrature of
+  ``interval_mean_weights``; with ``oversample: 1`` it is the instantaneous sample, so the default
+  changes nothing there;
 - ``lowpass``: a Butterworth anti-aliasing filter of ``order`` and ``cutoff_hz`` (default a quarter
   of the recording rate) run at the plant's step, sampled at t_(n+1).
 
@@ -143,6 +144,22 @@ EVENT_FIELDS = _FIELDS
 _SOURCE = {"Im1": 2, "Im2": 2, "u": 0, "u_ref": 1, "w_tach": 3}
 
 
+def interval_mean_weights(m: int) -> tuple[float, ...]:
+    """Quadrature weights (summing to m) of the m sub-samples y(t_n + j h/m), j = 1..m, for the interval mean.
+
+    The trapezoidal rule over the sub-intervals, its first one from y(t_n+) extrapolated linearly from the
+    first two sub-samples (``2 y_1 - y_2``): a plant holding its inputs jumps at t_n when they change, so
+    the sample before t_n does not belong to the interval. Weights ``2, 1/2, 1, ..., 1, 1/2`` (m >= 3); the
+    mid-point sample for m = 2, the sample itself for m = 1. The plain mean of the sub-samples would leave
+    an error of about the instantaneous sample's divided by m (the jump is weighted as if it were h/m late).
+    """
+    if m == 1:
+        return (1.0,)
+    if m == 2:
+        return (2.0, 0.0)
+    return (2.0, 0.5) + (1.0,) * (m - 3) + (0.5,)
+
+
 def antialias_sos(order: int, cutoff_hz: float, h: float) -> np.ndarray:
     """Second-order sections of a Butterworth low-pass of ``order`` and ``cutoff_hz`` [Hz] run every ``h`` [s].
 
@@ -203,6 +220,7 @@ class SensorsComponent(Component):
         self._mean = m > 1 and "mean" in self._sampling.values()
         self._acc = [0.0] * 4
         self._inv_m = 1.0 / m
+        self._weights = interval_mean_weights(m)
         self._filters: list[tuple[int, int, list[tuple[float, ...]], list[list[float]]]] = []
         self._cutoffs: dict[str, float] = {}
         for j, c in enumerate(_SOURCE):
@@ -286,11 +304,11 @@ class SensorsComponent(Component):
     def step(self, n: int) -> None:
         true = self._inputs
         if self._mean:
-            acc = self._acc
-            acc[0] += true[0]
-            acc[1] += true[1]
-            acc[2] += true[2]
-            acc[3] += true[3]
+            acc, wt = self._acc, self._weights[n % self.oversample]
+            acc[0] += wt * true[0]
+            acc[1] += wt * true[1]
+            acc[2] += wt * true[2]
+            acc[3] += wt * true[3]
         for j, s, coefs, states in self._filters:  # direct form II transposed, per second-order section
             x = true[s]
             for (b0, b1, b2, a1, a2), z in zip(coefs, states):

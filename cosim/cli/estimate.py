@@ -21,7 +21,14 @@ import sys
 import numpy as np
 
 from feeddrive.cosim.errors import InputError
-from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles, pairs
+from feeddrive.cosim.recorded import (
+    SAMPLED,
+    add_recording_arguments,
+    load_recording,
+    mapped_roles,
+    pairs,
+    sampling_modes,
+)
 from feeddrive.estimator import (
     EstimationOptions,
     EstimatorInputError,
@@ -30,6 +37,7 @@ from feeddrive.estimator import (
     NotEnoughExcitation,
     estimate_motion,
 )
+from feeddrive.estimator.motion import SAMPLING_DELAY
 from feeddrive.estimator.segmentation import segment
 from feeddrive.models import feed_drive
 
@@ -54,7 +62,9 @@ def main(args: argparse.Namespace) -> int:
             raise InputError(f"--known {name}={value!r}: expected a number") from None
     options = EstimationOptions(method=args.method, filter=FilterSpec(args.filter_cutoff), known=known,
                                 offset=args.offset)
+    modes = sampling_modes(args)
     rec = load_recording(args.data, roles, args.sample_time)
+    delays = {SAMPLED[q]: SAMPLING_DELAY[m] * rec.h for q, m in modes.items() if SAMPLING_DELAY[m]}
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     speed = sig.get("w")
     if speed is None and "position" in sig:
@@ -65,7 +75,7 @@ def main(args: argparse.Namespace) -> int:
     results = []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
-        data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, **part)
+        data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, delays=delays, **part)
         try:
             results.append(estimate_motion(data, options))
         except (NotEnoughExcitation, EstimatorInputError) as exc:  # e.g. a rapid block too short to filter

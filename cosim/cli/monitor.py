@@ -23,7 +23,7 @@ import numpy as np
 from feeddrive.cosim.cli.history import DEFAULT_DB
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
-from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles
+from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles, sampling_modes
 from feeddrive.estimator.segmentation import segment
 
 #: role -> monitor signal
@@ -48,6 +48,7 @@ def main(args: argparse.Namespace) -> int:
         missing.append("speed or position")
     if missing:
         raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
+    modes = sampling_modes(args)
     rec = load_recording(args.data, role_map, args.sample_time)
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     if "position" in rec.signals:
@@ -58,7 +59,7 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
     plots = _plot_folder(args.plots, args.overwrite) if args.plots else None
     config = MonitorConfig(axis=args.axis, scenario=str(rec.path), db=args.db, method=args.method,
-                           filter_cutoff_hz=args.filter_cutoff)
+                           filter_cutoff_hz=args.filter_cutoff, sampling=modes)
     end_clock = rec.path.stat().st_mtime - (rec.n - 1) * rec.h  # machine time of sample 0
     traces = []
     if args.db == DEFAULT_DB:
