@@ -233,6 +233,11 @@ class MonitorPipeline:
     def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> None:
         result = trace.result
         electrical = None if self.last_validated is None else {k: self.last_validated[k]["value"] for k in "RLK"}
+        w_enc = signals.get("w_enc")
+        if self.config.sampling.get("speed") == "mean" and w_enc is not None and len(w_enc) > 1:
+            # the encoder is latched, its speed is at the sample time: its interval mean is the mean of the
+            # speeds at both ends of the interval, as the tachometer's sample is (a quarter-sample lag otherwise)
+            signals = {**signals, "w_enc": np.r_[w_enc[0], 0.5 * (w_enc[1:] + w_enc[:-1])]}
         v = validate_measurements(signals, h, electrical, self.config.filter, self.validation_options,
                                   nominal=self.nominal)
         trace.validation = v

@@ -147,17 +147,28 @@ _SOURCE = {"Im1": 2, "Im2": 2, "u": 0, "u_ref": 1, "w_tach": 3}
 def interval_mean_weights(m: int) -> tuple[float, ...]:
     """Quadrature weights (summing to m) of the m sub-samples y(t_n + j h/m), j = 1..m, for the interval mean.
 
-    The trapezoidal rule over the sub-intervals, its first one from y(t_n+) extrapolated linearly from the
-    first two sub-samples (``2 y_1 - y_2``): a plant holding its inputs jumps at t_n when they change, so
-    the sample before t_n does not belong to the interval. Weights ``2, 1/2, 1, ..., 1, 1/2`` (m >= 3); the
-    mid-point sample for m = 2, the sample itself for m = 1. The plain mean of the sub-samples would leave
-    an error of about the instantaneous sample's divided by m (the jump is weighted as if it were h/m late).
+    A plant holding its inputs jumps at t_n when they change, so the sample before t_n does not belong to
+    the interval: its start value y(t_n+) is extrapolated from the first four sub-samples (exact for cubics),
+    then Gregory's trapezoidal rule with end corrections up to third differences integrates the m + 1 values
+    (m >= 5); for m <= 4 the weights integrate the polynomial through the m sub-samples exactly. On a jump
+    relaxing with the 1 kHz current loop's time constant this is ~100 times closer to the exact mean than
+    the trapezoidal rule at m = 10; the plain mean of the sub-samples is off by about the instantaneous
+    sample's error divided by m (it weighs the jump as if it came h/m late).
     """
-    if m == 1:
-        return (1.0,)
-    if m == 2:
-        return (2.0, 0.0)
-    return (2.0, 0.5) + (1.0,) * (m - 3) + (0.5,)
+    if m <= 4:  # the polynomial of degree m - 1 through the sub-samples, integrated over [0, m]
+        nodes = np.arange(1.0, m + 1)
+        degrees = np.arange(m)
+        return tuple(np.linalg.solve(nodes[None, :] ** degrees[:, None], m ** (degrees + 1.0) / (degrees + 1)))
+    weights = np.zeros(m)
+    for j in range(m):  # the rule is linear in the samples: apply it to each unit vector
+        e = np.zeros(m)
+        e[j] = 1.0
+        y = np.concatenate([[4 * e[0] - 6 * e[1] + 4 * e[2] - e[3]], e])
+        trapezoid = 0.5 * y[0] + y[1:-1].sum() + 0.5 * y[-1]
+        d = [np.diff(y[:4], k)[0] for k in (1, 2, 3)]  # forward differences at the start
+        b = [np.diff(y[-4:], k)[-1] for k in (1, 2, 3)]  # backward differences at the end
+        weights[j] = trapezoid - (b[0] - d[0]) / 12 - (b[1] + d[1]) / 24 - 19 / 720 * (b[2] - d[2])
+    return tuple(weights)
 
 
 def antialias_sos(order: int, cutoff_hz: float, h: float) -> np.ndarray:

@@ -41,24 +41,28 @@ def sensors_run(config: dict, true: np.ndarray, m: int, h: float) -> np.ndarray:
     return np.array(out)
 
 
-@pytest.mark.parametrize("m", [1, 2, 3, 10])
+@pytest.mark.parametrize("m", [1, 2, 3, 4, 5, 10])
 def test_interval_mean_is_exact_for_held_input_jumps(m):
-    """A signal that jumps at every t_n (held inputs) and is linear inside each interval: the sample is the
-    exact mean over [t_n, t_(n+1)] (the plain mean of the sub-samples would be off by slope h / (2 m))."""
+    """A signal that jumps at every t_n (held inputs) and is a polynomial inside each interval (linear for m = 2,
+    quadratic for m = 3, cubic from m = 4): the sample is the exact mean over [t_n, t_(n+1)] (the plain mean of
+    the sub-samples would be off by slope h / (2 m))."""
     h, n = 1e-4, 50
     k = np.arange(1, n * m + 1)
     t = k * h / m
     interval = (k - 1) // m  # the sub-sample at t_n + j h/m, j = 1..m, belongs to interval n
     jump = np.sin(interval)  # the value just after t_n
     slope = 3e3 * np.cos(interval)
-    v = jump + slope * (t - interval * h)
+    tau = t - interval * h
+    curve = 2e7 * (m >= 3) * tau ** 2 + 1e11 * (m >= 4) * tau ** 3
+    v = jump + slope * tau + curve
     true = np.column_stack([v, v, v, v, np.zeros_like(v)])
     y = sensors_run({"seed": 0, "current": [QUIET, QUIET], "voltage": QUIET, "voltage_ref": QUIET,
                      "tachometer": QUIET}, true, m, h)
-    exact = np.sin(np.arange(n)) + 3e3 * np.cos(np.arange(n)) * h / 2
+    exact = np.sin(np.arange(n)) + 3e3 * np.cos(np.arange(n)) * h / 2 + 2e7 * (m >= 3) * h ** 2 / 3 \
+        + 1e11 * (m >= 4) * h ** 3 / 4
     if m == 1:  # one sub-sample: the instantaneous sample at t_(n+1), as before the acquisition chain
         exact = v
-    np.testing.assert_allclose(y[1:, U], exact, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(y[1:, U], exact, rtol=0, atol=1e-11)
     assert math.isclose(sum(interval_mean_weights(m)), m)
 
 
