@@ -39,7 +39,8 @@ from feeddrive.cosim.recorder import Recorder
 #: preferred source components of each standard component's inputs
 DEFAULT_SOURCES = {"plant": ("nc",), "nc": ("plant", "monitor"), "sensors": ("plant",), "monitor": ("sensors", "nc")}
 #: fallbacks when no source component has the port
-DEFAULT_FALLBACKS = {"sensors.voltage_ref": "plant.voltage", "nc.request": 0.0}
+DEFAULT_FALLBACKS = {"sensors.voltage_ref": "plant.voltage", "sensors.voltage_ref_mean": "plant.voltage_mean",
+                     "nc.request": 0.0}
 #: steps between progress-bar updates and recorder flushes
 BLOCK = 1000
 #: largest accepted difference between the NC's start and the plant's initial position [m]
@@ -137,9 +138,10 @@ class Master:
         m = scenario.plant.oversample
         cycle = scenario.nc_cycle_ticks()
         nc = NCComponent("nc", scenario.nc)
+        plant = FMUComponent("plant", scenario.plant, input_period=cycle)
         comps: list[tuple[str, Component]] = [
-            ("nc", nc), ("plant", FMUComponent("plant", scenario.plant, input_period=cycle)),
-            ("sensors", SensorsComponent("sensors", scenario.sensors, oversample=m))]
+            ("nc", nc), ("plant", plant),
+            ("sensors", SensorsComponent("sensors", scenario.sensors, oversample=m, exact_means=plant.interval_means))]
         specs = [(("monitor", "class"), scenario.monitor)] if scenario.monitor is not None else []
         specs += [(("components", k, "class"), spec) for k, spec in enumerate(scenario.components)]
         for where, spec in specs:

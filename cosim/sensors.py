@@ -193,8 +193,14 @@ class SensorsComponent(Component):
     output_names = ("Im1", "Im2", "u", "u_ref", "w_tach", "theta_enc", "w_enc", "x")
     output_units = ("A", "A", "V", "V", "rad/s", "rad", "rad/s", "m")
 
-    def __init__(self, name: str, config: SensorsConfig | dict | None = None, oversample: int = 1) -> None:
+    def __init__(self, name: str, config: SensorsConfig | dict | None = None, oversample: int = 1,
+                 exact_means: bool = False) -> None:
         super().__init__(name, SensorsConfig.parse(config, name))
+        #: the plant also gives the exact mean of each signal over its step (Model Exchange): inputs
+        #: ``<signal>_mean`` after the instantaneous ones, summed for ``mean`` instead of the quadrature
+        self.exact_means = bool(exact_means)
+        if self.exact_means:
+            self.input_names = SensorsComponent.input_names + tuple(f"{n}_mean" for n in SensorsComponent.input_names[:4])
         if int(oversample) != oversample or oversample < 1:
             raise ScenarioError(f"{name}: oversample must be an integer >= 1, got {oversample!r}")
         #: sensor steps (plant steps) per recorded sample
@@ -216,7 +222,7 @@ class SensorsComponent(Component):
         self._h, self._window = h_rec, max(1, round(enc.speed_window / h_rec))
         self._inv_wh = 1.0 / (self._window * h_rec)
         self._setup_chain(channels, h)
-        self._inputs: Sequence[float] = (0.0,) * 5
+        self._inputs: Sequence[float] = (0.0,) * len(self.input_names)
         self._buffer: list[float] | None = None
         self._j = 0
         self._new_block()
@@ -314,7 +320,13 @@ class SensorsComponent(Component):
 
     def step(self, n: int) -> None:
         true = self._inputs
-        if self._mean:
+        if self._mean and self.exact_means:  # the plant's exact means over each of its steps
+            acc = self._acc
+            acc[0] += true[5]
+            acc[1] += true[6]
+            acc[2] += true[7]
+            acc[3] += true[8]
+        elif self._mean:
             acc, wt = self._acc, self._weights[n % self.oversample]
             acc[0] += wt * true[0]
             acc[1] += wt * true[1]
