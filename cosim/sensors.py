@@ -32,8 +32,9 @@ step, taken as its ``sampling`` says:
 - ``instant``: the true signal at the recording instant t_(n+1) (a sample-and-hold ADC);
 - ``mean`` (default): the mean over the recording interval (an integrating ADC, or a drive's per-cycle
   averaged voltage), from the m sub-samples at t_n + j h/m, j = 1..m, by the quadrature of
-  ``interval_mean_weights``; with ``oversample: 1`` it is the instantaneous sample, so the default
-  changes nothing there;
+  ``interval_mean_weights`` (with ``interface: me`` the plant integrates its exact means over each of
+  its steps with the states, and the sensors sum them); with ``oversample: 1`` it is the instantaneous
+  sample, so the default changes nothing there;
 - ``lowpass``: a Butterworth anti-aliasing filter of ``order`` and ``cutoff_hz`` (default a quarter
   of the recording rate) run at the plant's step, sampled at t_(n+1).
 
