@@ -394,6 +394,8 @@ class FMUComponent(Component):
     def report(self) -> dict:
         cfg = self.config
         return {"fmu": cfg.fmu, "sha256": cfg.sha256, "interface": cfg.interface, "input_hold": self.input_hold,
+                "step_s": getattr(self, "_h", None), "input_period_steps": self.input_period,
+                "interval_means": bool(getattr(self, "_mean_roles", ())),
                 "map": {r: e.model_dump() for r, e in cfg.map.items()}, "last_log": self.last_log}
 
     def terminate(self) -> None:

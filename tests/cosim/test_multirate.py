@@ -202,3 +202,39 @@ def test_model_exchange_interval_means_are_exact(feeddrive_fmu):
         exact.append(x[2:4] / h)
     exact = np.array(exact)
     np.testing.assert_allclose(np.array(got), exact, rtol=0, atol=2e-5 * np.abs(exact).max())
+
+
+@pytest.mark.parametrize("interface, rtol", [("cs", 1e-12), ("me", 2e-5)])
+def test_first_order_hold_ramps_over_the_whole_nc_cycle(feeddrive_fmu, interface, rtol):
+    """Inputs changing every 5 plant steps (an NC cycle): with foh the plant sees the ramp with the slope of the
+    last two cycle values over the whole cycle, so u_in = a + b t_j set at the cycle starts t_j is the ramp
+    a + b t itself (from the second cycle on) and the current is the exact solution of the linear ODE."""
+    from scipy.linalg import expm
+
+    from feeddrive.cosim.fmu_adapter import FMUComponent
+    from feeddrive.cosim.scenario import MapEntry, PlantConfig
+
+    R, L, K, J, ft = (TRUTH[n] for n in ("R", "L", "K", "Jt", "ft"))
+    h, n, r, a, b = 1e-4, 1000, 5, 24.0, 20.0
+    cfg = PlantConfig(fmu=str(feeddrive_fmu), interface=interface, parameters={"bypass": 1.0, "Cd": 0.0},
+                      map={"speed_ref": MapEntry(var="u_in"), "current": MapEntry(var="i"),
+                           "speed": MapEntry(var="w")}, input_hold="foh")
+    plant = FMUComponent("plant", cfg, input_period=r)
+    plant.setup(0.0, h, n)
+    try:
+        got = []
+        for k in range(n):
+            plant.set_inputs([a + b * (k - k % r) * h])  # held between the cycle starts, as the master does
+            plant.step(k)
+            got.append(plant.get_outputs()[:2])
+    finally:
+        plant.terminate()
+    M = np.zeros((4, 4))
+    M[:2, :2] = [[-R / L, -K / L], [K / J, -ft / J]]
+    M[0, 2], M[2, 3] = 1 / L, 1.0
+    step, x, exact = expm(M * h), np.zeros(4), []
+    for k in range(n):  # the first cycle has slope 0 (no previous value): the held a
+        x = step @ np.array([x[0], x[1], a + b * k * h if k >= r else a, 0.0 if k < r else b])
+        exact.append(x[:2])
+    exact = np.array(exact)
+    assert np.all(np.abs(np.array(got) - exact).max(axis=0) <= rtol * np.abs(exact).max(axis=0))
