@@ -85,7 +85,7 @@ class Component(ABC):
         """Release resources. Called once, also after a failure; must not raise."""
 
 
-#: the project's packages before they moved under ``feeddrive`` (0.1): old scenarios are told the new name
+#: the project's packages before they moved under ``feeddrive`` (0.2): old scenarios are told the new name
 LEGACY_PACKAGES = ("cosim", "estimator", "models", "fmu_build")
 
 

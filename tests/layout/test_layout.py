@@ -129,3 +129,27 @@ def test_version_and_python_m():
 def test_no_module_over_about_500_lines():
     long = {m: n for m in all_modules() if (n := len(source_of(m).read_text().splitlines())) > 520}
     assert not long, long
+
+
+def test_old_top_level_class_name_gets_a_one_line_hint(tmp_path):
+    scenario = tmp_path / "old.yaml"
+    scenario.write_text("name: t\nstep: 1.0e-4\nnc: {program: [{dwell: {time: 0.1}}]}\n"
+                        "monitor: {class: 'cosim.monitor:Monitor'}\n")
+    out = subprocess.run([sys.executable, "-m", "feeddrive.cosim", "run", str(scenario), "--out", str(tmp_path / "o")],
+                         capture_output=True, text=True, cwd=tmp_path)  # not the repo root, whose folders import bare
+    assert out.returncode == 2
+    (line,) = out.stderr.strip().splitlines()
+    assert f"{scenario}:4: monitor.class:" in line and "write 'feeddrive.cosim.monitor' instead" in line
+
+
+def test_a_users_own_models_package_is_not_mistaken_for_ours(tmp_path, monkeypatch):
+    """The point of the namespace: a user's top-level `models` package is theirs, and loads."""
+    from feeddrive.cosim.component import load_component_class
+
+    pkg = tmp_path / "models"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "mine.py").write_text("from feeddrive.cosim.component import Component\n"
+                                 "class Mine(Component):\n    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert load_component_class("models.mine:Mine").__name__ == "Mine"
