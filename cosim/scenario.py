@@ -251,6 +251,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
             raise scenario.error(("nc", "cycle"), f"{scenario.nc.cycle:g} s is not an integer multiple of the plant's "
                                                   f"step {hf:g} s (step / plant.oversample); expected e.g. "
                                                   f"{max(1, round(ticks)) * hf:g}")
+    _check_lowpass(scenario)
     plant, md = _resolve_plant(scenario)
     _check_events(scenario, md)
     return scenario.model_copy(update={"plant": plant})
@@ -307,6 +308,19 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     except ValidationError as exc:
         raise from_validation(exc, raw, source, lines, prefix=prefix, model=MonitorConfig) from None
     return ComponentSpec(name="monitor", class_=DEFAULT_MONITOR, config={}).model_copy(update={"config": config})
+
+
+def _check_lowpass(s: Scenario) -> None:
+    """An anti-aliasing filter runs at the plant's step: its cut-off must be well below that step's Nyquist."""
+    hf = s.step / s.plant.oversample
+    sensors = s.sensors
+    channels = {("current", 0): sensors.current[0], ("current", 1): sensors.current[1], ("voltage",): sensors.voltage,
+                ("voltage_ref",): sensors.voltage_ref, ("tachometer",): sensors.tachometer}
+    for key, chan in channels.items():
+        fc = chan.cutoff_hz or 0.25 / s.step
+        if chan.sampling == "lowpass" and not fc < 0.45 / hf:
+            raise s.error(("sensors", *key, "cutoff_hz"), f"{fc:g} Hz: expected a cut-off below {0.45 / hf:g} Hz "
+                                                         f"(0.9 x the Nyquist frequency of the plant's step {hf:g} s)")
 
 
 def _implied_sampling(data: dict) -> dict[str, str]:

@@ -247,7 +247,7 @@ class SensorsComponent(Component):
                 continue
             fc = cfg.cutoff_hz or 0.25 / (h * m)
             if not fc < 0.45 / h:
-                raise ScenarioError(f"{self.name}: {c}: lowpass cutoff_hz {fc:g} Hz must be below 0.45 x the Nyquist "
+                raise ScenarioError(f"{self.name}: {c}: lowpass cutoff_hz {fc:g} Hz must be below 0.9 x the Nyquist "
                                     f"frequency of the plant's step ({0.45 / h:g} Hz)")
             self._cutoffs[c] = fc
             sos = antialias_sos(cfg.order, fc, h)

@@ -238,3 +238,16 @@ def test_first_order_hold_ramps_over_the_whole_nc_cycle(feeddrive_fmu, interface
         exact.append(x[:2])
     exact = np.array(exact)
     assert np.all(np.abs(np.array(got) - exact).max(axis=0) <= rtol * np.abs(exact).max(axis=0))
+
+
+def test_lowpass_cutoff_is_checked_against_the_plant_step(tmp_path, feeddrive_fmu):
+    path = tmp_path / "s.yaml"
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["plant"]["oversample"] = 2
+    data["sensors"]["voltage"] = {"sampling": "lowpass", "cutoff_hz": 9.5e3}
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    from feeddrive.cosim.scenario import load_scenario
+
+    with pytest.raises(ScenarioError, match=r"s\.yaml:\d+: sensors\.voltage\.cutoff_hz: 9500 Hz: expected a cut-off "
+                                            r"below 9000 Hz"):
+        load_scenario(path)
