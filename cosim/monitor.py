@@ -233,11 +233,8 @@ class MonitorPipeline:
     def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> None:
         result = trace.result
         electrical = None if self.last_validated is None else {k: self.last_validated[k]["value"] for k in "RLK"}
-        w_enc = signals.get("w_enc")
-        if self.config.sampling.get("speed") == "mean" and w_enc is not None and len(w_enc) > 1:
-            # the encoder is latched, its speed is at the sample time: its interval mean is the mean of the
-            # speeds at both ends of the interval, as the tachometer's sample is (a quarter-sample lag otherwise)
-            signals = {**signals, "w_enc": np.r_[w_enc[0], 0.5 * (w_enc[1:] + w_enc[:-1])]}
+        if self.config.sampling.get("speed") == "mean" and signals.get("w_enc") is not None:
+            signals = {**signals, "w_enc": interval_mean_speed(signals["w_enc"])}
         v = validate_measurements(signals, h, electrical, self.config.filter, self.validation_options,
                                   nominal=self.nominal)
         trace.validation = v
@@ -278,6 +275,16 @@ class MonitorPipeline:
                 result["notes"].append(f"healthy baseline: motion {k + 1} of {n}")
         self.last_validated = current
         self.recent = (self.recent + [current])[-self.diagnosis_options.trend_motions:]
+
+
+def interval_mean_speed(w_enc: np.ndarray) -> np.ndarray:
+    """The latched encoder's speed at the sample times -> its mean over each sampling interval (trapezoid).
+
+    With a tachometer sampled as an interval mean, the average of the two speeds would otherwise lag the
+    tachometer by a quarter sample (R -0.04 % on the vendor-style drive at 10 kHz).
+    """
+    w_enc = np.asarray(w_enc, dtype=float)
+    return np.r_[w_enc[:1], 0.5 * (w_enc[1:] + w_enc[:-1])]
 
 
 def centred_speed(theta: np.ndarray, fallback: np.ndarray, h: float, window_s: float) -> np.ndarray:
