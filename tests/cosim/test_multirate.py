@@ -251,3 +251,36 @@ def test_lowpass_cutoff_is_checked_against_the_plant_step(tmp_path, feeddrive_fm
     with pytest.raises(ScenarioError, match=r"s\.yaml:\d+: sensors\.voltage\.cutoff_hz: 9500 Hz: expected a cut-off "
                                             r"below 9000 Hz"):
         load_scenario(path)
+
+
+def test_model_exchange_sensors_sample_the_exact_interval_mean(feeddrive_fmu):
+    """interface me, oversample 4, loops bypassed (the NC's command drives u_in, held over each recording
+    step), Cd = 0: the sensors' mean current over each 1 ms recording interval is the exact mean of the
+    linear ODE's current (matrix exponential), through the master's wiring of ``current_mean``."""
+    from scipy.linalg import expm
+
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data.pop("monitor")
+    data |= {"step": 1e-3, "stop_time": 0.1}
+    data["plant"] = {"fmu": "builtin", "interface": "me", "oversample": 4, "input_hold": "zoh",
+                     "parameters": {"bypass": 1.0, "Cd": 0.0}, "map": {"speed_ref": {"var": "u_in"}}}
+    data["nc"]["program"] = [{"rapid": {"to": 0.01}}]
+    data["sensors"] = {"seed": 0, "current": [QUIET, QUIET], "voltage": QUIET, "voltage_ref": QUIET,
+                       "tachometer": QUIET}
+    with Master.from_scenario(scenario_from_dict(data)) as master:
+        sig = master.run().signals()
+    assert "plant.current_mean" in sig
+    R, L, K, J, ft = (TRUTH[n] for n in ("R", "L", "K", "Jt", "ft"))
+    h = 1e-3
+    M = np.zeros((5, 5))  # x = [i, w, Qi, Qw, u]
+    M[:2, :2] = [[-R / L, -K / L], [K / J, -ft / J]]
+    M[0, 4] = 1 / L
+    M[2, 0] = M[3, 1] = 1.0
+    step, x, exact = expm(M * h), np.zeros(5), []
+    for u in sig["nc.speed_ref"][1:]:  # the command over [t_n, t_(n+1)], shown at t_(n+1)
+        x = step @ np.array([x[0], x[1], 0.0, 0.0, u])
+        exact.append(x[2] / h)
+    exact = np.array(exact)
+    assert np.abs(exact).max() > 1.0  # the current moves (A)
+    np.testing.assert_allclose(sig["sensors.Im1"][1:], exact, rtol=0, atol=2e-5 * np.abs(exact).max())
+    assert np.abs(sig["plant.current"][1:] - exact).max() > 100 * 2e-5 * np.abs(exact).max()  # not the instant
