@@ -30,6 +30,11 @@ whose outputs at t_n come from step n-1 (the plant; the sensors, whose sample at
 step n-1), an event at t_n first shows in the outputs at t_(n+1): a sensor fault at t_n changes the
 samples from t_(n+1) on, a plant parameter changed at t_n acts over [t_n, t_(n+1)] and shows from t_(n+1).
 
+Rates: ``h`` is the component's own communication step. The master counts ticks of the finest step
+and steps each component every ``rate`` ticks (the plant and the sensors every tick, at
+``step / plant.oversample``; the NC every ``nc.cycle``; the monitor and user components every recording
+``step``); see cosim/master.py.
+
 Ports are plain sequences of floats in a fixed order, not dicts, so that the per-step cost stays
 small (the master's loop runs 10^4 to 10^5 times per simulated second).
 """

@@ -45,6 +45,8 @@ from feeddrive.cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, Plan
 
 _SET_REAL, _DO_STEP, _GET_REAL = (fmi_progress.CODE[f] for f in ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal"))
 _SET_DERIVATIVES = fmi_progress.CODE["fmi2SetRealInputDerivatives"]
+#: the roles whose exact interval means a Model Exchange plant outputs (as ``<role>_mean``)
+MEAN_ROLES = ("voltage", "voltage_ref", "current", "speed")
 STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
 _LOG_LEVEL = (logging.DEBUG, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
 
@@ -108,8 +110,13 @@ class FMUComponent(Component):
     Exchange inside an event iteration).
     """
 
-    def __init__(self, name: str, config: PlantConfig) -> None:
+    def __init__(self, name: str, config: PlantConfig, input_period: int = 1) -> None:
         super().__init__(name, config)
+        #: Model Exchange: also output ``<role>_mean``, the exact mean of each measured role over the last step
+        #: (a quadrature integrated by CVode with the states), for the sensors' ``mean`` sampling
+        self.interval_means = config.interface == "me" and config.oversample > 1
+        #: plant steps per change of the inputs (the NC's cycle): a first-order hold ramps over the whole cycle
+        self.input_period = int(input_period)
         self.log = logging.getLogger(f"cosim.fmu.{name}")
         self.last_log = ""
         self._fmu: Any = None
@@ -192,6 +199,7 @@ class FMUComponent(Component):
                   and v.name not in mapped and v.name not in OUTPUT_ROLES + INPUT_ROLES]
         out_roles = tuple(r for r in OUTPUT_ROLES if r in roles)
         self.output_names = out_roles + tuple(v.name for v in extras)
+        self._mean_roles = tuple(r for r in MEAN_ROLES if r in roles) if self.interval_means and not cs else ()
         self.output_units = tuple(ROLE_UNITS[r] for r in out_roles) + tuple(v.unit or "" for v in extras)
         in_vars = [roles[r].var for r in self.input_names]
         out_vars = [roles[r].var for r in out_roles] + [v.name for v in extras]
@@ -220,6 +228,8 @@ class FMUComponent(Component):
             self._start_me(md, t0)
             self.step = self._step_me
         self._get_real(self._c, self._yvr, self._ny, self._y)
+        if self._mean_roles:
+            self._start_means(roles)
         self._state = "running"
 
     # -- Co-Simulation: the hot path ------------------------------------------------------------------
@@ -255,22 +265,31 @@ class FMUComponent(Component):
             self._set_derivatives = self._fmu.dll.fmi2SetRealInputDerivatives
             self.step = self._step_foh
 
-    def _update_slopes(self) -> None:
-        """``du <- (u_n - u_(n-1)) / h`` for the continuous inputs (0 at the first step)."""
-        u, du, prev, h = self._u, self._du, self._u_prev, self._h
+    def _update_slopes(self, n: int) -> None:
+        """``du <- (u_n - u_(n-r)) / (r h)`` for the continuous inputs (0 at the first step), at the start of
+        each input period of r = ``input_period`` steps; inside it the inputs continue that ramp."""
+        u, du, r = self._u, self._du, self.input_period
+        j = n % r
+        if j:  # the inputs are held between the NC's cycles: continue the ramp started at its cycle
+            dt = j * self._h
+            for k, i in self._foh:
+                u[k] += du[i] * dt
+            return
+        prev = self._u_prev
         if prev is None:
             prev = self._u_prev = u[:]
-        for k, j in self._foh:
+        inv = 1.0 / (r * self._h)
+        for k, i in self._foh:
             v = u[k]
-            du[j] = (v - prev[k]) / h
+            du[i] = (v - prev[k]) * inv
             prev[k] = v
 
     def _step_foh(self, n: int) -> None:
         c, h, rec = self._c, self._h, self._rec
         rec.time = t = self._t0 + n * h
+        self._update_slopes(n)  # before the values: inside an NC cycle it continues the inputs' ramp
         rec.function = _SET_REAL
         self._set_real(c, self._uvr, self._nu, self._u)
-        self._update_slopes()
         rec.function = _SET_DERIVATIVES
         self._set_derivatives(c, self._dvr, len(self._du), self._order, self._du)
         rec.function = _DO_STEP
@@ -306,6 +325,17 @@ class FMUComponent(Component):
         self._state = "failed"
         raise NonFiniteOutput(self.name, role_or_var, variable, y[bad], self._t0 + self._k * self._h)
 
+    # -- Model Exchange: exact interval means ------------------------------------------------------------
+    def _start_means(self, roles: Any) -> None:
+        """``<role>_mean`` outputs: CVode integrates q' = y with the states, q reset at each step."""
+        lin = [(roles[r].scale, roles[r].offset) for r in self._mean_roles]
+        self.output_names += tuple(f"{r}_mean" for r in self._mean_roles)
+        self.output_units += tuple(ROLE_UNITS[r] for r in self._mean_roles)
+        self._mean_lin = lin
+        self._means = [s * y + o for (s, o), y in zip(lin, self._y)]  # at t0: the instantaneous values
+        base = self.get_outputs
+        self.get_outputs = lambda: base() + self._means
+
     # -- Model Exchange: CVode over each communication step --------------------------------------------
     def _start_me(self, md: Any, t0: float) -> None:
         from fmpy.sundials import CVodeSolver
@@ -322,10 +352,43 @@ class FMUComponent(Component):
         self._next_event = self._event_iteration()
         fmu.enterContinuousTimeMode()
         self._completed_needed = md.modelExchange.needsCompletedIntegratorStep
-        self._solver = _CVode(nx=md.numberOfContinuousStates, nz=md.numberOfEventIndicators,
-                              get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
-                              get_dx=fmu.getDerivatives, get_z=fmu.getEventIndicators,
-                              get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
+        nx = md.numberOfContinuousStates
+        get_x, set_x, get_dx, nominals = (fmu.getContinuousStates, fmu.setContinuousStates, fmu.getDerivatives,
+                                          fmu.getNominalsOfContinuousStates)
+        if self.interval_means:  # quadrature states q' = y of the measured roles, after the FMU's states
+            names = [self.config.map[r].var for r in MEAN_ROLES if r in self.config.map]
+            nq = len(names)
+            qvr = (ctypes.c_uint * nq)(*[self._vr[n] for n in names])
+            ybuf = (ctypes.c_double * nq)()
+            self._q = [0.0] * nq
+
+            def get_x(px, n, _get=fmu.getContinuousStates):  # noqa: ANN001 - ctypes callback arguments
+                _get(px, nx)
+                for j, q in enumerate(self._q):
+                    px[nx + j] = q
+
+            def set_x(px, n, _set=fmu.setContinuousStates):  # noqa: ANN001
+                _set(px, nx)
+
+            def get_dx(pdx, n, _get=fmu.getDerivatives):  # noqa: ANN001
+                _get(pdx, nx)
+                self._get_real(self._c, qvr, nq, ybuf)
+                for j in range(nq):
+                    pdx[nx + j] = ybuf[j]
+
+            def nominals(p, n, _get=fmu.getNominalsOfContinuousStates):  # noqa: ANN001
+                _get(p, nx)
+                for j in range(nq):
+                    p[nx + j] = 1.0
+
+            nx_total = nx + nq
+        else:
+            nx_total = nx
+        self._nx = nx
+        self._solver = _CVode(nx=nx_total, nz=md.numberOfEventIndicators,
+                              get_x=get_x, set_x=set_x,
+                              get_dx=get_dx, get_z=fmu.getEventIndicators,
+                              get_nominals=nominals, set_time=fmu.setTime,
                               input=_RampedInputs(self) if self.input_hold == "foh" else _HeldInputs(),
                               startTime=t0, maxStep=self._h,
                               relativeTolerance=self.config.tolerance)
@@ -344,10 +407,13 @@ class FMUComponent(Component):
         fmu, solver = self._fmu, self._solver
         t, t1 = self._t0 + n * self._h, self._t0 + (n + 1) * self._h
         self._rec.time = t
-        self._set_real(self._c, self._uvr, self._nu, self._u)
-        if self.input_hold == "foh":
-            self._update_slopes()
+        if self.input_hold == "foh" and n % self.input_period == 0:
+            self._update_slopes(n)
             self._ramp_start = t
+        self._set_real(self._c, self._uvr, self._nu, self._u)
+        means = self._mean_roles
+        if means:
+            self._q = [0.0] * len(self._q)
         solver.reset(t)  # the inputs' value or slope changes at each step: restart at the discontinuity
         while t < t1 - 1e-9 * self._h:
             t_stop = t1 if self._next_event is None else min(t1, self._next_event)
@@ -358,6 +424,9 @@ class FMUComponent(Component):
                     raise self._failure from None
                 raise SimulationError(f"{self.name}: {exc}") from None
             fmu.setTime(t)
+            if means:  # the integrals so far (an event restarts CVode from them)
+                px, nx = solver.px, self._nx
+                self._q = [px[nx + j] for j in range(len(self._q))]
             step_event = self._completed_needed and fmu.completedIntegratorStep()[0]
             time_event = self._next_event is not None and t >= self._next_event - 1e-9 * self._h
             if state_event or step_event or time_event:
@@ -367,6 +436,9 @@ class FMUComponent(Component):
                 solver.reset(t)
         self._k = n + 1
         self._get_real(self._c, self._yvr, self._ny, self._y)
+        if means:
+            inv_h = 1.0 / self._h
+            self._means = [sc * q * inv_h + o for (sc, o), q in zip(self._mean_lin, self._q)]
 
     # -- events, report, terminate ---------------------------------------------------------------------
     def set_parameter(self, name: str, value: Any) -> None:
@@ -384,6 +456,8 @@ class FMUComponent(Component):
     def report(self) -> dict:
         cfg = self.config
         return {"fmu": cfg.fmu, "sha256": cfg.sha256, "interface": cfg.interface, "input_hold": self.input_hold,
+                "step_s": getattr(self, "_h", None), "input_period_steps": self.input_period,
+                "interval_means": bool(getattr(self, "_mean_roles", ())),
                 "map": {r: e.model_dump() for r, e in cfg.map.items()}, "last_log": self.last_log}
 
     def terminate(self) -> None:

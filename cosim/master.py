@@ -1,4 +1,12 @@
-"""Co-simulation master: fixed communication step, Gauss-Seidel order, timed events, recorder.
+"""Co-simulation master: integer ticks of the finest rate, Gauss-Seidel order, timed events, recorder.
+
+Rates. Time is ``t0 + k hf`` with an integer tick k of the finest step ``hf = step / oversample``.
+Each component steps every ``d`` ticks (its rate divisor, ``d hf`` is its communication step): the
+plant and the sensors every tick, the NC every ``nc.cycle / hf`` ticks, the monitor and the user
+components every ``oversample`` ticks (the recording step). A component placed before the first
+fine-rate component in the stepping order (the NC: it feeds the plant) steps at the start of its
+period, the others at its end (they read what the fine components produced over it). Rows are
+recorded every ``oversample`` ticks; events land on the finest grid.
 
 Components run in order (NC -> plant -> sensors -> monitor -> user components); at step n each one
 reads the newest outputs of its sources from one flat list, the signal bus ``Y``: outputs at t_{n+1}
@@ -31,7 +39,8 @@ from feeddrive.cosim.recorder import Recorder
 #: preferred source components of each standard component's inputs
 DEFAULT_SOURCES = {"plant": ("nc",), "nc": ("plant", "monitor"), "sensors": ("plant",), "monitor": ("sensors", "nc")}
 #: fallbacks when no source component has the port
-DEFAULT_FALLBACKS = {"sensors.voltage_ref": "plant.voltage", "nc.request": 0.0}
+DEFAULT_FALLBACKS = {"sensors.voltage_ref": "plant.voltage", "sensors.voltage_ref_mean": "plant.voltage_mean",
+                     "nc.request": 0.0}
 #: steps between progress-bar updates and recorder flushes
 BLOCK = 1000
 #: largest accepted difference between the NC's start and the plant's initial position [m]
@@ -87,16 +96,29 @@ class Master:
         Signals to record.
     error : callable (key path, message) -> InputError, optional
         Builds wiring errors (a scenario's ``error`` method names file and line).
+    oversample : int
+        Finest ticks per recording step (``hf = step / oversample``), >= 1.
+    rates : mapping of str to int, optional
+        Component name -> ticks per step of that component; default ``oversample`` (the recording step).
     """
 
     def __init__(self, components: Sequence[tuple[str, Component]], *, step: float, n_steps: int,
                  t0: float = 0.0, connections: Mapping[str, str | float] | None = None,
                  events: Iterable[tuple[float, str, Any]] = (), record: str | Sequence[str] = "all",
-                 error: ErrorFactory | None = None) -> None:
+                 error: ErrorFactory | None = None, oversample: int = 1,
+                 rates: Mapping[str, int] | None = None) -> None:
         self.components = dict(components)
         if len(self.components) != len(components):
             raise InputError("component names must be unique")
         self.h, self.n_steps, self.t0 = float(step), int(n_steps), float(t0)
+        if int(oversample) != oversample or oversample < 1:
+            raise InputError(f"oversample must be an integer >= 1, got {oversample!r}")
+        self.m = int(oversample)
+        self.hf = self.h / self.m
+        self.rates = {n: self.m for n in self.components} | dict(rates or {})
+        bad = {n: d for n, d in self.rates.items() if n not in self.components or int(d) != d or d < 1}
+        if bad:
+            raise InputError(f"rates: expected component names with integer tick counts >= 1, got {bad}")
         self.user_connections = dict(connections or {})
         self.events = list(events)
         self.record = record
@@ -113,9 +135,13 @@ class Master:
         from feeddrive.cosim.nc import NCComponent
         from feeddrive.cosim.sensors import SensorsComponent
 
+        m = scenario.plant.oversample
+        cycle = scenario.nc_cycle_ticks()
         nc = NCComponent("nc", scenario.nc)
-        comps: list[tuple[str, Component]] = [("nc", nc), ("plant", FMUComponent("plant", scenario.plant)),
-                                              ("sensors", SensorsComponent("sensors", scenario.sensors))]
+        plant = FMUComponent("plant", scenario.plant, input_period=cycle)
+        comps: list[tuple[str, Component]] = [
+            ("nc", nc), ("plant", plant),
+            ("sensors", SensorsComponent("sensors", scenario.sensors, oversample=m, exact_means=plant.interval_means))]
         specs = [(("monitor", "class"), scenario.monitor)] if scenario.monitor is not None else []
         specs += [(("components", k, "class"), spec) for k, spec in enumerate(scenario.components)]
         for where, spec in specs:
@@ -133,7 +159,8 @@ class Master:
         stop = scenario.stop_time if scenario.stop_time is not None else nc.duration() + SETTLING
         return cls(comps, step=scenario.step, n_steps=event_step(stop, 0.0, scenario.step),
                    connections=connections, events=[(e.time, e.target, e.value) for e in scenario.events],
-                   record=scenario.record, error=scenario.error)
+                   record=scenario.record, error=scenario.error, oversample=m,
+                   rates={"nc": cycle, "plant": 1, "sensors": 1})
 
     @property
     def stop_time(self) -> float:
@@ -146,8 +173,10 @@ class Master:
             return
         name = "?"
         try:
+            ticks = self.n_steps * self.m
             for name, comp in self.components.items():
-                comp.setup(self.t0, self.h, self.n_steps)
+                d = self.rates[name]
+                comp.setup(self.t0, d * self.hf, -(-ticks // d))
             self._compile()
             self._check_start_position()
         except BaseException as exc:
@@ -223,7 +252,7 @@ class Master:
             if comp not in self.components or not name:
                 raise self._error(("events", k, "target"), f"expected '<component>.<name>' with component one "
                                   f"of {', '.join(order)}, got {target!r}")
-            self._events.append((event_step(time, self.t0, self.h), comp, name, value))
+            self._events.append((event_step(time, self.t0, self.hf), comp, name, value))
         self._events.sort(key=lambda e: e[0])  # stable: same-step events keep their declaration order
 
     # -- the run --------------------------------------------------------------------------------------
@@ -237,41 +266,39 @@ class Master:
         self.setup()
         comps = list(self.components.values())
         Y = [0.0] * self.n_signals + self._constants
-        plan = []
-        a = 0
-        for c, getter in zip(comps, self._getters):
-            b = a + len(c.output_names)
-            plan.append((c, c.set_inputs, getter, c.step, c.get_outputs, a, b))
-            a = b
-        for c, _, _, _, get_outputs, a, b in plan:
-            Y[a:b] = get_outputs()
-        rec, recorder = self._rec_get, self.recorder
+        schedule, period = self._schedule()
+        for c in comps:
+            a, b = self._slices[c]
+            Y[a:b] = c.get_outputs()
+        rec, recorder, m = self._rec_get, self.recorder, self.m
         rows = [rec(Y)]
         events = self._events
         e = 0
         next_event = events[0][0] if events else -1
-        n = -1
+        k = -1
         c = None
+        ticks = self.n_steps * m
         try:
             with tqdm(total=self.n_steps, unit="s", unit_scale=self.h, disable=None if progress else True,
                       leave=False, desc="co-simulation", bar_format="{desc}: {percentage:3.0f}%|{bar}| "
                       "{n:.2f}/{total:.2f} s [{elapsed}<{remaining}, {rate_fmt}]") as bar:
-                for n0 in range(0, self.n_steps, BLOCK):
-                    for n in range(n0, min(n0 + BLOCK, self.n_steps)):
-                        while n == next_event:
+                for k0 in range(0, ticks, BLOCK * m):
+                    for k in range(k0, min(k0 + BLOCK * m, ticks)):
+                        while k == next_event:
                             _, name, param, value = events[e]
                             c = self.components[name]
                             c.set_parameter(param, value)
                             e += 1
                             next_event = events[e][0] if e < len(events) else -1
-                        for c, set_inputs, getter, step, get_outputs, a, b in plan:
+                        for c, set_inputs, getter, step, get_outputs, a, b, d in schedule[k % period]:
                             set_inputs(getter(Y))
-                            step(n)
+                            step(k // d)
                             Y[a:b] = get_outputs()
-                        rows.append(rec(Y))
+                        if m == 1 or (k + 1) % m == 0:
+                            rows.append(rec(Y))
                     recorder.extend(rows)
                     rows.clear()
-                    bar.update(n + 1 - n0)
+                    bar.update((k + 1 - k0) // m)
             recorder.extend(rows)  # the t0 row when there are no steps
         except BaseException as exc:
             recorder.extend(rows)
@@ -281,11 +308,32 @@ class Master:
             if isinstance(exc, (InputError, SimulationError)) or not isinstance(exc, Exception):
                 raise
             name = next((k for k, v in self.components.items() if v is c), "?")
-            raise SimulationError(f"{name}: {type(exc).__name__}: {exc} (in step {max(n, 0)} from t="
-                                  f"{self.t0 + max(n, 0) * self.h:.6g} s)") from exc
+            raise SimulationError(f"{name}: {type(exc).__name__}: {exc} (in step {max(k, 0) // m} from t="
+                                  f"{self.t0 + max(k, 0) * self.hf:.6g} s)") from exc
         if signals_path is not None:
             recorder.write_csv(signals_path)
         return recorder
+
+    def _schedule(self) -> tuple[list[list[tuple]], int]:
+        """Per tick residue ``k % period``: the components that step at tick k, in stepping order.
+
+        A component with rate divisor d steps at the ticks with ``k % d == 0`` when it precedes the first
+        fine-rate (d = 1) component in the order (it feeds it: the NC's command for the coming cycle), else
+        at ``k % d == d - 1`` (it reads what the faster components produced over its period).
+        """
+        names = list(self.components)
+        rates = [self.rates[n] for n in names]
+        first_fine = next((j for j, d in enumerate(rates) if d == 1), len(names))
+        period = math.lcm(*rates) if rates else 1
+        self._slices = {}
+        entries = []
+        a = 0
+        for j, (c, getter, d) in enumerate(zip(self.components.values(), self._getters, rates)):
+            b = a + len(c.output_names)
+            self._slices[c] = (a, b)
+            entries.append(((c, c.set_inputs, getter, c.step, c.get_outputs, a, b, d), d, 0 if j < first_fine else d - 1))
+            a = b
+        return [[x for x, d, phase in entries if r % d == phase] for r in range(period)], period
 
     def reports(self) -> dict[str, dict]:
         """Each component's ``report()`` (call after the run)."""

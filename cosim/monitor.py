@@ -38,6 +38,7 @@ from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.history import History
 from feeddrive.estimator.mismatch import MismatchResult, check_model
+from feeddrive.estimator.motion import SAMPLING_DELAY
 from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
 #: NC state of a high-speed motion without machining
@@ -98,6 +99,10 @@ class MonitorConfig(BaseModel):
         The sensors' ``w_enc`` is a backward difference, i.e. the speed half a window earlier: averaged
         with the tachometer it delayed the speed by a quarter window (0.25 ms), which biased R by
         +0.45 % and ft by -1 % on the built-in plant.
+    sampling : mapping of {"voltage", "current", "speed"} to {"instant", "mean"}
+        What a sample of each quantity is: ``mean``, the mean over the sampling interval before its
+        time stamp, which the estimator aligns to the interval's middle (h/2 earlier); default
+        instant. In a scenario it defaults to the sensors' sampling when ``plant.oversample`` > 1.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
@@ -126,6 +131,12 @@ class MonitorConfig(BaseModel):
     budget_s: float = Field(2.0, gt=0)
     keep_traces: int = Field(5, ge=0)
     encoder_window_s: float = Field(1.0e-3, gt=0)
+    sampling: dict[Literal["voltage", "current", "speed"], Literal["instant", "mean"]] = {}
+
+    def delays(self, h: float) -> dict[str, float]:
+        """Estimator signal -> delay [s] of its samples (see ``sampling``), for sampling period ``h``."""
+        symbol = {"voltage": "u", "current": "i", "speed": "w"}
+        return {symbol[q]: SAMPLING_DELAY[mode] * h for q, mode in self.sampling.items() if SAMPLING_DELAY[mode]}
 
     @property
     def filter(self) -> FilterSpec:
@@ -243,6 +254,8 @@ class MonitorPipeline:
     def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> None:
         result = trace.result
         electrical = None if self.last_validated is None else {k: self.last_validated[k]["value"] for k in "RLK"}
+        if self.config.sampling.get("speed") == "mean" and signals.get("w_enc") is not None:
+            signals = {**signals, "w_enc": interval_mean_speed(signals["w_enc"])}
         v = validate_measurements(signals, h, electrical, self.config.filter, self.validation_options,
                                   nominal=self.nominal)
         trace.validation = v
@@ -251,7 +264,8 @@ class MonitorPipeline:
                    "sensor_faults": [f.to_dict() for f in v.sensor_faults],
                    "residues": {q: _residue_dict(p) for q, p in v.pairs.items() if p.residue is not None}}
         result["notes"] += list(v.notes) + [n for p in v.pairs.values() for n in p.notes]
-        est = estimate_motion(MotionData(h, u=v.u, i=v.i, w=v.w, t0=start), self.estimation_options)
+        est = estimate_motion(MotionData(h, u=v.u, i=v.i, w=v.w, t0=start, delays=self.config.delays(h)),
+                              self.estimation_options)
         params = est.parameters
         units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units[k]}
@@ -286,6 +300,16 @@ class MonitorPipeline:
                 result["notes"].append(f"healthy baseline: motion {k + 1} of {n}")
         self.last_validated = current
         self.recent = (self.recent + [current])[-self.diagnosis_options.trend_motions:]
+
+
+def interval_mean_speed(w_enc: np.ndarray) -> np.ndarray:
+    """The latched encoder's speed at the sample times -> its mean over each sampling interval (trapezoid).
+
+    With a tachometer sampled as an interval mean, the average of the two speeds would otherwise lag the
+    tachometer by a quarter sample (R -0.04 % on the vendor-style drive at 10 kHz).
+    """
+    w_enc = np.asarray(w_enc, dtype=float)
+    return np.r_[w_enc[:1], 0.5 * (w_enc[1:] + w_enc[:-1])]
 
 
 def centred_speed(theta: np.ndarray, fallback: np.ndarray, h: float, window_s: float) -> np.ndarray:

@@ -195,6 +195,10 @@ class NCConfig(StrictConfig):
         The motion inserted on an identification request.
     program : tuple of ProgramItem
         The moves, in order.
+    cycle : float or None
+        Interpolation and position-loop cycle [s], an integer multiple of the plant's step
+        (``step / plant.oversample``); default: the recording ``step``. Between cycles the outputs
+        are held (the plant's ``input_hold`` decides whether it sees them held or ramped).
     """
 
     start: float = 0.0
@@ -205,6 +209,7 @@ class NCConfig(StrictConfig):
     accel: float = Field(BENCH_ACCEL, gt=0)
     identification: Identification = Identification()
     program: tuple[ProgramItem, ...] = ()
+    cycle: float | None = Field(None, gt=0)
 
 
 # A segment is [t_start (s, relative to t0), x0 (m), v0 (m/s), a (m/s^2), state, load (N.m), item];

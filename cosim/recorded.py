@@ -332,6 +332,10 @@ def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str
                         help="ball-screw pitch [m]: converts a table position/speed/force to the motor side")
     parser.add_argument("--ratio", type=float, default=1.0, metavar="N",
                         help="motor turns per screw turn (belt or gear; default 1)")
+    parser.add_argument("--sampling", action="append", default=[], metavar="QUANTITY=MODE",
+                        help="what a sample of voltage, current or speed is: instant (default) or mean (the mean "
+                             "over the interval before its time stamp, aligned to the interval's middle), "
+                             "e.g. voltage=mean; repeat for each quantity")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.set_defaults(default_cutoff_hz=filter_cutoff_hz)
 
@@ -357,6 +361,20 @@ def to_motor_side(rec: Recording, args: argparse.Namespace) -> Recording:
     units = {"position": "rad", "speed": "rad/s", "torque": "N*m"}
     signals = {r: v * factors.get(r, 1.0) for r, v in rec.signals.items()}
     return replace(rec, signals=signals, units=rec.units | {r: units[r] for r in rec.units if r in units})
+
+
+#: quantities ``--sampling`` accepts and their estimator signal
+SAMPLED = {"voltage": "u", "current": "i", "speed": "w"}
+
+
+def sampling_modes(args: argparse.Namespace) -> dict[str, str]:
+    """The ``--sampling`` options as quantity -> mode, refusing unknown quantities and modes."""
+    modes = pairs(args.sampling, "--sampling")
+    for q, mode in modes.items():
+        if q not in SAMPLED or mode not in ("instant", "mean"):
+            raise InputError(f"--sampling {q}={mode}: expected QUANTITY=MODE with QUANTITY one of "
+                             f"{', '.join(SAMPLED)} and MODE instant or mean")
+    return modes
 
 
 def mapped_roles(args: argparse.Namespace, roles: Iterable[str]) -> dict[str, str]:

@@ -32,7 +32,7 @@ from feeddrive.cosim.axis import Axis, resolve_drive_chain
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.fmu_inspect import check_archive, fmi_version, model_description, sha256
 from feeddrive.cosim.nc import SETTLING, NCConfig, drive_chain_nominal, plan_program
-from feeddrive.cosim.sensors import ChannelConfig, SensorsConfig
+from feeddrive.cosim.sensors import EVENT_FIELDS, SensorsConfig
 from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error, read_yaml
 
 Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
@@ -78,6 +78,8 @@ class PlantConfig(_Strict):
     fmu: str = "builtin"
     sha256: str | None = None
     interface: Literal["cs", "me"] = "cs"
+    oversample: int = Field(1, ge=1, description="plant and sensor steps per recording step: the plant's "
+                            "communication step is step / oversample")
     tolerance: float = Field(1e-8, gt=0, description="relative tolerance of CVode (interface: me)")
     call_timeout: float = Field(60.0, gt=0, description="watchdog of `cosim run` [s]: a single FMI call "
                                 "running longer stops the run as hung (report.json status: hung)")
@@ -156,6 +158,14 @@ class Scenario(_Strict):
     def base_dir(self) -> Path:
         """Directory against which relative paths of the scenario are resolved."""
         return self._base_dir
+
+    def nc_cycle_ticks(self) -> int:
+        """The NC's cycle in ticks of the plant's step ``step / plant.oversample`` (default: one ``step``)."""
+        m = self.plant.oversample
+        if self.nc.cycle is None:
+            return m
+        ticks = self.nc.cycle * m / self.step
+        return max(1, round(ticks))
 
     def error(self, path: KeyPath, message: str) -> ScenarioError:
         """A ScenarioError naming the file, the YAML line of ``path`` (or its nearest parent) and the key."""
@@ -241,6 +251,13 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     if scenario.step > stop:
         raise scenario.error(("step",), f"{scenario.step:g} s is longer than the run ({stop:g} s, {what}); "
                                         "expected a communication step <= the stop time")
+    if scenario.nc.cycle is not None:
+        ticks, hf = scenario.nc.cycle * scenario.plant.oversample / scenario.step, scenario.step / scenario.plant.oversample
+        if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-6 * max(1.0, ticks):
+            raise scenario.error(("nc", "cycle"), f"{scenario.nc.cycle:g} s is not an integer multiple of the plant's "
+                                                  f"step {hf:g} s (step / plant.oversample); expected e.g. "
+                                                  f"{max(1, round(ticks)) * hf:g}")
+    _check_lowpass(scenario)
     plant, md = _resolve_plant(scenario)
     _check_drive_chain(scenario, md)
     _check_events(scenario, md)
@@ -288,6 +305,8 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     name = name.get("name", "X") if isinstance(name, dict) else name
     implied = {k: v for k, v in (("axis", name), ("scenario", data.get("name")))
                if k in fields and isinstance(v, str)}
+    if "sampling" in fields:
+        implied["sampling"] = _implied_sampling(data)
     if isinstance(raw, dict) and isinstance(raw.get("db"), str) and raw["db"] != ":memory:" and "db" in fields:
         raw = raw | {"db": str(base_dir / Path(raw["db"]).expanduser())}
     try:
@@ -295,6 +314,36 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     except ValidationError as exc:
         raise from_validation(exc, raw, source, lines, prefix=prefix, model=MonitorConfig) from None
     return ComponentSpec(name="monitor", class_=DEFAULT_MONITOR, config={}).model_copy(update={"config": config})
+
+
+def _check_lowpass(s: Scenario) -> None:
+    """An anti-aliasing filter runs at the plant's step: its cut-off must be well below that step's Nyquist."""
+    hf = s.step / s.plant.oversample
+    sensors = s.sensors
+    channels = {("current", 0): sensors.current[0], ("current", 1): sensors.current[1], ("voltage",): sensors.voltage,
+                ("voltage_ref",): sensors.voltage_ref, ("tachometer",): sensors.tachometer}
+    for key, chan in channels.items():
+        fc = chan.cutoff_hz or 0.25 / s.step
+        if chan.sampling == "lowpass" and not fc < 0.45 / hf:
+            raise s.error(("sensors", *key, "cutoff_hz"), f"{fc:g} Hz: expected a cut-off below {0.45 / hf:g} Hz "
+                                                         f"(0.9 x the Nyquist frequency of the plant's step {hf:g} s)")
+
+
+def _implied_sampling(data: dict) -> dict[str, str]:
+    """The monitor's default ``sampling``: a quantity is an interval mean when the plant is oversampled and
+    every sensor of it samples the mean (the default); bad values are left to the sections' own checks."""
+    plant, sensors = data.get("plant"), data.get("sensors")
+    m = plant.get("oversample", 1) if isinstance(plant, dict) else 1
+    if not isinstance(m, int) or m <= 1:
+        return {}
+    sensors = sensors if isinstance(sensors, dict) else {}
+    current = sensors.get("current")
+    channels = {"voltage": [sensors.get("voltage"), sensors.get("voltage_ref")],
+                "current": list(current) if isinstance(current, list) else [None, None],
+                "speed": [sensors.get("tachometer")]}
+    return {q: "mean" for q, chans in channels.items()
+            if all((c or {}).get("sampling", "mean") == "mean" if isinstance(c, dict) or c is None else False
+                   for c in chans)}
 
 
 # -- the plant FMU -------------------------------------------------------------------------------
@@ -440,7 +489,7 @@ def _check_events(s: Scenario, md: Any) -> None:
 
 def _check_sensor_event(s: Scenario, k: int, name: str, value: float | str) -> None:
     """``sensors.<channel>.<field>`` with the channels and fields ``SensorsComponent.set_parameter`` accepts."""
-    channels, fields = tuple(s.sensors.channels()), tuple(ChannelConfig.model_fields)
+    channels, fields = tuple(s.sensors.channels()), EVENT_FIELDS
     channel, _, field = name.partition(".")
     if channel not in channels or field not in fields:
         raise s.error(("events", k, "target"), f"sensors.{name}: expected sensors.<channel>.<field> with channel "

@@ -54,6 +54,11 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
     if data.w is not None:
         raw.pop("position", None)  # a tachometer is preferred to the differentiated encoder
     f = options.filter.apply(raw, h)
+    for name, delay in data.delays.items():
+        if delay and name in f:  # a sample stamped t_n is the signal at t_n - delay: read it `delay` later
+            x = f[name]
+            k = np.arange(x.size, dtype=float)
+            f[name] = np.interp(k + delay / h, k, x)  # the filtered signal is smooth on the sample scale
     if "position" in f:
         w, valid = zero_forcing_derivative(f.pop("position"), h)
         f = {k: v[valid] for k, v in f.items()} | {"w": w}
@@ -303,7 +308,8 @@ def split_halves(data: MotionData) -> tuple[MotionData, MotionData]:
     """Odd and even samples of a motion: two records of the same motion with independent white noise."""
     def half(k: int) -> MotionData:
         return MotionData(2 * data.h, *(None if x is None else x[k::2] for x in
-                                        (data.u, data.i, data.w, data.position, data.torque)), data.t0 + k * data.h)
+                                        (data.u, data.i, data.w, data.position, data.torque)), data.t0 + k * data.h,
+                          data.delays)  # the delays are in seconds: the same for either half
     return half(1), half(0)
 
 

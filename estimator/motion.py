@@ -17,6 +17,10 @@ from feeddrive.estimator.regression import Regression
 from feeddrive.estimator.simulation import MODEL
 
 METHODS = ("ls", "iv", "oe")
+#: fraction of the sampling period by which a sampling mode's samples lag their time stamps: an interval
+#: mean over [t - h, t] belongs to the middle of its interval, t - h / 2
+SAMPLING_DELAY = {"instant": 0.0, "mean": 0.5}
+
 #: Signals measured on the drive (the others are derivatives and sign(w), computed from them).
 MEASURED = ("u", "i", "w")
 #: Physical parameters of the model in model order (T0 and other optional terms on request).
@@ -39,6 +43,10 @@ class MotionData:
         Motor torque [N.m], used in place of ``K i`` in the mechanical equation.
     t0 : float
         Time of the first sample [s].
+    delays : mapping of str to float
+        Signal name -> how long [s] its samples lag their time stamps: ``h / 2`` for a sample that is the
+        mean over the interval before its time stamp (``SAMPLING_DELAY``); default 0 (instantaneous).
+        The estimator aligns every signal to its time stamp before the regression.
     """
 
     h: float
@@ -48,6 +56,7 @@ class MotionData:
     position: np.ndarray | None = None
     torque: np.ndarray | None = None
     t0: float = 0.0
+    delays: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.h) and self.h > 0):
@@ -68,6 +77,11 @@ class MotionData:
             object.__setattr__(self, name, x)
         if n is None:
             raise EstimatorInputError("MotionData: no signal given")
+        for name, d in dict(self.delays).items():
+            if name not in ("u", "i", "w", "position", "torque") or not (np.isfinite(d) and 0 <= d <= 10 * self.h):
+                raise EstimatorInputError(f"MotionData: delays: expected u, i, w, position or torque -> a delay in "
+                                          f"[0, 10 h] s, got {name!r}: {d!r}")
+        object.__setattr__(self, "delays", dict(self.delays))
 
     @property
     def n(self) -> int:

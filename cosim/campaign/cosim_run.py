@@ -48,19 +48,23 @@ def _estimates(signals: Mapping[str, np.ndarray], rows: slice, h: float, faulty:
     (``cosim.monitor.centred_speed``). The filter and the speed threshold are the monitor's ``config``
     (``cosim.monitor.MonitorConfig``), so that the table scores the estimator the monitor validates.
     """
-    from feeddrive.cosim.monitor import centred_speed
+    from feeddrive.cosim.monitor import centred_speed, interval_mean_speed
     from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
+
+    sampling = getattr(config, "sampling", {})  # interval means (plant.oversample > 1): as the monitor aligns them
 
     def measured(name: str) -> np.ndarray:
         if name == "encoder":
-            return centred_speed(signals["sensors.theta_enc"][rows], signals["sensors.w_enc"][rows], h,
-                                 config.encoder_window_s)
+            w = centred_speed(signals["sensors.theta_enc"][rows], signals["sensors.w_enc"][rows], h,
+                              config.encoder_window_s)
+            return interval_mean_speed(w) if sampling.get("speed") == "mean" else w
         return signals[f"sensors.{name}"][rows]
 
     data = {q: np.mean([measured(c) for c in [c for c in pair if c not in faulty] or pair[:1]], axis=0)
             for q, pair in _QUANTITIES.items()}
     method = next(m for m in ("oe", "iv", "ls") if m in methods)
-    est = estimate_motion(MotionData(h=h, **data), EstimationOptions(method=method, filter=config.filter,
+    delays = config.delays(h) if hasattr(config, "delays") else {}
+    est = estimate_motion(MotionData(h=h, delays=delays, **data), EstimationOptions(method=method, filter=config.filter,
                                                                      speed_threshold=config.speed_threshold))
     return {m: {k: {"value": p.value, "ci95": list(p.ci95)} for k, p in getattr(est, m).parameters.items()}
             for m in methods if getattr(est, m) is not None}

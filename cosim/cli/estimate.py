@@ -27,11 +27,13 @@ import numpy as np
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.recorded import (
+    SAMPLED,
     add_recording_arguments,
     filter_cutoff,
     load_recording,
     mapped_roles,
     pairs,
+    sampling_modes,
     to_motor_side,
 )
 from feeddrive.estimator import (
@@ -42,6 +44,7 @@ from feeddrive.estimator import (
     NotEnoughExcitation,
     estimate_motion,
 )
+from feeddrive.estimator.motion import SAMPLING_DELAY
 from feeddrive.estimator.segmentation import segment
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
@@ -69,6 +72,8 @@ def main(args: argparse.Namespace) -> int:
     options = EstimationOptions(method=args.method, filter=FilterSpec(filter_cutoff(args, rec.h)), known=known,
                                 offset=args.offset, speed_threshold=args.speed_threshold,
                                 speed_unit="m/s" if side == "table" else "rad/s")
+    modes = sampling_modes(args)
+    delays = {SAMPLED[q]: SAMPLING_DELAY[m] * rec.h for q, m in modes.items() if SAMPLING_DELAY[m]}
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     speed = sig.get("w")
     if speed is None and "position" in sig:
@@ -79,7 +84,7 @@ def main(args: argparse.Namespace) -> int:
     results = []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
-        data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, **part)
+        data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, delays=delays, **part)
         try:
             results.append(estimate_motion(data, options))
         except (NotEnoughExcitation, EstimatorInputError) as exc:  # e.g. a rapid block too short to filter

@@ -34,6 +34,7 @@ from feeddrive.cosim.recorded import (
     filter_cutoff,
     load_recording,
     mapped_roles,
+    sampling_modes,
     to_motor_side,
 )
 from feeddrive.cosim.run import _versions
@@ -62,6 +63,7 @@ def main(args: argparse.Namespace) -> int:
         missing.append("speed or position")
     if missing:
         raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
+    modes = sampling_modes(args)
     rec = to_motor_side(load_recording(args.data, role_map, args.sample_time, args.delimiter, args.decimal), args)
     if rec.side == "table":  # the monitor's model is the motor's: u = R i + L di/dt + K w, w in rad/s
         raise InputError(f"{args.data}: the position/speed columns are on the table side ({rec.units}); the "
@@ -77,7 +79,8 @@ def main(args: argparse.Namespace) -> int:
     out = _out_folder(args.out, args.overwrite) if args.out else None
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     config = MonitorConfig(axis=args.axis, scenario=str(rec.path), db=args.db, method=args.method,
-                           filter_cutoff_hz=filter_cutoff(args, rec.h), speed_threshold=args.speed_threshold)
+                           filter_cutoff_hz=filter_cutoff(args, rec.h), speed_threshold=args.speed_threshold,
+                           sampling=modes)
     end_clock = rec.path.stat().st_mtime - (rec.n - 1) * rec.h  # machine time of sample 0
     traces = []
     if args.db == DEFAULT_DB:
