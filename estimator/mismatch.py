@@ -93,10 +93,11 @@ class ResidueCheck:
         RMS of the residue without its nuisance part, and the sensor noise it is compared with (NaN
         without one), in the signal's unit.
     simulated, residue : ndarray, shape (n,)
-        Simulated signal and ``measured - simulated`` (filtered; NaN where the speed is not simulated).
+        Simulated signal and ``measured - simulated`` (filtered; NaN on the samples not tested: the
+        filter's transients at both ends and, for the speed, outside the segments).
     correlation : ndarray, shape (lags + 1, n_inputs)
         Correlation of the prewhitened residue with each prewhitened input at lags 0..lags (as ``resid``
-        draws it); ``band``: its 99 % band ``z(1 - alpha / 2) / sqrt(blocks)`` under independence.
+        draws it); ``band``: its (1 - alpha) band ``z(1 - alpha / 2) / sqrt(blocks)`` under independence.
     band : float
     """
 
@@ -374,8 +375,8 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[k], D, X, h, alpha, rate_hz, lags,
                                                ar_order, noise.get(name), noise_dof,
                                                labels[k] if name == "speed" else None)
-        checks[name] = ResidueCheck(name, tests, rms, float(noise.get(name, np.nan)), simulated,
-                                    f[x] - simulated, corr, band)
+        residue = np.where(k, f[x] - simulated, np.nan)  # the samples tested (filter edges out)
+        checks[name] = ResidueCheck(name, tests, rms, float(noise.get(name, np.nan)), simulated, residue, corr, band)
     results = [(f"{name} {t}", r) for name, c in checks.items() for t, r in c.tests.items()]
     m = len(results)
     label, worst = min(results, key=lambda t: t[1].p_value)
