@@ -201,9 +201,8 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     out = np.full(w.size, np.nan)
     for sl in ndimage.find_objects(labels):
         drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
-        # initial filter state for the output w0: that of a steady input ft w0 (the gain is 1 / ft)
-        zi = signal.lfilter_zi(b, a) * w[sl][0] * ft
-        out[sl] = signal.lfilter(b, a, drive, zi=zi)[0]
+        # transposed direct form: y[0] = b0 x[0] + z[0], so z[0] = w0 - b0 x[0] starts the output at w0
+        out[sl] = signal.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
     return out
 
 
