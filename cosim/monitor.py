@@ -71,10 +71,9 @@ class MonitorConfig(BaseModel):
         Level of every statistical test (residues, model whiteness, drifts).
     window_s, gain_tol, offset_tol : float
         Residue windows [s]; sensor gain error [relative] and offset [fraction of range] that count as faults.
-    mismatch_rms_tol : float
-        RMS output-error residue in a 50 ms window, beyond what the estimate's uncertainty band allows
-        (fraction of the signal's range), above which a residue that is not white Gaussian noise
-        (Ljung-Box or burst test) is a mismatch; see estimator/mismatch.py.
+    mismatch_alpha : float
+        Family-wise level of the model check (independence and size tests of the output-error residues,
+        estimator/mismatch.py): its false-alarm rate on healthy motions.
     baseline : {"motions", "nominal"}
         Healthy baseline: the first ``baseline_motions`` validated motions without a diagnosis, or the
         model's nominal values. While it is incomplete, each validated motion is diagnosed against the
@@ -119,7 +118,7 @@ class MonitorConfig(BaseModel):
     window_s: float = Field(0.05, gt=0)
     gain_tol: float = Field(0.005, gt=0)
     offset_tol: float = Field(0.005, gt=0)
-    mismatch_rms_tol: float = Field(0.01, gt=0)
+    mismatch_alpha: float = Field(0.01, gt=0, lt=0.5)
     baseline: Literal["motions", "nominal"] = "motions"
     baseline_motions: int = Field(3, ge=1)
     nominal: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
@@ -272,8 +271,8 @@ class MonitorPipeline:
                                 for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
         mismatch = check_model(v.u, v.i, v.w, h, {k: p.value for k, p in params.items()}, self.config.filter,
-                               self.config.alpha, rms_tol=self.config.mismatch_rms_tol, covariance=est.covariance,
-                               names=est.names)
+                               self.config.mismatch_alpha, covariance=est.covariance, names=est.names,
+                               noise=_signal_noise(v), noise_dof=len(v.i), speed_threshold=self.config.speed_threshold)
         trace.mismatch = mismatch
         result["mismatch"] = mismatch.to_dict()
         result["validated"] = bool(v.valid and mismatch.passed)
@@ -340,6 +339,18 @@ def _drift_reference(reference: Mapping | None, options: DiagnosisOptions, names
     """``{"z_crit", "min_relative": {name}, "baseline": {name: {"value", "std"}} or None}`` of a drift test."""
     base = None if reference is None else {k: {"value": float(v), "std": float(s)} for k, (v, s) in reference.items()}
     return {"z_crit": options.z_crit, "min_relative": {n: options.min_rel(n) for n in names}, "baseline": base}
+
+
+def _signal_noise(v: MeasurementValidation) -> dict[str, float]:
+    """Noise standard deviation of the current [A] and speed [rad/s] passed to the estimator, from the
+    residue of each redundant pair: ``std(x1 - x2) / 2`` for the mean of two sensors with equal noise,
+    ``/ sqrt(2)`` for one trusted sensor; none without redundancy."""
+    out = {}
+    for quantity, key in (("current", "current"), ("speed", "speed")):
+        pair = v.pairs.get(quantity)
+        if pair is not None and pair.residue is not None and np.isfinite(pair.residue.noise_std):
+            out[key] = float(pair.residue.noise_std) / (2.0 if pair.trusted is None else np.sqrt(2.0))
+    return out
 
 
 def _residue_dict(pair) -> dict:

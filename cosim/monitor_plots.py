@@ -1,8 +1,9 @@
 """Plots of the monitor (matplotlib, Agg backend).
 
 * per motion: the current residue ``Im1 - Im2`` with its window means (paper Fig. 9, 10), the
-  measured and model-simulated current (Fig. 12), the measured and simulated speed and their residue
-  (Fig. 13, 14);
+  measured and model-simulated current (Fig. 12), the measured and simulated speed and the residues
+  against the sensor noise, titled with the test that decided (Fig. 13, 14); the correlation of the
+  residues with past inputs and its band (``monitor_correlation<k>.png``, as MATLAB's ``resid``);
 * per axis: each parameter's trend over the motions with its 95 % confidence interval, the healthy
   baseline and the diagnosis' alarm band (cosim/trends.py).
 """
@@ -43,17 +44,53 @@ def plot_motion(trace, path: Path) -> Path:
         axes[1].plot(t, cur.simulated, "--", label="simulated from the estimated model")
         axes[1].set_ylabel("current [A]")
         axes[2].plot(t, speed.simulated + speed.residue, label="measured (filtered)")
-        axes[2].plot(t, speed.simulated, "--", label="simulated from the estimated model")
+        axes[2].plot(t, speed.simulated, "--", label="simulated on each constant-sign segment")
         axes[2].set_ylabel("speed [rad/s]")
-        axes[3].plot(t, speed.residue, color="C3")
-        axes[3].set_ylabel("speed residue [rad/s]")
-        axes[3].set_title(f"Ljung-Box p = {speed.p_value:.3g}, RMS = {100 * speed.rms_relative:.2f} % of range, "
-                          f"{'passed' if speed.passed else 'MISMATCH'}", fontsize=8)
+        for ax, check, unit, color in ((axes[3], speed, "rad/s", "C3"), (axes[3].twinx(), cur, "A", "C0")):
+            ax.plot(t, check.residue, color=color, lw=0.6, label=f"{check.signal} residue")
+            if np.isfinite(check.noise_std):
+                ax.axhline(check.noise_std, color=color, ls=":", lw=0.8)
+                ax.axhline(-check.noise_std, color=color, ls=":", lw=0.8)
+            ax.set_ylabel(f"{check.signal} residue [{unit}]", color=color)
+        axes[3].set_title(decision_text(mm), fontsize=8)
         for ax in axes[1:3]:
             ax.legend(loc="upper right", fontsize=7)
     axes[-1].set_xlabel("time [s]")
     state = "validated" if trace.result.get("validated") else "not validated"
     fig.suptitle(f"motion {trace.motion}: {state}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def decision_text(mm) -> str:
+    """What decided the model check: the deciding test, its statistic and p-value against alpha, and for
+    each residue its RMS (nuisance removed) against the sensor noise (dotted lines: +- that noise)."""
+    size = ", ".join(f"{k} RMS {c.rms:.3g} vs noise {c.noise_std:.3g}" for k, c in mm.checks.items())
+    return (f"{'passed' if mm.passed else 'MISMATCH'}: {mm.test} F = {mm.statistic:.3g}, adjusted p = "
+            f"{mm.p_value:.3g} {'>=' if mm.passed else '<'} alpha = {mm.alpha:g} ({size})")
+
+
+def plot_correlation(trace, path: Path) -> Path:
+    """Correlation of each prewhitened residue with each prewhitened input against the lag, with the band
+    of independence at the check's level (as MATLAB's ``resid``), into ``path`` (PNG)."""
+    mm = trace.mismatch
+    fig, axes = plt.subplots(1, len(mm.checks), figsize=(9, 2.8), squeeze=False)
+    from feeddrive.estimator.mismatch import INPUTS
+
+    for ax, (name, check) in zip(axes[0], mm.checks.items()):
+        lags = np.arange(check.correlation.shape[0])
+        for j, x in enumerate(INPUTS[name]):
+            ax.stem(lags + 0.15 * j, check.correlation[:, j], linefmt=f"C{j}-", markerfmt=f"C{j}o",
+                    basefmt=" ", label=f"input {x}")
+        ax.axhspan(-check.band, check.band, color="0.85", zorder=0, label=f"{100 * (1 - mm.alpha):g} % band")
+        p = check.tests["independence"].p_value
+        ax.set_title(f"{name} residue vs past inputs: F-test p = {p:.3g}", fontsize=8)
+        ax.set_xlabel("lag [blocks of 20 ms]")
+        ax.legend(fontsize=7)
+    axes[0, 0].set_ylabel("correlation")
+    fig.suptitle(f"motion {trace.motion}: residue-input correlation", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -75,6 +112,8 @@ def plot_monitor(traces: Sequence, motions: Sequence[dict], folder: Path, thresh
     """
     folder.mkdir(parents=True, exist_ok=True)
     paths = [plot_motion(tr, folder / f"monitor_motion{tr.motion}.png") for tr in traces]
+    paths += [plot_correlation(tr, folder / f"monitor_correlation{tr.motion}.png") for tr in traces
+              if tr.mismatch is not None]
     if any(m.get("parameters") for m in motions):
         axis = motions[-1].get("axis")
         paths.append(plot_trends(motions, folder / "monitor_trends.png", f"axis {axis}" if axis else "", thresholds))

@@ -1,73 +1,43 @@
 """Model validation: does the estimated model explain the motion? (paper IV.B.3, Fig. 13, 14)
 
 The estimated model is simulated from the measured inputs (output error, no feedback from the
-measured output):
+measured output), on the filtered signals (eq. 8):
 
-* speed from the filtered current with the estimated K, Jt, ft, Cd (mechanical equation), and
-* current from the filtered voltage and speed with the estimated R, L, K (electrical equation,
-  the same first-order recursion as the validation's Ir_hat, started in steady state),
+* current from the voltage and speed with the estimated R, L, K (electrical equation, exact Tustin
+  recursion started in steady state, as the validation's Ir_hat);
+* speed from the current with the estimated K, Jt, ft, Cd (T0), on each segment where ``|w|`` stays
+  above the speed threshold, started from the measured speed at the segment's start. sign(w) is
+  constant on a segment, so the mechanical equation is linear there and simulated exactly (Tustin).
+  One simulation over the whole motion integrated every imperfection of the smoothed sign(w) through
+  the reversals and dwells (creep): on healthy data its residue was coloured and correlated with the
+  current, and any test rejected 25-40 % of healthy motions.
 
-and each residue ``measured - simulated`` (filtered signals, eq. 8) is judged on its shape and size:
+Each residue ``measured - simulated`` is judged by two tests whose null hypothesis holds on healthy
+data, so that their level is their false-alarm rate:
 
-* whiteness: Ljung-Box test (statsmodels ``acorr_ljungbox``) at level ``alpha`` on the residue
-  decimated to ``rate_hz`` by block means (at 10 kHz the filtered residue is correlated over about
-  1/cutoff and the test would reject every motion for that reason alone);
-* bursts: the largest block mean against the robust (MAD) scale of all of them, ``burst_z``, with the
-  Sidak-corrected p-value ``1 - (1 - 2 Phi(-burst_z))^n_blocks`` of the largest of n Gaussian block
-  means (filter transients at both ends excluded). Ljung-Box sums autocorrelations over the motion and
-  misses a few short bursts; this test does not;
-* size: RMS of the residue relative to the range of the measured signal, over the whole motion
-  (``rms_relative``) and over every ``window_s`` window (the filter's transients at both ends excluded;
-  the largest is ``peak_rms_relative``).
+* **independence** (Ljung's residual analysis, MATLAB ``resid``): is the residue explained by the
+  past inputs (current residue: voltage and speed; speed residue: current) at lags 0..``lags`` of the
+  residue decimated to ``rate_hz`` by block means? The residue's own colour is accounted for by
+  prewhitening: feasible GLS with AR(``ar_order``) errors (statsmodels ``GLSAR``), F-test of the lag
+  coefficients. The estimate's own error also leaves an input-correlated residue (theta_hat - theta
+  is of the order of its standard error); it is not a mismatch, so the sensitivities of the simulation
+  along the principal axes of the covariance (``sensitivity_directions``), a constant and, for the
+  speed, one constant per segment (its start from a noisy speed) are nuisance regressors of the test;
+* **size**: the residue, with those nuisance regressors removed, must be no larger than the noise of
+  the sensors measured by the redundancy (``noise``: the standard deviation of the signal the
+  estimator received, from the residue of the two sensors of each quantity). Statistic
+  ``F = mean(e^2) / sigma^2``, one-sided F-test with (decimated blocks, noise samples) degrees of
+  freedom. Filtering only lowers the noise, so a model that explains the motion leaves a residue well
+  below one sensor noise (healthy: 0.06 to 0.64 sigma on the speed); a friction step of +10 % during
+  the motion leaves 1.7 to 5.5 sigma.
 
-A residue counts as a mismatch only when it is not white Gaussian noise (Ljung-Box or burst
-p < alpha) and it is too large for the estimate's uncertainty: in some window its RMS exceeds
-
-    rms_tol * range + c * (RMS of the band sigma(t) over that same window),
-
-``excess_relative`` being the largest ``(residue RMS - c band RMS) / range`` over the windows and
-``band_relative`` the band's RMS / range in that window. sigma(t) = sqrt(diag(S Sigma S^T)) is the
-standard deviation of the simulated signal due to the parameters' uncertainty: Sigma the estimate's
-covariance restricted to the parameters the signal uses (speed: K, Jt, ft, Cd and T0 when estimated;
-current: R, L, K), S the sensitivity of the simulation to them, by finite differences of the same
-simulation along the principal axes of Sigma (``uncertainty_band``). c = sqrt(chi2_p^-1(1 - alpha)),
-p = rank of Sigma (4.30 for speed, 4.03 for current at alpha = 1e-3), is a simultaneous bound for every
-window: with delta = theta_hat - theta, Cauchy-Schwarz gives |S_t delta| <= sigma(t) sqrt(delta^T
-Sigma^-1 delta) at each t, so the windowed RMS of the parameter error's effect is at most its band's RMS
-times sqrt(delta^T Sigma^-1 delta), below c with probability 1 - alpha. Without a covariance the band is
-0 and the rule is ``peak_rms_relative <= rms_tol``. The result names the test that decided:
-``ljung-box`` or ``burst`` (with its statistic and p-value) for a mismatch or a white residue, ``size``
-(statistic: the largest ``excess_relative``; p-value: the rejecting whiteness test's) when the residue is
-coloured but within the rule, which is the usual case on healthy data (see below): on healthy plant data
-the whiteness tests alone cannot accept a model, and ``rms_tol`` is a stated engineering threshold, not
-one derived from the noise.
-
-The worst window, not the whole motion, and the burst test, because an unmodelled effect can be local:
-backlash in the drive chain disturbs the current only around the torque reversals. With the whole-motion
-RMS and Ljung-Box alone, a 0.06 rad gap (0.19 mm at the table) passed with L estimated 6.6 % high (and
-was diagnosed as motor heating); its current residue was white by Ljung-Box (p = 1.4e-3) but had bursts
-(p < 1e-80) and a worst window of 1.8 % of the range (1.3 % beyond the band).
-
-The band, because a slow motion determines friction poorly. A tool change at 0.02 m/s (6.3 rad/s,
-10.5 s; the standard one runs at 70 rad/s for 3.5 s) gave ft 0.032 [0.017, 0.048] and Cd 1.12
-[1.02, 1.22] N m for a plant with 0.02 and 1.2, and the open-loop speed simulation integrates that
-torque error over seconds: 0.6 to 1.3 % of the range in the worst window over 9 noise seeds, all
-healthy; the band brings the largest excess down to 0.06 to 0.34 %. Measured on those 9 motions, the
-windowed RMS of the actual parameter error's effect stayed within 1.1 to 5.0 times the band's (above
-c = 4.30 in three: the estimator's covariance is optimistic on this motion, delta^T Sigma^-1 delta
-reached 27 for the 4 speed parameters), within 0.7 to 1.6 times on 4 standard tool changes. A
-friction step during the motion (Cd 1.2 -> 2.4 N m) still leaves 2.1 % beyond the band.
-
-The size rule is needed: an open-loop speed simulation integrates every small model imperfection (the
-filtered sign(w) at reversals, estimation error), so even the true model gives a coloured speed residue,
-and the true model's current residue has small bursts at the torque steps (the plant's sampled signals
-do not satisfy eq. 1 exactly there: burst p down to 6e-4, worst window 1e-3 of the range); neither
-matters. The simulation smooths sign(w) as tanh(w / w_eps) with the smallest w_eps its step allows
-(friction stiffness Cd / (Jt w_eps) times the 0.5 ms step at most 1: 6e-3 rad/s, the plant's 1e-3 is
-too stiff for it): with 0.1 rad/s the true model's worst speed window was 1.5 % of the range on the slow
-motion (it creeps through the dwell at the tool-change position), with 6e-3 rad/s it is 0.2 %
-(0.02 % on the standard motion). A white Gaussian residue is noise, however large. A mismatch means
-the parameters are NOT validated; they are still reported.
+The motion passes when no test rejects at the family-wise level ``alpha`` (Bonferroni: each of the m
+tests at ``alpha / m``); ``p_value`` is the Bonferroni-adjusted ``min(1, m min p)`` and the result
+names the test that decided. Without a noise level (recorded data without redundancy) only the
+independence tests run. The former whiteness (Ljung-Box) test rejected every healthy motion (the
+filtered open-loop residue is coloured by construction) and the decision then rested on a fixed size
+rule (1 % of the signal's range); both are gone. A mismatch means the parameters are NOT validated;
+they are still reported.
 """
 from __future__ import annotations
 
@@ -76,199 +46,263 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
-from scipy import stats
-from statsmodels.stats.diagnostic import acorr_ljungbox
+import statsmodels.api as sm
+from scipy import ndimage, signal, stats
 
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
-from feeddrive.estimator.simulation import MODEL, simulate_speed
+from feeddrive.estimator.simulation import MODEL
 from feeddrive.estimator.validation import model_reference
 
 #: physical parameters each simulated output depends on (from the model's equations)
-USES = {signal: tuple(v.name for v in MODEL.parameters
-                      if v.kind == "physical" and ca.depends_on(MODEL.equations[eq].residual, v.sym))
-        for signal, eq in (("speed", "mechanical"), ("current", "electrical"))}
+USES = {signal_: tuple(v.name for v in MODEL.parameters
+                       if v.kind == "physical" and ca.depends_on(MODEL.equations[eq].residual, v.sym))
+        for signal_, eq in (("speed", "mechanical"), ("current", "electrical"))}
+#: inputs of each simulation, the regressors of its independence test
+INPUTS = {"current": ("u", "w"), "speed": ("i",)}
+#: shortest speed segment simulated [s]: shorter ones (reversals) carry no test information
+MIN_SEGMENT_S = 0.1
+
+
+@dataclass(frozen=True)
+class TestResult:
+    """One test of one residue: ``statistic`` (F), its degrees of freedom and p-value."""
+
+    __test__ = False  # not a pytest class
+
+    name: str
+    statistic: float
+    df: tuple[float, float]
+    p_value: float
+
+    def to_dict(self) -> dict:
+        return {"statistic": self.statistic, "df": list(self.df), "p_value": self.p_value}
 
 
 @dataclass(frozen=True)
 class ResidueCheck:
-    """Whiteness and size of one output-error residue.
+    """The tests of one output-error residue.
 
     Attributes
     ----------
     signal : str
         ``speed`` or ``current``.
-    statistic, p_value : float
-        Ljung-Box Q statistic and its p-value.
-    lags : int
-    rms_relative : float
-        RMS residue / range of the measured signal.
-    peak_rms_relative : float
-        Largest RMS over a sliding window / range of the measured signal.
-    excess_relative : float
-        Largest over the windows of ``residue RMS - band_factor * band RMS``, / range (the size the rule
-        compares with ``rms_tol``; ``peak_rms_relative`` without a band).
-    band_relative : float
-        RMS of the band over the window of ``excess_relative``, / range (0 without a band).
-    band_factor : float
-        c of the module docstring (0 without a band).
-    burst_z, burst_p : float
-        Largest robust z-score of the block means and its Sidak-corrected p-value.
-    passed : bool
+    tests : dict of str to TestResult
+        ``independence`` and, with a noise level, ``size``.
+    rms, noise_std : float
+        RMS of the residue without its nuisance part, and the sensor noise it is compared with (NaN
+        without one), in the signal's unit.
     simulated, residue : ndarray, shape (n,)
-        Simulated signal and ``measured - simulated`` (filtered), in the signal's unit.
-    band : ndarray, shape (n,) or None
-        sigma(t), the standard deviation of the simulated signal due to the parameters' uncertainty
-        (signal's unit); None without a covariance.
+        Simulated signal and ``measured - simulated`` (filtered; NaN on the samples not tested: the
+        filter's transients at both ends and, for the speed, outside the segments).
+    correlation : ndarray, shape (lags + 1, n_inputs)
+        Correlation of the prewhitened residue with each prewhitened input at lags 0..lags (as ``resid``
+        draws it); ``band``: its (1 - alpha) band ``z(1 - alpha / 2) / sqrt(blocks)`` under independence.
+    band : float
     """
 
     signal: str
-    statistic: float
-    p_value: float
-    lags: int
-    rms_relative: float
-    peak_rms_relative: float
-    excess_relative: float
-    band_relative: float
-    band_factor: float
-    burst_z: float
-    burst_p: float
-    passed: bool
+    tests: dict[str, TestResult]
+    rms: float
+    noise_std: float
     simulated: np.ndarray = field(repr=False)
     residue: np.ndarray = field(repr=False)
-    band: np.ndarray | None = field(repr=False)
+    correlation: np.ndarray = field(repr=False)
+    band: float = 0.0
 
 
 @dataclass(frozen=True)
 class MismatchResult:
-    """Model validation of one motion; ``test``, ``statistic`` and ``p_value`` are those of the smaller
-    p-value (``ljung-box`` or ``burst``) of the failing (or worst) check, or ``size`` (see the module
-    docstring)."""
+    """Model validation of one motion: the deciding test (smallest p-value), its statistic, the
+    Bonferroni-adjusted p-value, the level, the verdict and the rule (see the module docstring)."""
 
     test: str
     statistic: float
     p_value: float
-    passed: bool
-    checks: dict[str, ResidueCheck]
     alpha: float
-    rms_tol: float
+    passed: bool
+    rule: str
+    checks: dict[str, ResidueCheck]
 
     def to_dict(self) -> dict:
-        """``test, statistic, p_value, passed`` and, per signal, ``rms_relative, peak_rms_relative,
-        excess_relative, band_relative, band_factor, burst_p``."""
-        per = {key: {k: getattr(c, key) for k, c in self.checks.items()}
-               for key in ("rms_relative", "peak_rms_relative", "excess_relative", "band_relative", "band_factor",
-                           "burst_p")}
-        return {"test": self.test, "statistic": self.statistic, "p_value": self.p_value, "passed": self.passed,
-                **per}
+        """``{test, statistic, p_value, alpha, passed, rule, checks: {signal: {test: {statistic, df,
+        p_value}, rms, noise_std}}}`` (report.json)."""
+        checks = {k: {**{t: r.to_dict() for t, r in c.tests.items()}, "rms": c.rms,
+                      "noise_std": None if np.isnan(c.noise_std) else c.noise_std}
+                  for k, c in self.checks.items()}
+        return {"test": self.test, "statistic": self.statistic, "p_value": self.p_value, "alpha": self.alpha,
+                "passed": self.passed, "rule": self.rule, "checks": checks}
 
 
-def residue_check(name: str, measured: np.ndarray, simulated: np.ndarray, h: float, alpha: float, rate_hz: float,
-                  lags: int, rms_tol: float, window_s: float = 0.05, edge_s: float = 0.0,
-                  band: np.ndarray | None = None, band_factor: float = 0.0) -> ResidueCheck:
-    """Judge one output-error residue; see the module docstring. Arrays have shape (n,); h, window_s and
-    edge_s (time left out of the windows and burst blocks at each end) in seconds; ``band`` is sigma(t)
-    (signal's unit) and a window's RMS residue may exceed ``rms_tol`` of the range by ``band_factor``
-    times the band's RMS over that window."""
-    r = measured - simulated
-    if band is not None and np.shape(band) != r.shape:
-        raise EstimatorInputError(f"model check ({name}): band has shape {np.shape(band)}, the residue {r.shape}")
-    block = max(1, int(round(1.0 / (rate_hz * h))))
-    nb = r.size // block
-    if nb < 2 * lags + 2:
-        raise EstimatorInputError(
-            f"model check: {r.size} samples give {nb} blocks at {rate_hz} Hz; need {2 * lags + 2} for {lags} lags")
-    decimated = r[:nb * block].reshape(nb, block).mean(axis=1)
-    lb = acorr_ljungbox(decimated, lags=[lags])
-    stat, p = float(lb["lb_stat"].iloc[0]), float(lb["lb_pvalue"].iloc[0])
-    eb = int(np.ceil(edge_s / (block * h)))
-    inner_blocks = decimated[eb:nb - eb] if nb > 2 * eb + 2 else decimated
-    deviation = float(np.max(np.abs(inner_blocks - np.median(inner_blocks))))
-    scale = float(stats.median_abs_deviation(inner_blocks, scale="normal"))
-    burst_z = deviation / scale if scale > 0 else (np.inf if deviation > 0 else 0.0)
-    burst_p = float(-np.expm1(inner_blocks.size * np.log1p(-2 * stats.norm.sf(burst_z))))
-    span = float(np.ptp(measured)) or 1.0
-    rms = float(np.sqrt(np.mean(r**2))) / span
-    edge, m = int(round(edge_s / h)), max(1, int(round(window_s / h)))
-    keep = slice(edge, r.size - edge) if r.size - 2 * edge >= m else slice(None)
-    m = min(m, r[keep].size)
-    size, spread = (window_rms(x[keep], m) / span for x in (r, np.zeros_like(r) if band is None else band))
-    excess = size - band_factor * spread
-    worst = int(np.argmax(excess))
-    white = p >= alpha and burst_p >= alpha
-    return ResidueCheck(name, stat, p, lags, rms, float(size.max()), float(excess[worst]),
-                        float(spread[worst]), float(band_factor), float(burst_z), burst_p,
-                        bool(white or excess[worst] <= rms_tol), simulated, r, band)
+def sensitivity_directions(simulate: Callable[[dict[str, float]], np.ndarray], parameters: Mapping[str, float],
+                           names: Sequence[str], covariance: np.ndarray | None, uses: Sequence[str],
+                           base: np.ndarray) -> np.ndarray:
+    """Change of a simulated signal along each principal axis of the estimate's covariance.
 
-
-def window_rms(x: np.ndarray, m: int) -> np.ndarray:
-    """RMS over every window of ``m`` consecutive samples.
-
-    Parameters
-    ----------
-    x : ndarray, shape (n,)
-    m : int
-        Window length in samples, ``1 <= m <= n``.
-
-    Returns
-    -------
-    ndarray, shape (n - m + 1,)
-        Element k is the RMS of ``x[k:k + m]`` (unit of x).
-    """
-    energy = np.concatenate(([0.0], np.cumsum(x**2)))
-    return np.sqrt(np.maximum(energy[m:] - energy[:-m], 0.0) / m)
-
-
-def uncertainty_band(simulate: Callable[[dict[str, float]], np.ndarray], parameters: Mapping[str, float],
-                     names: Sequence[str], covariance: np.ndarray, uses: Sequence[str],
-                     base: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-    """Standard deviation of a simulated signal due to the parameters' uncertainty.
-
-    ``sigma(t) = sqrt(diag(S Sigma S^T))`` with S the sensitivity of the signal to the parameters it uses
-    and Sigma their covariance. Writing ``Sigma = sum_k lambda_k v_k v_k^T`` (principal axes),
-    ``S Sigma S^T = sum_k d_k d_k^T`` with ``d_k = S sqrt(lambda_k) v_k``, taken as the finite difference
-    ``simulate(theta + sqrt(lambda_k) v_k) - simulate(theta)``: one simulation per axis, each step one
-    standard deviation along it, so also the curvature at the scale of the uncertainty is in the band.
+    ``d_k = simulate(theta + sqrt(lambda_k) v_k) - simulate(theta)`` for the eigenpairs of the covariance
+    restricted to the parameters the signal uses: one standard deviation along each axis. Without a
+    covariance, one step of 1e-3 of each used parameter's value.
 
     Parameters
     ----------
     simulate : callable
         ``simulate(parameters) -> ndarray, shape (n,)``.
     parameters : mapping of str to float
-        The estimate theta.
     names : sequence of str, length p
-        Names of the covariance's rows.
-    covariance : ndarray, shape (p, p)
-        Covariance of the estimate (unit of each parameter squared).
+        Rows of the covariance.
+    covariance : ndarray, shape (p, p), or None
     uses : sequence of str
-        Parameters the signal depends on; the others' rows are left out.
-    base : ndarray, shape (n,), optional
-        ``simulate(parameters)`` when already computed.
+    base : ndarray, shape (n,)
+        ``simulate(parameters)``.
 
     Returns
     -------
-    band : ndarray, shape (n,)
-        sigma(t), in the signal's unit.
-    rank : int
-        Number of principal axes with a positive variance (the degrees of freedom of the parameter error).
+    ndarray, shape (n, k)
+        One column per axis with a positive variance (signal's unit).
     """
     rows = [j for j, name in enumerate(names) if name in uses]
-    variances, axes = np.linalg.eigh(np.asarray(covariance, dtype=float)[np.ix_(rows, rows)])
-    base = simulate(dict(parameters)) if base is None else base
-    positive = variances > 1e-12 * max(variances.max(initial=0.0), np.finfo(float).tiny)
-    power = np.zeros_like(base)
-    for variance, axis in zip(variances[positive], axes.T[positive]):
-        step = dict(parameters)
-        for j, delta in zip(rows, np.sqrt(variance) * axis):
-            step[names[j]] += delta
-        power += (simulate(step) - base) ** 2
-    return np.sqrt(power), int(positive.sum())
+    if covariance is None:
+        steps = [{names[j]: 1e-3 * (abs(parameters[names[j]]) or 1.0)} for j in rows]
+    else:
+        variances, axes = np.linalg.eigh(np.asarray(covariance, dtype=float)[np.ix_(rows, rows)])
+        positive = variances > 1e-12 * max(variances.max(initial=0.0), np.finfo(float).tiny)
+        steps = [{names[j]: d for j, d in zip(rows, np.sqrt(lam) * ax)}
+                 for lam, ax in zip(variances[positive], axes.T[positive])]
+    cols = []
+    for step in steps:
+        p = dict(parameters)
+        for k, d in step.items():
+            p[k] += d
+        cols.append(simulate(p) - base)
+    return np.column_stack(cols) if cols else np.zeros((base.size, 0))
+
+
+def speed_segments(w: np.ndarray, threshold: float, h: float) -> tuple[np.ndarray, int]:
+    """Labels 1..k of the runs of samples with ``|w| > threshold`` lasting at least ``MIN_SEGMENT_S``
+    (0 elsewhere), and k."""
+    labels, n = ndimage.label(np.abs(w) > threshold)
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)
+    short = sizes < MIN_SEGMENT_S / h
+    short[0] = True
+    labels[short[labels]] = 0
+    return ndimage.label(labels > 0)
+
+
+def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: Mapping[str, float],
+                      h: float) -> np.ndarray:
+    """Speed [rad/s] from the current [A] on each labelled segment (constant sign of w), NaN elsewhere.
+
+    ``Jt dw/dt + ft w = K i - Cd sign(w) - T0``, Tustin, started at the measured speed ``w`` of each
+    segment's first sample."""
+    K, Jt, ft, Cd = (float(params[k]) for k in ("K", "Jt", "ft", "Cd"))
+    T0 = float(params.get("T0", 0.0))
+    b, a = signal.cont2discrete(([1.0], [Jt, ft]), h, method="bilinear")[:2]
+    b = np.ravel(b)
+    out = np.full(w.size, np.nan)
+    for sl in ndimage.find_objects(labels):
+        drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
+        # transposed direct form: y[0] = b0 x[0] + z[0], so z[0] = w0 - b0 x[0] starts the output at w0
+        out[sl] = signal.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
+    return out
+
+
+def _blocks(x: np.ndarray, block: int) -> np.ndarray:
+    nb = x.shape[0] // block
+    return x[:nb * block].reshape(nb, block, *x.shape[1:]).mean(axis=1)
+
+
+def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: np.ndarray, h: float,
+                  alpha: float, rate_hz: float = 50.0, lags: int = 10, ar_order: int = 2,
+                  noise_std: float | None = None, noise_dof: float = np.inf,
+                  groups: np.ndarray | None = None) -> tuple[dict[str, TestResult], float, np.ndarray, float]:
+    """Independence and size tests of one residue; see the module docstring.
+
+    Parameters
+    ----------
+    residue : ndarray, shape (n,)
+        ``measured - simulated`` on the samples tested (signal's unit).
+    nuisance : ndarray, shape (n, k)
+        Columns whose effect is not a mismatch (sensitivities to the parameters).
+    inputs : ndarray, shape (n, m)
+        The simulation's inputs.
+    h : float
+        Sample time [s].
+    alpha : float
+        Level of the correlation band (the tests return p-values).
+    rate_hz, lags, ar_order : float, int, int
+        Decimated rate [Hz], input lags (at that rate) and order of the prewhitening AR model.
+    noise_std : float or None
+        Sensor noise standard deviation of the measured signal (None: no size test).
+    noise_dof : float
+        Degrees of freedom of ``noise_std`` (the samples it was estimated from).
+    groups : ndarray of int, shape (n,), optional
+        Segment labels: one nuisance constant per segment, and blocks never straddle two segments.
+
+    Returns
+    -------
+    tests : dict of str to TestResult
+    rms : float
+        RMS of the residue without its least-squares nuisance part (signal's unit).
+    correlation : ndarray, shape (lags + 1, m)
+    band : float
+    """
+    block = max(1, int(round(1.0 / (rate_hz * h))))
+    groups = np.ones(residue.size, dtype=int) if groups is None else np.asarray(groups)
+    parts = [np.flatnonzero(groups == g) for g in np.unique(groups)]
+    dummies = np.column_stack([groups == g for g in np.unique(groups)]).astype(float)
+    Z = np.column_stack([nuisance, dummies])
+    rb, Zb, Xb, lagged = [], [], [], []
+    for idx in parts:
+        nb = idx.size // block
+        if nb <= lags + 1:
+            continue
+        take = idx[:nb * block]
+        r_, Z_, X_ = _blocks(residue[take], block), _blocks(Z[take], block), _blocks(inputs[take], block)
+        rb.append(r_[lags:])
+        Zb.append(Z_[lags:])
+        lagged.append(np.column_stack([X_[lags - k:nb - k, j] for j in range(X_.shape[1])
+                                       for k in range(lags + 1)]))
+        Xb.append(X_[lags:])
+    if not rb or sum(len(r) for r in rb) < (lags + 1) * inputs.shape[1] + Z.shape[1] + 10:
+        raise EstimatorInputError(f"model check ({name}): {residue.size} samples give too few {rate_hz:g} Hz blocks "
+                                  f"for {lags} lags of {inputs.shape[1]} input(s)")
+    y, N, L = np.concatenate(rb), np.vstack(Zb), np.vstack(lagged)
+    L = (L - L.mean(axis=0)) / L.std(axis=0).clip(1e-300)
+    N = N[:, np.abs(N).max(axis=0) > 0]
+    N = N / np.abs(N).max(axis=0)
+    # nuisance columns nearly collinear with others (a constant and a flat sensitivity) are dropped
+    u_, s_, _ = np.linalg.svd(N, full_matrices=False)
+    N = u_[:, s_ > 1e-9 * s_[0]]
+    design = np.column_stack([N, L])
+    fit = sm.GLSAR(y, design, rho=ar_order).iterative_fit(maxiter=6)
+    q = L.shape[1]
+    restriction = np.zeros((q, design.shape[1]))
+    restriction[:, -q:] = np.eye(q)
+    f = fit.f_test(restriction)
+    tests = {"independence": TestResult("independence", float(np.squeeze(f.fvalue)),
+                                        (float(f.df_num), float(f.df_denom)), float(np.squeeze(f.pvalue)))}
+    # the correlation plot: residue and inputs prewhitened by the fitted AR model, after the nuisance
+    rho = np.atleast_1d(fit.model.rho)
+    white = fit.model.whiten(y - N @ np.linalg.lstsq(N, y, rcond=None)[0])
+    wl = fit.model.whiten(L)
+    corr = (wl.T @ white) / np.sqrt(np.sum(wl ** 2, axis=0) * (white @ white)).clip(1e-300)
+    correlation = corr.reshape(inputs.shape[1], lags + 1).T
+    band = float(stats.norm.isf(alpha / 2) / np.sqrt(white.size - rho.size))
+    Zfull = Z[:, np.abs(Z).max(axis=0) > 0]
+    e = residue - Zfull @ np.linalg.lstsq(Zfull, residue, rcond=None)[0]
+    rms = float(np.sqrt(np.mean(e ** 2)))
+    if noise_std is not None and noise_std > 0:
+        dof = float(y.size)  # the residue is correlated over about a block: one degree of freedom per block
+        ratio = rms ** 2 / noise_std ** 2
+        tests["size"] = TestResult("size", ratio, (dof, float(noise_dof)), float(stats.f.sf(ratio, dof, noise_dof)))
+    return tests, rms, correlation, band
 
 
 def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameters: Mapping[str, float],
-                filter: FilterSpec, alpha: float = 1e-3, rate_hz: float = 50.0, lags: int = 10,
-                rms_tol: float = 0.01, window_s: float = 0.05, covariance: np.ndarray | None = None,
-                names: Sequence[str] | None = None) -> MismatchResult:
+                filter: FilterSpec, alpha: float = 0.01, covariance: np.ndarray | None = None,
+                names: Sequence[str] | None = None, noise: Mapping[str, float] | None = None,
+                noise_dof: float = np.inf, speed_threshold: float = 2.0, rate_hz: float = 50.0, lags: int = 10,
+                ar_order: int = 2) -> MismatchResult:
     """Simulate the estimated model from the measured inputs and test the residues.
 
     Parameters
@@ -282,22 +316,21 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     filter : FilterSpec
         The monitor's filter (eq. 8).
     alpha : float
-        Level of the Ljung-Box test (and of the uncertainty band).
-    rate_hz : float
-        Rate of the decimated residue the test sees [Hz].
-    lags : int
-        Ljung-Box lags.
-    rms_tol : float
-        RMS residue over the worst window, as a fraction of the measured signal's range, below which the
-        model is accepted (beyond the uncertainty band, when ``covariance`` is given).
-    window_s : float
-        Length of the sliding window of that RMS [s]; ``5 / cutoff`` seconds at each end are left out
-        (the zero-phase filter's transients, the simulations' start).
+        Family-wise level of the model check (its false-alarm rate on healthy motions).
     covariance : ndarray, shape (p, p), optional
-        Covariance of the estimated parameters (``MotionEstimate.covariance``); None: no uncertainty
-        band, only ``rms_tol``.
+        Covariance of the estimate (``MotionEstimate.covariance``); its principal axes give the
+        nuisance directions. None: one relative step of 1e-3 per parameter.
     names : sequence of str, length p
         The covariance's parameters (``MotionEstimate.names``); required with ``covariance``.
+    noise : mapping, optional
+        Sensor noise standard deviation of the raw ``i`` [A] and ``w`` [rad/s] given (keys ``current``,
+        ``speed``), from the redundant sensors; a missing key: no size test for that residue.
+    noise_dof : float
+        Degrees of freedom of those noise estimates (number of samples they come from).
+    speed_threshold : float
+        The speed is simulated on the segments where ``|w| >`` this [rad/s].
+    rate_hz, lags, ar_order : float, int, int
+        See ``residue_tests``.
 
     Returns
     -------
@@ -306,6 +339,8 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     missing = [k for k in ("R", "L", "K", "Jt", "ft", "Cd") if k not in parameters]
     if missing:
         raise EstimatorInputError(f"check_model: parameters {missing} are missing")
+    if not 0 < alpha < 1:
+        raise EstimatorInputError(f"check_model: alpha must be in (0, 1), got {alpha}")
     if covariance is not None:
         covariance = np.asarray(covariance, dtype=float)
         if names is None or covariance.shape != (len(names), len(names)) or not np.all(np.isfinite(covariance)):
@@ -314,29 +349,37 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         unknown = [k for k in names if k not in parameters]
         if unknown:
             raise EstimatorInputError(f"check_model: covariance names {unknown} are not in the parameters")
+    names = tuple(parameters) if names is None else tuple(names)
     f = filter.apply({"u": u, "i": i, "w": w}, h)
     params = {k: float(v) for k, v in parameters.items()}
-    decimate = max(h, 1.0 / (20.0 * filter.cutoff_hz))  # integration step: 20 per filter cut-off period
-    # the sharpest sign(w) the step allows: friction stiffness Cd / (Jt w_eps) times the step at most 1
-    w_eps = max(float(MODEL.variables["w_eps"].nominal), abs(params["Cd"]) * decimate / max(abs(params["Jt"]), 1e-12))
+    edge = int(round(5.0 / (filter.cutoff_hz * h)))  # the zero-phase filter's transients at both ends
+    inner = np.zeros(f["w"].size, dtype=bool)
+    inner[edge:f["w"].size - edge] = True
+    labels, _ = speed_segments(np.where(inner, f["w"], 0.0), speed_threshold, h)
+    keep = {"current": inner, "speed": labels > 0}
     simulators = {
-        "speed": ("w", lambda p: simulate_speed(f["i"], p, h, w0=float(f["w"][0]), step=decimate, w_eps=w_eps)),
         "current": ("i", lambda p: model_reference("current", f, h, p)),  # linear: exact Tustin recursion
+        "speed": ("w", lambda p: simulate_segments(f["i"], f["w"], labels, p, h)),
     }
-    edge_s = 5.0 / filter.cutoff_hz
+    noise = dict(noise or {})
     checks = {}
     for name, (x, simulate) in simulators.items():
-        simulated, band, factor = simulate(params), None, 0.0
-        if covariance is not None:
-            band, rank = uncertainty_band(simulate, params, names, covariance, USES[name], simulated)
-            factor = float(np.sqrt(stats.chi2.isf(alpha, rank))) if rank else 0.0
-        checks[name] = residue_check(name, f[x], simulated, h, alpha, rate_hz, lags, rms_tol, window_s, edge_s,
-                                     band, factor)
-    worst = min(checks.values(), key=lambda c: (c.passed, min(c.p_value, c.burst_p)))
-    test, statistic, p = min((("ljung-box", worst.statistic, worst.p_value), ("burst", worst.burst_z, worst.burst_p)),
-                             key=lambda t: t[2])
-    passed = all(c.passed for c in checks.values())
-    if passed and p < alpha:
-        # coloured but small: the size rule decided; say so, with its statistic (worst window beyond the band)
-        test, statistic = "size", max(c.excess_relative for c in checks.values())
-    return MismatchResult(test, statistic, p, passed, checks, alpha, rms_tol)
+        simulated = simulate(params)
+        k = keep[name]
+        if k.sum() < 2 / h * MIN_SEGMENT_S:
+            raise EstimatorInputError(f"model check ({name}): only {k.sum()} samples to test")
+        D = sensitivity_directions(lambda p, s=simulate, k=k: s(p)[k], params, names, covariance, USES[name],
+                                   simulated[k])
+        X = np.column_stack([f[s] for s in INPUTS[name]])[k]
+        tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[k], D, X, h, alpha, rate_hz, lags,
+                                               ar_order, noise.get(name), noise_dof,
+                                               labels[k] if name == "speed" else None)
+        residue = np.where(k, f[x] - simulated, np.nan)  # the samples tested (filter edges out)
+        checks[name] = ResidueCheck(name, tests, rms, float(noise.get(name, np.nan)), simulated, residue, corr, band)
+    results = [(f"{name} {t}", r) for name, c in checks.items() for t, r in c.tests.items()]
+    m = len(results)
+    label, worst = min(results, key=lambda t: t[1].p_value)
+    p = min(1.0, m * worst.p_value)
+    rule = (f"Bonferroni over {m} tests ({', '.join(t for t, _ in results)}): mismatch when a p-value is below "
+            f"alpha / {m}")
+    return MismatchResult(label, worst.statistic, p, alpha, bool(p >= alpha), rule, checks)
