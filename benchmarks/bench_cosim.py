@@ -47,9 +47,10 @@ def cosim_run(scenario) -> tuple[float, Master, dict]:
     return wall, master, rec.signals()
 
 
-def fmpy_run(scenario, stop: float, signals: dict | None) -> float:
-    """simulate_fmu on the plant alone; ``signals``: the co-simulation's, whose NC outputs become the input
-    table (every FMU input gets a column, zeros when the NC does not drive it), or None for no input."""
+def fmpy_run(scenario, stop: float, signals: dict | None, m: int = 1) -> float:
+    """simulate_fmu on the plant alone at step / m, recording every step; ``signals``: the co-simulation's,
+    whose NC outputs become the input table (every FMU input gets a column, zeros when the NC does not
+    drive it), or None for no input."""
     from fmpy import read_model_description, simulate_fmu
 
     h = scenario.step
@@ -64,8 +65,8 @@ def fmpy_run(scenario, stop: float, signals: dict | None) -> float:
             if entry is not None:  # the plant's input over [t_n, t_n+1] is the NC's output at t_n+1
                 table[entry.var] = entry.scale * np.r_[signals[f"nc.{role}"][1:], 0.0] + entry.offset
     t = time.perf_counter()
-    simulate_fmu(scenario.plant.fmu, fmi_type="CoSimulation", stop_time=stop, step_size=h, output_interval=h,
-                 input=table, start_values=dict(scenario.plant.parameters))
+    simulate_fmu(scenario.plant.fmu, fmi_type="CoSimulation", stop_time=stop, step_size=h / m,
+                 output_interval=h / m, input=table, start_values=dict(scenario.plant.parameters))
     return time.perf_counter() - t
 
 

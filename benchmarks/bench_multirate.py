@@ -11,43 +11,13 @@ seconds (best of ``--repeat``) and the ratio cosim / fmpy (target <= 1.0 at m = 
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
-import numpy as np
-from fmpy import read_model_description, simulate_fmu
+from bench_cosim import cosim_run, fmpy_run  # the same baseline as bench_cosim (run from benchmarks/ or the root)
 
-from feeddrive.cosim.master import Master
 from feeddrive.cosim.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def cosim_run(scenario) -> tuple[float, Master, dict]:
-    master = Master.from_scenario(scenario)
-    master.setup()
-    t = time.perf_counter()
-    rec = master.run()
-    wall = time.perf_counter() - t
-    master.terminate()
-    return wall, master, rec.signals()
-
-
-def fmpy_run(scenario, stop: float, signals: dict, m: int) -> float:
-    """simulate_fmu on the plant alone at step / m, recording every fine step, the NC's reference as input."""
-    h = scenario.step
-    inputs = [v.name for v in read_model_description(scenario.plant.fmu).modelVariables if v.causality == "input"]
-    n = len(signals["nc.speed_ref"])
-    table = np.zeros(n, dtype=[("time", float)] + [(name, float) for name in inputs])
-    table["time"] = h * np.arange(n)
-    for role in ("speed_ref", "load"):
-        entry = scenario.plant.map.get(role)
-        if entry is not None:  # the plant's input over [t_n, t_n+1] is the NC's output at t_n+1
-            table[entry.var] = entry.scale * np.r_[signals[f"nc.{role}"][1:], 0.0] + entry.offset
-    t = time.perf_counter()
-    simulate_fmu(scenario.plant.fmu, fmi_type="CoSimulation", stop_time=stop, step_size=h / m, output_interval=h / m,
-                 input=table, start_values=dict(scenario.plant.parameters))
-    return time.perf_counter() - t
 
 
 def main(argv: list[str] | None = None) -> None:

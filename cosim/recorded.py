@@ -134,12 +134,19 @@ def _dialect(text: str, delimiter: str | None, decimal: str | None, path: Path) 
             raise DataError(f"{path}: --delimiter {delimiter!r}; expected one of ',', ';', 'tab'")
         delimiter = DELIMITERS[delimiter]
     head = text.splitlines()[:20]
+
+    def fields(line: str, sep: str) -> list[str]:
+        try:
+            return next(csv.reader([line], delimiter=sep), [])
+        except csv.Error:  # a NUL byte or an oversized field: the full read names its line
+            return []
+
     if delimiter is None:
         header = head[0] if head else ""
-        counts = {d: len(next(csv.reader([header], delimiter=d), [])) for d in (",", ";", "\t")}
+        counts = {d: len(fields(header, d)) for d in (",", ";", "\t")}
         delimiter = max(counts, key=lambda d: (counts[d], d == ","))
     if decimal is None:
-        sample = [c.strip() for line in head[1:] for c in next(csv.reader([line], delimiter=delimiter), [])]
+        sample = [c.strip() for line in head[1:] for c in fields(line, delimiter)]
         comma = any(re.fullmatch(r"[-+]?\d*,\d+([eE][-+]?\d+)?", c) for c in sample)
         decimal = "," if comma and delimiter != "," else "."
     if decimal not in (".", ","):

@@ -110,14 +110,9 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         old.unlink(missing_ok=True)
     paths: dict[str, Any] = {"signals": out_dir / "signals.csv", "resolved": out_dir / "scenario.resolved.yaml",
                              "report": out_dir / "report.json", "page": out_dir / "report.html", "plots": []}
-    report: dict[str, Any] = {"scenario": scenario.name, "axis": scenario.axis.name,
-                              # the drive chain, and the units of the parameters (estimated on the motor side)
-                              "drive_chain": scenario.axis.model_dump(),
-                              "parameter_units": parameter_units("motor", scenario.axis.kind), "source": scenario.source,
-                              "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                              "status": "running", "versions": _versions(),
-                              "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,
-                                        "interface": scenario.plant.interface}}
+    report = report_header(scenario) | {
+        "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "status": "running", "versions": _versions()}
     if default_history is not None:
         scenario = _with_default_history(scenario, Path(default_history).resolve())
     master = Master.from_scenario(scenario)
@@ -181,6 +176,15 @@ def prepare_out_dir(out_dir: str | Path, overwrite: bool) -> Path:
                                 "overwriting (--overwrite)")
     out_dir.mkdir(parents=True, exist_ok=True)
     return out_dir
+
+
+def report_header(scenario: Scenario) -> dict[str, Any]:
+    """The head of a run's report.json: scenario, axis and its drive chain, units, source and plant."""
+    # the drive chain, and the units of the parameters (estimated on the motor side)
+    return {"scenario": scenario.name, "axis": scenario.axis.name, "drive_chain": scenario.axis.model_dump(),
+            "parameter_units": parameter_units("motor", scenario.axis.kind), "source": scenario.source,
+            "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,
+                      "interface": scenario.plant.interface}}
 
 
 def _with_default_history(scenario: Scenario, db: Path) -> Scenario:

@@ -79,7 +79,7 @@ class ChannelConfig(StrictConfig):
 
     @model_validator(mode="after")
     def _filter_only_for_lowpass(self) -> ChannelConfig:
-        if self.sampling != "lowpass" and "cutoff_hz" in self.model_fields_set:
+        if self.sampling != "lowpass" and self.cutoff_hz is not None:
             raise ValueError(f"cutoff_hz is the lowpass filter's; sampling is {self.sampling!r}, expected lowpass")
         return self
 

@@ -305,9 +305,9 @@ def _write_failure_report(scenario: Any, out_dir: Path, outcome: Outcome, messag
     try:
         report = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        report = {"scenario": scenario.name, "axis": scenario.axis, "source": scenario.source,
-                  "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,
-                            "interface": scenario.plant.interface}}
+        from feeddrive.cosim.run import report_header
+
+        report = report_header(scenario)
     report |= {"status": outcome.status, "error": message,
                "ended": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                "failure": {"component": outcome.component, "function": outcome.function, "time_s": outcome.time,

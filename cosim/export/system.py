@@ -63,6 +63,13 @@ def wiring(scenario: Scenario) -> tuple[list[tuple[str, str, str, str]], dict[st
     if scenario.components:
         raise ExportError(f"{scenario.source}: components: user components ({scenario.components[0].name}, ...) "
                           "cannot be exported; expected only nc, plant, sensors and monitor")
+    # the exported system runs every FMU at the one BaseStepSize: one rate only
+    if scenario.plant.oversample != 1:
+        raise ExportError(f"{scenario.source}: plant.oversample: {scenario.plant.oversample}; the exported system "
+                          "steps every FMU at `step`, expected 1 (or export a scenario with step = step / oversample)")
+    if scenario.nc.cycle is not None and abs(scenario.nc.cycle - scenario.step) > 1e-9 * scenario.step:
+        raise ExportError(f"{scenario.source}: nc.cycle: {scenario.nc.cycle:g} s; the exported system steps the NC "
+                          f"at `step` = {scenario.step:g} s, expected no nc.cycle")
     role_map = scenario.plant.map
     for role, entry in role_map.items():
         if entry.scale != 1.0 or entry.offset != 0.0:

@@ -116,7 +116,7 @@ CSVS = {
     "empty": ("", "{f}: empty file, expected a header row"),
     "missing-column": (CSV.replace("w\n", "v\n", 1), "{f}: column 'w' (role speed) not found"),
     "text-cell": (CSV.replace("0.005,5", "0.005,five"), "{f}: column 'u [V]' row 7: 'five' is not a number"),
-    "nan-cell": (CSV.replace("0.005,5", "0.005,nan"), "{f}: column 'u [V]' row 7: NaN or infinite value"),
+    "nan-cell": (CSV.replace("0.005,5", "0.005,nan"), "{f}: column 'u [V]' row 7: 'nan' is not a finite number"),
     "nul-byte": (CSV.replace("0.005,5", "0.005,\0"), "{f}: column 'u [V]' row 7"),
     "time-backwards": (CSV.replace("0.005,", "0.001,"), "{f}: column 'time' is not strictly increasing at row 7"),
     "too-large": (CSV, "bytes; expected a CSV file of at most 100 bytes"),

@@ -65,7 +65,9 @@ def test_the_system_has_the_connections_step_and_initial_values_of_cosim_run(hea
     assert float(root.findtext("osp:BaseStepSize", namespaces=NS)) == s.step
     plant = root.find("osp:Simulators/osp:Simulator[@name='plant']", NS)
     values = {iv.get("variable"): float(iv[0].get("value")) for iv in plant.iterfind(".//osp:InitialValue", NS)}
-    assert values == {"R": 0.6, "L": 4.0e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
+    # the axis's drive chain (scenario `axis:`) reaches the plant FMU with its parameters
+    assert values == {"R": 0.6, "L": 4.0e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2,
+                      "pitch": s.axis.pitch, "belt_ratio": s.axis.ratio}
     with zipfile.ZipFile(paths["ssp"]) as z:
         ssd = ElementTree.fromstring(z.read("SystemStructure.ssd"))
         assert {f"resources/{paths[n].name}" for n in ("nc", "plant", "sensors", "monitor")} <= set(z.namelist())
@@ -89,10 +91,16 @@ def test_cli_exports_and_info_shows_the_ports(feeddrive_fmu, tmp_path, capsys):
 @pytest.mark.parametrize("extra, message", [
     ("components:\n  - {name: mine, class: 'feeddrive.cosim.monitor:Monitor'}\n", "components: user components"),
     ("monitor: {class: 'feeddrive.cosim.monitor:Monitor2'}\n", "monitor"),
+    ("", "plant.oversample: 4; the exported system steps every FMU at `step`, expected 1"),
+    ("", "nc.cycle: 0.002 s; the exported system steps the NC at `step` = 0.0001 s"),
 ])
 def test_cli_refuses_what_an_osp_system_cannot_hold(feeddrive_fmu, tmp_path, capsys, extra, message):
     text = (HERE / "sensor_fault_short.yaml").read_text().replace('monitor: {db: ":memory:"}\n', "")
     path = tmp_path / "s.yaml"
+    if "oversample" in message:
+        text = text.replace("  fmu: builtin\n", "  fmu: builtin\n  oversample: 4\n")
+    if "cycle" in message:
+        text = text.replace("nc:\n", "nc:\n  cycle: 2.0e-3\n")
     path.write_text(text + extra)
     status = cosim(["export-system", str(path), "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
