@@ -37,7 +37,7 @@ from feeddrive.estimator.errors import EstimatorInputError, HistoryError, NotEno
 from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.history import History
-from feeddrive.estimator.mismatch import MismatchResult, check_model
+from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
 from feeddrive.estimator.motion import SAMPLING_DELAY
 from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
@@ -270,9 +270,12 @@ class MonitorPipeline:
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units[k]}
                                 for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
-        mismatch = check_model(v.u, v.i, v.w, h, {k: p.value for k, p in params.items()}, self.config.filter,
-                               self.config.mismatch_alpha, covariance=est.covariance, names=est.names,
-                               noise=_signal_noise(v), noise_dof=len(v.i), speed_threshold=self.config.speed_threshold)
+        inputs, instruments, noise = check_signals(v, signals)
+        mismatch = check_model(inputs["u"], inputs["i"], inputs["w"], h, {k: p.value for k, p in params.items()},
+                               self.config.filter, self.config.mismatch_alpha, covariance=est.covariance,
+                               names=est.names, noise=noise, noise_dof=len(v.i),
+                               speed_threshold=self.config.speed_threshold,
+                               speed_fraction=self.config.speed_fraction, instruments=instruments)
         trace.mismatch = mismatch
         result["mismatch"] = mismatch.to_dict()
         result["validated"] = bool(v.valid and mismatch.passed)
@@ -339,18 +342,6 @@ def _drift_reference(reference: Mapping | None, options: DiagnosisOptions, names
     """``{"z_crit", "min_relative": {name}, "baseline": {name: {"value", "std"}} or None}`` of a drift test."""
     base = None if reference is None else {k: {"value": float(v), "std": float(s)} for k, (v, s) in reference.items()}
     return {"z_crit": options.z_crit, "min_relative": {n: options.min_rel(n) for n in names}, "baseline": base}
-
-
-def _signal_noise(v: MeasurementValidation) -> dict[str, float]:
-    """Noise standard deviation of the current [A] and speed [rad/s] passed to the estimator, from the
-    residue of each redundant pair: ``std(x1 - x2) / 2`` for the mean of two sensors with equal noise,
-    ``/ sqrt(2)`` for one trusted sensor; none without redundancy."""
-    out = {}
-    for quantity, key in (("current", "current"), ("speed", "speed")):
-        pair = v.pairs.get(quantity)
-        if pair is not None and pair.residue is not None and np.isfinite(pair.residue.noise_std):
-            out[key] = float(pair.residue.noise_std) / (2.0 if pair.trusted is None else np.sqrt(2.0))
-    return out
 
 
 def _residue_dict(pair) -> dict:

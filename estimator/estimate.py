@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import binary_erosion
 
-from feeddrive.estimator.derivative import FUTURE, PAST, zero_forcing_derivative
+from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.motion import (
     MEASURED,
@@ -59,7 +59,8 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
             x = f[name]
             k = np.arange(x.size, dtype=float)
             f[name] = np.interp(k + delay / h, k, x)  # the filtered signal is smooth on the sample scale
-    if "position" in f:
+    from_position = "position" in f
+    if from_position:
         w, valid = zero_forcing_derivative(f.pop("position"), h)
         f = {k: v[valid] for k, v in f.items()} | {"w": w}
     if "w" not in f:
@@ -68,7 +69,10 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
     for state in ("i", "w"):
         if state in f:
             sig["D" + state], valid = zero_forcing_derivative(f[state], h)
-    sig.update({k: v[PAST:len(v) - FUTURE] for k, v in f.items()})
+    # the other signals as the derivative operator sees them (its gain error, see matched_average)
+    # (a speed from the position already is one: D x = d/dt S x)
+    sig.update({k: (v if k == "w" and from_position else matched_average(v))[PAST:len(v) - FUTURE]
+                for k, v in f.items()})
     # the filter's start-up (both ends for zero phase: sosfiltfilt pads with a mirror image that does
     # not obey the model) would bias the fits: those samples are dropped, like the derivative's edges
     edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))

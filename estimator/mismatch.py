@@ -6,30 +6,36 @@ measured output), on the filtered signals (eq. 8):
 * current from the voltage and speed with the estimated R, L, K (electrical equation, exact Tustin
   recursion started in steady state, as the validation's Ir_hat);
 * speed from the current with the estimated K, Jt, ft, Cd (T0), on each segment where ``|w|`` stays
-  above the speed threshold, started from the measured speed at the segment's start. sign(w) is
-  constant on a segment, so the mechanical equation is linear there and simulated exactly (Tustin).
-  One simulation over the whole motion integrated every imperfection of the smoothed sign(w) through
-  the reversals and dwells (creep): on healthy data its residue was coloured and correlated with the
-  current, and any test rejected 25-40 % of healthy motions.
+  above the speed threshold, less the filter's smear of the dry-friction jump at each end, started from
+  the measured speed at the segment's start. sign(w) is constant on a segment, so the mechanical
+  equation is linear there and simulated exactly (Tustin). One simulation over the whole motion
+  integrated every imperfection of the smoothed sign(w) through the reversals and dwells (creep): on
+  healthy data its residue was coloured and correlated with the current.
+
+The simulation runs on the first sensor of each healthy redundant pair (``Im1``, ``u``, ``w_tach``)
+and the second one (``Im2``, ``u_ref``, ``w_enc``) is the instrument (``check_signals``): the residue
+carries the first sensors' noise through the model, so regressors or nuisance directions computed from
+the same signals correlate with it on a healthy motion (with the mean of both sensors the test rejected
+every healthy motion at high signal-to-noise ratio), and the differentiated encoder's quantisation,
+aliased into the filter's band at slow speeds, is a structured error the speed residue must not carry.
 
 Each residue ``measured - simulated`` is judged by two tests whose null hypothesis holds on healthy
 data, so that their level is their false-alarm rate:
 
 * **independence** (Ljung's residual analysis, MATLAB ``resid``): is the residue explained by the
-  past inputs (current residue: voltage and speed; speed residue: current) at lags 0..``lags`` of the
+  instruments (current residue: voltage and speed; speed residue: current) at lags 0..``lags`` of the
   residue decimated to ``rate_hz`` by block means? The residue's own colour is accounted for by
-  prewhitening: feasible GLS with AR(``ar_order``) errors (statsmodels ``GLSAR``), F-test of the lag
-  coefficients. The estimate's own error also leaves an input-correlated residue (theta_hat - theta
-  is of the order of its standard error); it is not a mismatch, so the sensitivities of the simulation
-  along the principal axes of the covariance (``sensitivity_directions``), a constant and, for the
-  speed, one constant per segment (its start from a noisy speed) are nuisance regressors of the test;
+  prewhitening: feasible GLS with AR errors of an order chosen by BIC (statsmodels ``GLSAR``), F-test of
+  the lag coefficients. The estimate's own error also leaves an input-correlated residue (theta_hat -
+  theta is of the order of its standard error); it is not a mismatch, so the sensitivities of the
+  simulation along the principal axes of the covariance (``sensitivity_directions``), a constant
+  (current) and, for the speed, each segment's free response (its start from one noisy sample,
+  ``free_responses``) are nuisance regressors of the test;
 * **size**: the residue, with those nuisance regressors removed, must be no larger than the noise of
-  the sensors measured by the redundancy (``noise``: the standard deviation of the signal the
-  estimator received, from the residue of the two sensors of each quantity). Statistic
+  the sensor (``noise``: from its first differences, for a sensor the redundancy confirmed). Statistic
   ``F = mean(e^2) / sigma^2``, one-sided F-test with (decimated blocks, noise samples) degrees of
   freedom. Filtering only lowers the noise, so a model that explains the motion leaves a residue well
-  below one sensor noise (healthy: 0.06 to 0.64 sigma on the speed); a friction step of +10 % during
-  the motion leaves 1.7 to 5.5 sigma.
+  below one sensor noise; a friction step of +10 % during the motion leaves several times it.
 
 The motion passes when no test rejects at the family-wise level ``alpha`` (Bonferroni: each of the m
 tests at ``alpha / m``); ``p_value`` is the Bonferroni-adjusted ``min(1, m min p)`` and the result
@@ -48,11 +54,12 @@ import casadi as ca
 import numpy as np
 import statsmodels.api as sm
 from scipy import ndimage, signal, stats
+from statsmodels.tsa.ar_model import ar_select_order
 
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.simulation import MODEL
-from feeddrive.estimator.validation import model_reference
+from feeddrive.estimator.validation import MeasurementValidation, model_reference, noise_std
 
 #: physical parameters each simulated output depends on (from the model's equations)
 USES = {signal_: tuple(v.name for v in MODEL.parameters
@@ -60,6 +67,10 @@ USES = {signal_: tuple(v.name for v in MODEL.parameters
         for signal_, eq in (("speed", "mechanical"), ("current", "electrical"))}
 #: inputs of each simulation, the regressors of its independence test
 INPUTS = {"current": ("u", "w"), "speed": ("i",)}
+#: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
+MAX_AR = 12
+#: singular values of the standardised lag regressors below this fraction of the largest are not tested
+LAG_RCOND = 1e-9
 #: shortest speed segment simulated [s]: shorter ones (reversals) carry no test information
 MIN_SEGMENT_S = 0.1
 
@@ -177,10 +188,18 @@ def sensitivity_directions(simulate: Callable[[dict[str, float]], np.ndarray], p
     return np.column_stack(cols) if cols else np.zeros((base.size, 0))
 
 
-def speed_segments(w: np.ndarray, threshold: float, h: float) -> tuple[np.ndarray, int]:
-    """Labels 1..k of the runs of samples with ``|w| > threshold`` lasting at least ``MIN_SEGMENT_S``
-    (0 elsewhere), and k."""
-    labels, n = ndimage.label(np.abs(w) > threshold)
+def speed_segments(w: np.ndarray, threshold: float, h: float, margin: int = 0) -> tuple[np.ndarray, int]:
+    """Labels 1..k of the runs of samples with ``|w| > threshold``, less ``margin`` samples at each end,
+    lasting at least ``MIN_SEGMENT_S`` (0 elsewhere), and k.
+
+    The margin keeps the filter's smear of the dry-friction jump at a reversal or a start out of the
+    segments: there the filtered current carries part of the torque step of the other sign, which the
+    constant-sign simulation does not have (a model error of up to 4e-3 rad/s at 0.02 m/s, as large as
+    the noise's)."""
+    fast = np.abs(w) > threshold
+    if margin > 0:
+        fast = ndimage.binary_erosion(fast, np.ones(2 * margin + 1, dtype=bool))
+    labels, n = ndimage.label(fast)
     sizes = np.bincount(labels.ravel(), minlength=n + 1)
     short = sizes < MIN_SEGMENT_S / h
     short[0] = True
@@ -206,15 +225,30 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     return out
 
 
+def free_responses(labels: np.ndarray, params: Mapping[str, float], h: float) -> np.ndarray:
+    """Free response of ``simulate_segments`` to a unit error of each segment's start speed, shape (n, k).
+
+    The start is one noisy measured sample: its error decays as ``exp(-ft t / Jt)`` through the segment
+    (seconds), so it is not a constant; it is a nuisance of the speed residue's tests."""
+    b, a = signal.cont2discrete(([1.0], [float(params["Jt"]), float(params["ft"])]), h, method="bilinear")[:2]
+    pole = -float(np.ravel(a)[1])
+    cols = []
+    for sl in ndimage.find_objects(labels):
+        col = np.zeros(labels.size)
+        col[sl] = pole ** np.arange(sl[0].stop - sl[0].start)
+        cols.append(col)
+    return np.column_stack(cols) if cols else np.zeros((labels.size, 0))
+
+
 def _blocks(x: np.ndarray, block: int) -> np.ndarray:
     nb = x.shape[0] // block
     return x[:nb * block].reshape(nb, block, *x.shape[1:]).mean(axis=1)
 
 
 def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: np.ndarray, h: float,
-                  alpha: float, rate_hz: float = 50.0, lags: int = 10, ar_order: int = 2,
+                  alpha: float, rate_hz: float = 50.0, lags: int = 10, ar_order: int | None = None,
                   noise_std: float | None = None, noise_dof: float = np.inf,
-                  groups: np.ndarray | None = None) -> tuple[dict[str, TestResult], float, np.ndarray, float]:
+                  groups: np.ndarray | None = None, constant: bool = True) -> tuple[dict[str, TestResult], float, np.ndarray, float]:
     """Independence and size tests of one residue; see the module docstring.
 
     Parameters
@@ -236,7 +270,9 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     noise_dof : float
         Degrees of freedom of ``noise_std`` (the samples it was estimated from).
     groups : ndarray of int, shape (n,), optional
-        Segment labels: one nuisance constant per segment, and blocks never straddle two segments.
+        Segment labels: blocks never straddle two segments.
+    constant : bool
+        A constant is a nuisance regressor.
 
     Returns
     -------
@@ -249,8 +285,10 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     block = max(1, int(round(1.0 / (rate_hz * h))))
     groups = np.ones(residue.size, dtype=int) if groups is None else np.asarray(groups)
     parts = [np.flatnonzero(groups == g) for g in np.unique(groups)]
-    dummies = np.column_stack([groups == g for g in np.unique(groups)]).astype(float)
-    Z = np.column_stack([nuisance, dummies])
+    # the current: a constant (a voltage or current sensor offset) is a nuisance. Not for the speed: a
+    # constant and the segments' free responses (nuisance) span the response to a constant torque, so a
+    # load torque or a friction change between two segments would pass unseen
+    Z = np.column_stack([nuisance, np.ones(residue.size)]) if constant else nuisance
     rb, Zb, Xb, lagged = [], [], [], []
     for idx in parts:
         nb = idx.size // block
@@ -268,14 +306,23 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
                                   f"for {lags} lags of {inputs.shape[1]} input(s)")
     y, N, L = np.concatenate(rb), np.vstack(Zb), np.vstack(lagged)
     L = (L - L.mean(axis=0)) / L.std(axis=0).clip(1e-300)
+    # lags of smooth inputs are nearly collinear: test the well-conditioned principal directions only
+    uL, sL, _ = np.linalg.svd(L, full_matrices=False)
+    T = uL[:, sL > LAG_RCOND * sL[0]]
     N = N[:, np.abs(N).max(axis=0) > 0]
     N = N / np.abs(N).max(axis=0)
     # nuisance columns nearly collinear with others (a constant and a flat sensitivity) are dropped
     u_, s_, _ = np.linalg.svd(N, full_matrices=False)
     N = u_[:, s_ > 1e-9 * s_[0]]
-    design = np.column_stack([N, L])
-    fit = sm.GLSAR(y, design, rho=ar_order).iterative_fit(maxiter=6)
-    q = L.shape[1]
+    design = np.column_stack([N, T])
+    if ar_order is None or ar_order < 0:
+        # prewhitening order chosen by an information criterion on the OLS residue: the open-loop residue
+        # carries the integrated input noise, more colour than a fixed AR(2) whitens
+        r0 = y - design @ np.linalg.lstsq(design, y, rcond=None)[0]
+        sel = ar_select_order(r0, maxlag=MAX_AR, ic="bic", trend="n")
+        ar_order = max(sel.ar_lags) if sel.ar_lags else 0
+    fit = sm.GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
+    q = T.shape[1]
     restriction = np.zeros((q, design.shape[1]))
     restriction[:, -q:] = np.eye(q)
     f = fit.f_test(restriction)
@@ -298,11 +345,62 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     return tests, rms, correlation, band
 
 
+def check_signals(v: MeasurementValidation, signals: Mapping[str, np.ndarray | None]
+                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, float]]:
+    """Signals of the model check (estimator/mismatch.py): simulation inputs and measured outputs, instruments
+    and sensor noise, per quantity.
+
+    Where both sensors of a pair are healthy, the check simulates from and compares with the first sensor
+    alone and takes the second as the instrument (the regressors of its independence test and the inputs
+    of its nuisance directions): their noises are independent, so the residue, which carries the first
+    sensor's noise through the model, is uncorrelated with them on a healthy motion. With the mean of both
+    the residue and the regressors shared the noise, and the test rejected healthy motions. Elsewhere (no
+    redundancy, a faulty or corrected sensor) the validated signal is used and has no instrument. The noise
+    [A, rad/s] is that of the first sensor, from its first differences (``validation.noise_std``), only where
+    the redundancy confirmed it.
+
+    Returns
+    -------
+    inputs : dict with ``u``, ``i``, ``w`` of ndarray, shape (n,)
+    instruments : dict of str to ndarray, shape (n,)
+    noise : dict with ``current``, ``speed`` (those measured)
+    """
+    symbol = {"voltage": "u", "current": "i", "speed": "w"}
+    inputs = {"u": v.u, "i": v.i, "w": v.w}
+    instruments, noise = {}, {}
+    for quantity, pair in v.pairs.items():
+        s1, s2 = pair.sensors
+        healthy = (s2 is not None and pair.residue is not None and pair.residue.kind == "none"
+                   and signals.get(s2) is not None)
+        if not healthy:
+            continue
+        x = np.asarray(signals[s1], dtype=float)
+        inputs[symbol[quantity]] = x
+        instruments[symbol[quantity]] = np.asarray(signals[s2], dtype=float)
+        if quantity in ("current", "speed"):
+            noise[quantity] = noise_std(x)
+    return inputs, instruments, noise
+
+
+def _instrument_signals(instruments: Mapping[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
+    out = {}
+    for key, x in instruments.items():
+        if key not in ("u", "i", "w"):
+            raise EstimatorInputError(f"check_model: instrument {key!r} is not one of u, i, w")
+        x = np.asarray(x, dtype=float)
+        if x.shape != (n,) or not np.all(np.isfinite(x)):
+            raise EstimatorInputError(f"check_model: instrument {key!r} must be finite with shape ({n},)")
+        out[key] = x
+    return out
+
+
 def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameters: Mapping[str, float],
                 filter: FilterSpec, alpha: float = 0.01, covariance: np.ndarray | None = None,
                 names: Sequence[str] | None = None, noise: Mapping[str, float] | None = None,
-                noise_dof: float = np.inf, speed_threshold: float = 2.0, rate_hz: float = 50.0, lags: int = 10,
-                ar_order: int = 2) -> MismatchResult:
+                noise_dof: float = np.inf, speed_threshold: float | None = None,
+                speed_fraction: float = 0.03, rate_hz: float = 50.0, lags: int = 10,
+                ar_order: int | None = None,
+                instruments: Mapping[str, np.ndarray] | None = None) -> MismatchResult:
     """Simulate the estimated model from the measured inputs and test the residues.
 
     Parameters
@@ -327,8 +425,9 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         ``speed``), from the redundant sensors; a missing key: no size test for that residue.
     noise_dof : float
         Degrees of freedom of those noise estimates (number of samples they come from).
-    speed_threshold : float
-        The speed is simulated on the segments where ``|w| >`` this [rad/s].
+    speed_threshold : float or None
+        The speed is simulated on the segments where ``|w| >`` this [rad/s]; None: ``speed_fraction`` of
+        the motion's peak filtered speed (as the estimator).
     rate_hz, lags, ar_order : float, int, int
         See ``residue_tests``.
 
@@ -355,25 +454,33 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     edge = int(round(5.0 / (filter.cutoff_hz * h)))  # the zero-phase filter's transients at both ends
     inner = np.zeros(f["w"].size, dtype=bool)
     inner[edge:f["w"].size - edge] = True
-    labels, _ = speed_segments(np.where(inner, f["w"], 0.0), speed_threshold, h)
+    if speed_threshold is None:
+        speed_threshold = speed_fraction * float(np.abs(f["w"][inner]).max(initial=0.0))
+    labels, _ = speed_segments(np.where(inner, f["w"], 0.0), speed_threshold, h, margin=edge)
     keep = {"current": inner, "speed": labels > 0}
+    # instruments: second sensors whose noise is independent of the residue's (the simulation's inputs'
+    # noise passes into the residue; regressors or nuisance directions carrying the same noise correlate
+    # with it under the null, and the test rejected every healthy motion)
+    fi = f if instruments is None else {**f, **filter.apply(_instrument_signals(instruments, u.size), h)}
     simulators = {
-        "current": ("i", lambda p: model_reference("current", f, h, p)),  # linear: exact Tustin recursion
-        "speed": ("w", lambda p: simulate_segments(f["i"], f["w"], labels, p, h)),
+        "current": ("i", lambda p, s: model_reference("current", s, h, p)),  # linear: exact Tustin recursion
+        "speed": ("w", lambda p, s: simulate_segments(s["i"], f["w"], labels, p, h)),
     }
     noise = dict(noise or {})
     checks = {}
     for name, (x, simulate) in simulators.items():
-        simulated = simulate(params)
+        simulated = simulate(params, f)
         k = keep[name]
         if k.sum() < 2 / h * MIN_SEGMENT_S:
             raise EstimatorInputError(f"model check ({name}): only {k.sum()} samples to test")
-        D = sensitivity_directions(lambda p, s=simulate, k=k: s(p)[k], params, names, covariance, USES[name],
-                                   simulated[k])
-        X = np.column_stack([f[s] for s in INPUTS[name]])[k]
+        D = sensitivity_directions(lambda p, s=simulate, k=k: s(p, fi)[k], params, names, covariance, USES[name],
+                                   simulate(params, fi)[k])
+        if name == "speed":
+            D = np.column_stack([D, free_responses(labels, params, h)[k]])
+        X = np.column_stack([fi[s] for s in INPUTS[name]])[k]
         tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[k], D, X, h, alpha, rate_hz, lags,
                                                ar_order, noise.get(name), noise_dof,
-                                               labels[k] if name == "speed" else None)
+                                               labels[k] if name == "speed" else None, constant=name == "current")
         residue = np.where(k, f[x] - simulated, np.nan)  # the samples tested (filter edges out)
         checks[name] = ResidueCheck(name, tests, rms, float(noise.get(name, np.nan)), simulated, residue, corr, band)
     results = [(f"{name} {t}", r) for name, c in checks.items() for t, r in c.tests.items()]

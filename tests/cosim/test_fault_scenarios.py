@@ -186,14 +186,15 @@ def test_backlash_in_the_drive_chain_is_a_mismatch(tmp_path, healthy):
 
     It matters: the estimated L comes out 6-7 % high, beyond the 5 % diagnosis threshold, so a validated
     set would be misdiagnosed as motor heating or demagnetisation (it was, before the monitor's fix).
-    The gap disturbs the current around the torque reversals, in step with the voltage: the independence
-    test of the current residue rejects the model."""
+    The gap disturbs the current around the torque reversals, in step with the voltage (the independence
+    test of the current residue rejects it at the family-wise level) and the speed through the load it
+    decouples."""
     m, _, _ = run_fault(tmp_path, healthy, "backlash", plant={"fmu": "builtin-backlash",
                                                               "parameters": {"backlash": 0.06}})
     assert m["measurements_valid"] and m["sensor_faults"] == []
     mismatch = m["mismatch"]
     assert not mismatch["passed"] and mismatch["p_value"] < 1e-10
-    assert mismatch["checks"]["current"]["independence"]["p_value"] < 1e-10
+    assert mismatch["checks"]["current"]["independence"]["p_value"] < mismatch["alpha"] / 4
     assert not m["validated"] and m["diagnosis"] == []
     assert m["parameters"]["L"]["value"] > 1.05 * TRUTH["L"]
 

@@ -16,7 +16,7 @@ from feeddrive.cosim.monitor import MEASUREMENTS, MonitorConfig, MonitorPipeline
 from feeddrive.cosim.run import run_scenario
 from feeddrive.cosim.scenario import scenario_from_dict
 from feeddrive.estimator.history import History
-from feeddrive.estimator.mismatch import check_model
+from feeddrive.estimator.mismatch import check_model, check_signals
 
 pytestmark = pytest.mark.slow
 
@@ -76,6 +76,14 @@ def test_replay_reproduces_the_run_and_the_true_model_passes(slow_run):
     assert trace.result["parameters"] == m["parameters"]
     assert trace.result["mismatch"] == m["mismatch"]
     v = trace.validation
-    truth = check_model(v.u, v.i, v.w, H, TRUTH, MonitorConfig().filter, 0.01,
-                        noise={"current": 0.05 / 2, "speed": m["residues"]["speed"]["noise_std"] / 2}, noise_dof=v.i.size)
+    inputs, instruments, noise = check_signals(v, trace.signals)
+    # the first sensors against the second as instruments; the measured noise is the sensors' own
+    assert set(instruments) == {"u", "i", "w"} and inputs["i"] is not v.i
+    assert noise["current"] == pytest.approx(0.05, rel=0.05) and noise["speed"] == pytest.approx(0.05, rel=0.05)
+    truth = check_model(inputs["u"], inputs["i"], inputs["w"], H, TRUTH, MonitorConfig().filter, 0.01,
+                        noise=noise, noise_dof=v.i.size, instruments=instruments)
     assert truth.passed, truth.to_dict()
+    # the validated speed (the mean with the differentiated encoder) carries the encoder's quantisation,
+    # aliased by the sampling into the filter's band: a structured error the test rightly rejects
+    averaged = check_model(v.u, v.i, v.w, H, TRUTH, MonitorConfig().filter, 0.01, noise=noise, noise_dof=v.i.size)
+    assert averaged.checks["speed"].tests["independence"].p_value < 1e-6

@@ -68,7 +68,8 @@ def test_healthy_then_sensor_offset(tmp_path):
         p = first["parameters"][name]
         assert p["value"] == pytest.approx(truth, rel=0.01), name
         assert p["ci95"][0] < p["value"] < p["ci95"][1]
-    assert first["mismatch"]["test"] == "size" and first["mismatch"]["passed"] is True  # coloured, small
+    mm = first["mismatch"]
+    assert mm["passed"] is True and mm["p_value"] >= mm["alpha"] == 0.01 and "Bonferroni" in mm["rule"]
     assert first["gain_ratio"] == pytest.approx(1.0, abs=2e-3)
     assert first["processing_s"] > 0 and first["diagnosis"] == []
     # motion 2: Im1 offset isolated against the model with motion 1's validated R, L, K; Im2 trusted
@@ -182,9 +183,11 @@ def test_monitor_plots(tmp_path):
     run(mon, [motion(11), motion(12, Im2=(1.03, 0.0))])
     mon.terminate()
     paths = mon.write_plots(tmp_path / "plots")
-    assert [p.name for p in paths] == ["monitor_motion1.png", "monitor_motion2.png", "monitor_trends.png"]
+    assert sorted(p.name for p in paths) == ["monitor_correlation1.png", "monitor_correlation2.png",
+                                             "monitor_motion1.png", "monitor_motion2.png", "monitor_trends.png"]
     for p in paths:
-        assert matplotlib.image.imread(p).shape[0] > 400
+        height, width = matplotlib.image.imread(p).shape[:2]
+        assert width > 600 and height > (250 if "correlation" in p.name else 400)
 
 
 @pytest.mark.slow

@@ -67,7 +67,8 @@ def test_plots_and_errors(recording, tmp_path, capsys):
     db = str(tmp_path / "h.sqlite")
     assert main(["monitor", str(recording), *MAP, "--db", db, "--plots", str(tmp_path / "p")]) == 0
     assert sorted(p.name for p in (tmp_path / "p").iterdir()) == \
-        ["monitor_motion1.png", "monitor_motion2.png", "monitor_trends.png"]
+        ["monitor_correlation1.png", "monitor_correlation2.png", "monitor_motion1.png", "monitor_motion2.png",
+         "monitor_trends.png"]
     capsys.readouterr()
     assert main(["monitor", str(recording), *MAP, "--db", db, "--plots", str(tmp_path / "p")]) == 2
     assert "--overwrite" in capsys.readouterr().err

@@ -92,7 +92,7 @@ def test_monitor_page(drift):
     root = checks.parse(out / "report.html")
     checks.assert_self_contained(out / "report.html", root)
     images = checks.embedded_images(root)
-    assert len(images) == 6  # the last 5 motions (keep_traces) and the trends
+    assert len(images) == 11  # the last 5 motions (keep_traces): residues and correlations; the trends
     assert sorted(images) == sorted((out / p).read_bytes() for p in report["files"]["plots"])
     assert len(report["motions"]) == 10 and all(m["validated"] for m in report["motions"])
     for m in report["motions"]:

@@ -53,7 +53,8 @@ def test_page_parses_is_self_contained_and_embeds_every_figure(runs, name):
     checks.assert_self_contained(runs[name] / "report.html", root)
     images = checks.embedded_images(root)
     plots = report["files"]["plots"]
-    assert len(plots) == 4 and len(images) == len(plots)  # profiles, currents, monitor motion, trends
+    # profiles, currents, monitor motion, residue-input correlation, trends
+    assert len(plots) == 5 and len(images) == len(plots)
     assert sorted(images) == sorted((runs[name] / p).read_bytes() for p in plots)
     assert report["files"]["page"] == "report.html"
     summary = {"".join(tr.find("th").itertext()): checks.cells(tr)[0]
