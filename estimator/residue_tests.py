@@ -1,0 +1,185 @@
+"""The independence and size tests of one output-error residue (the model check's statistics).
+
+``residue_tests`` is called by ``mismatch.check_model``, which explains the tests; this module holds
+the statistics: block means at the test rate, the null covariance of the speed residue, the GLS and
+AR prewhitening, the F-tests, the residue-input correlation and its band.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import statsmodels.api as sm
+from scipy import linalg, stats
+from statsmodels.tsa.ar_model import ar_select_order
+
+from feeddrive.estimator.errors import EstimatorInputError
+
+#: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
+MAX_AR = 12
+#: singular values of the standardised lag regressors below this fraction of the largest are not tested
+LAG_RCOND = 1e-9
+
+
+@dataclass(frozen=True)
+class TestResult:
+    """One test of one residue: ``statistic`` (F), its degrees of freedom and p-value."""
+
+    __test__ = False  # not a pytest class
+
+    name: str
+    statistic: float
+    df: tuple[float, float]
+    p_value: float
+
+    def to_dict(self) -> dict:
+        return {"statistic": self.statistic, "df": list(self.df), "p_value": self.p_value}
+
+
+def _blocks(x: np.ndarray, block: int) -> np.ndarray:
+    nb = x.shape[0] // block
+    return x[:nb * block].reshape(nb, block, *x.shape[1:]).mean(axis=1)
+
+
+def integrated_noise_covariance(nb: int, rho: float, ratio: float) -> np.ndarray:
+    """Covariance, up to scale, of ``nb`` block means of the speed residue of one segment, shape (nb, nb).
+
+    Under the null the residue is the speed sensor's noise (its block means white, variance 1 here)
+    plus the first current sensor's noise integrated by the model from the segment's start: an AR(1)
+    at the block rate, ``x[b] = rho x[b-1] + v[b]``, ``x[0] = 0``, ``var v = ratio``, so
+    ``cov(x[b], x[c]) = ratio rho^|b-c| (1 - rho^(2 min(b, c))) / (1 - rho^2)`` (blocks from 1). The
+    sensor noises are white at the sample rate, so their block means are white whatever the filter
+    (its cut-off is above the block rate). Ignoring the integrated part, the prewhitening AR model
+    met a near-unit root it could not estimate from a few dozen blocks, and the test rejected healthy
+    motions several times more often than its level.
+    """
+    b = np.arange(1, nb + 1, dtype=float)
+    lo = np.minimum.outer(b, b)
+    if rho < 1.0:
+        x = rho ** np.abs(np.subtract.outer(b, b)) * (1.0 - rho ** (2 * lo)) / (1.0 - rho ** 2)
+    else:
+        x = lo
+    return np.eye(nb) + ratio * x
+
+
+def _whiten_segments(a: np.ndarray, sizes: Sequence[int], covariance: Callable[[int], np.ndarray],
+                     skip: int) -> np.ndarray:
+    # rows of each segment times the inverse Cholesky factor of its blocks' covariance (the first
+    # ``skip`` blocks, the lags' warm-up, are not in ``a``)
+    out, start = [], 0
+    for n in sizes:
+        c = np.linalg.cholesky(covariance(n + skip)[skip:, skip:])
+        out.append(linalg.solve_triangular(c, a[start:start + n], lower=True))
+        start += n
+    return np.concatenate(out)
+
+
+def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: np.ndarray, h: float,
+                  alpha: float, rate_hz: float = 50.0, lags: int = 10, ar_order: int | None = None,
+                  noise_std: float | None = None, noise_dof: float = np.inf,
+                  groups: np.ndarray | None = None, constant: bool = True,
+                  segment_covariance: Callable[[int], np.ndarray] | None = None) -> tuple[dict[str, TestResult], float, np.ndarray, float]:
+    """Independence and size tests of one residue; see the module docstring.
+
+    Parameters
+    ----------
+    residue : ndarray, shape (n,)
+        ``measured - simulated`` on the samples tested (signal's unit).
+    nuisance : ndarray, shape (n, k)
+        Columns whose effect is not a mismatch (sensitivities to the parameters).
+    inputs : ndarray, shape (n, m)
+        The simulation's inputs.
+    h : float
+        Sample time [s].
+    alpha : float
+        Level of the correlation band (the tests return p-values).
+    rate_hz, lags, ar_order : float, int, int
+        Decimated rate [Hz], input lags (at that rate) and order of the prewhitening AR model.
+    noise_std : float or None
+        Sensor noise standard deviation of the measured signal (None: no size test).
+    noise_dof : float
+        Degrees of freedom of ``noise_std`` (the samples it was estimated from).
+    groups : ndarray of int, shape (n,), optional
+        Segment labels: blocks never straddle two segments.
+    constant : bool
+        A constant is a nuisance regressor.
+
+    Returns
+    -------
+    tests : dict of str to TestResult
+    rms : float
+        RMS of the residue without its least-squares nuisance part (signal's unit).
+    correlation : ndarray, shape (lags + 1, m)
+    band : float
+    """
+    block = max(1, int(round(1.0 / (rate_hz * h))))
+    groups = np.ones(residue.size, dtype=int) if groups is None else np.asarray(groups)
+    parts = [np.flatnonzero(groups == g) for g in np.unique(groups)]
+    # the current: a constant (a voltage or current sensor offset) is a nuisance. Not for the speed: a
+    # constant and the segments' free responses (nuisance) span the response to a constant torque, so a
+    # load torque or a friction change between two segments would pass unseen
+    Z = np.column_stack([nuisance, np.ones(residue.size)]) if constant else nuisance
+    rb, Zb, Xb, lagged = [], [], [], []
+    for idx in parts:
+        nb = idx.size // block
+        if nb <= lags + 1:
+            continue
+        take = idx[:nb * block]
+        r_, Z_, X_ = _blocks(residue[take], block), _blocks(Z[take], block), _blocks(inputs[take], block)
+        rb.append(r_[lags:])
+        Zb.append(Z_[lags:])
+        lagged.append(np.column_stack([X_[lags - k:nb - k, j] for j in range(X_.shape[1])
+                                       for k in range(lags + 1)]))
+        Xb.append(X_[lags:])
+    if not rb or sum(len(r) for r in rb) < (lags + 1) * inputs.shape[1] + Z.shape[1] + 10:
+        raise EstimatorInputError(f"model check ({name}): {residue.size} samples give too few {rate_hz:g} Hz blocks "
+                                  f"for {lags} lags of {inputs.shape[1]} input(s)")
+    y, N, L = np.concatenate(rb), np.vstack(Zb), np.vstack(lagged)
+    L = (L - L.mean(axis=0)) / L.std(axis=0).clip(1e-300)
+    # lags of smooth inputs are nearly collinear: test the well-conditioned principal directions only
+    uL, sL, _ = np.linalg.svd(L, full_matrices=False)
+    T = uL[:, sL > LAG_RCOND * sL[0]]
+    N = N[:, np.abs(N).max(axis=0) > 0]
+    N = N / np.abs(N).max(axis=0)
+    # nuisance columns nearly collinear with others (a constant and a flat sensitivity) are dropped
+    if N.shape[1]:
+        u_, s_, _ = np.linalg.svd(N, full_matrices=False)
+        N = u_[:, s_ > 1e-9 * s_[0]]
+    if segment_covariance is not None:
+        # GLS first stage: each segment whitened by the covariance the model implies under the null
+        sizes = [len(r) for r in rb]
+        y, N, T, L = (_whiten_segments(a, sizes, segment_covariance, lags) for a in (y, N, T, L))
+    design = np.column_stack([N, T])
+    if ar_order is None or ar_order < 0:
+        # prewhitening order chosen by an information criterion on the OLS residue: the open-loop residue
+        # carries the integrated input noise, more colour than a fixed AR(2) whitens
+        r0 = y - design @ np.linalg.lstsq(design, y, rcond=None)[0]
+        sel = ar_select_order(r0, maxlag=MAX_AR, ic="bic", trend="n")
+        ar_order = max(sel.ar_lags) if sel.ar_lags else 0
+    if ar_order == 0 and segment_covariance is not None:
+        fit = sm.OLS(y, design).fit()
+        whiten = np.asarray
+    else:
+        fit = sm.GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
+        whiten = fit.model.whiten
+    q = T.shape[1]
+    restriction = np.zeros((q, design.shape[1]))
+    restriction[:, -q:] = np.eye(q)
+    f = fit.f_test(restriction)
+    tests = {"independence": TestResult("independence", float(np.squeeze(f.fvalue)),
+                                        (float(f.df_num), float(f.df_denom)), float(np.squeeze(f.pvalue)))}
+    # the correlation plot: residue and inputs prewhitened by the fitted AR model, after the nuisance
+    white = whiten(y - N @ np.linalg.lstsq(N, y, rcond=None)[0])
+    wl = whiten(L)
+    corr = (wl.T @ white) / np.sqrt(np.sum(wl ** 2, axis=0) * (white @ white)).clip(1e-300)
+    correlation = corr.reshape(inputs.shape[1], lags + 1).T
+    band = float(stats.norm.isf(alpha / 2) / np.sqrt(white.size))
+    Zfull = Z[:, np.abs(Z).max(axis=0) > 0]
+    e = residue - Zfull @ np.linalg.lstsq(Zfull, residue, rcond=None)[0]
+    rms = float(np.sqrt(np.mean(e ** 2)))
+    if noise_std is not None and noise_std > 0:
+        dof = float(y.size)  # the residue is correlated over about a block: one degree of freedom per block
+        ratio = rms ** 2 / noise_std ** 2
+        tests["size"] = TestResult("size", ratio, (dof, float(noise_dof)), float(stats.f.sf(ratio, dof, noise_dof)))
+    return tests, rms, correlation, band
