@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import statsmodels.api as sm
 from scipy import linalg, stats
+from statsmodels.stats.diagnostic import acorr_ljungbox
 from statsmodels.tsa.ar_model import ar_select_order
 
 from feeddrive.estimator.errors import EstimatorInputError
@@ -20,6 +21,8 @@ from feeddrive.estimator.errors import EstimatorInputError
 MAX_AR = 12
 #: singular values of the standardised lag regressors below this fraction of the largest are not tested
 LAG_RCOND = 1e-9
+#: after the null covariance, an AR stage is fitted only if Ljung-Box rejects whiteness at this level
+WHITE_ALPHA = 0.01
 
 
 @dataclass(frozen=True)
@@ -155,8 +158,15 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
         # prewhitening order chosen by an information criterion on the OLS residue: the open-loop residue
         # carries the integrated input noise, more colour than a fixed AR(2) whitens
         r0 = y - design @ np.linalg.lstsq(design, y, rcond=None)[0]
-        sel = ar_select_order(r0, maxlag=MAX_AR, ic="bic", trend="n")
-        ar_order = max(sel.ar_lags) if sel.ar_lags else 0
+        if segment_covariance is not None and acorr_ljungbox(r0, lags=[max(1, min(10, r0.size // 5))])[
+                "lb_pvalue"].iloc[0] >= WHITE_ALPHA:
+            # the null covariance already whitened the residue: an AR model chosen on a few dozen blocks
+            # overfits (BIC picked AR(3) on 54 blocks of a healthy fast motion) and its feasible GLS
+            # F-test rejected healthy motions at several times its level
+            ar_order = 0
+        else:
+            sel = ar_select_order(r0, maxlag=MAX_AR, ic="bic", trend="n")
+            ar_order = max(sel.ar_lags) if sel.ar_lags else 0
     if ar_order == 0 and segment_covariance is not None:
         fit = sm.OLS(y, design).fit()
         whiten = np.asarray
