@@ -40,6 +40,7 @@ def former_check(ref: str):
     path.write_text(source, encoding="utf-8")
     spec = importlib.util.spec_from_file_location("former_mismatch", path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the class is built
     spec.loader.exec_module(module)
 
     def check(u, i, w, h, parameters, filter, alpha, covariance=None, names=None, **_):
