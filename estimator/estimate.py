@@ -32,7 +32,7 @@ from feeddrive.estimator.motion import (
     ParameterEstimate,
     Prepared,
     check_result,
-    long_run_covariance,
+    parameter_covariance,
 )
 from feeddrive.estimator.regression import Regression, derive_regression
 from feeddrive.estimator.simulation import MODEL, simulate
@@ -131,6 +131,7 @@ class _Fit:
     dof: int
     cond: float
     fit: float
+    theta_dof: np.ndarray  # (p,) effective dof of each theta's variance
 
 
 def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: float) -> np.ndarray:
@@ -210,10 +211,9 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         G += g[:n]
         res2 += e @ e
         out2 += yr @ yr
-    S, nb = long_run_covariance(G, block)
-    Ai = np.linalg.inv(A)
-    return _Fit(theta_s / scale, Ai @ S @ Ai.T / np.outer(scale, scale), nb - p, float(cond),
-                float(np.sqrt(res2 / out2)))
+    cov, dof, nb = parameter_covariance(G, np.linalg.inv(A), block)
+    return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
+                float(np.sqrt(res2 / out2)), dof)
 
 
 def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 1) -> MethodResult:
@@ -250,8 +250,16 @@ def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 
                 J[a] = 0.0
                 J[a, jt], J[a, jn] = theta[jn], theta[jt]
     cov = J @ C @ J.T
+    # Welch-Satterthwaite: a product theta_t theta_n mixes two variances with their own dof (the
+    # equations' covariances are separate blocks of C)
+    parts = J ** 2 * np.diag(C)
+    dof_t = np.concatenate([fits[reg.equation].theta_dof for reg in p.regressions])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        parameter_dof = parts.sum(axis=1) ** 2 / (parts ** 2 / dof_t).sum(axis=1)
+    parameter_dof = np.where(np.isfinite(parameter_dof), parameter_dof, min(f.dof for f in fits.values()))
     return MethodResult(method, tuple(names), values, cov, min(f.dof for f in fits.values()),
-                        max(f.cond for f in fits.values()), max(f.fit for f in fits.values()), iterations)
+                        max(f.cond for f in fits.values()), max(f.fit for f in fits.values()), iterations,
+                        parameter_dof=parameter_dof)
 
 
 def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:

@@ -185,7 +185,7 @@ class MethodResult:
     values : ndarray, shape (p,)
     covariance : ndarray, shape (p, p)
     dof : int
-        Degrees of freedom of the t quantile of the intervals.
+        Degrees of freedom of the batch-means covariance (blocks less parameters).
     condition_number : float
         Of the column-scaled regressor (largest over the equations; OE: of the scaled jacobian).
     fit_error : float
@@ -193,6 +193,9 @@ class MethodResult:
     iterations : int
     message : str
         Why OE fell back, or "".
+    parameter_dof : ndarray, shape (p,), optional
+        Effective degrees of freedom of each parameter's variance (see :func:`parameter_covariance`), for
+        the t quantile of its interval; ``dof`` for every parameter when absent.
     """
 
     method: str
@@ -204,13 +207,15 @@ class MethodResult:
     fit_error: float
     iterations: int = 1
     message: str = ""
+    parameter_dof: np.ndarray | None = None
 
     @property
     def parameters(self) -> dict[str, ParameterEstimate]:
-        t = stats.t.ppf(0.975, max(self.dof, 1))
+        dof = np.full(len(self.names), float(self.dof)) if self.parameter_dof is None else self.parameter_dof
+        t = stats.t.ppf(0.975, np.maximum(dof, 1))
         std = np.sqrt(np.clip(np.diag(self.covariance), 0, None))
-        return {n: ParameterEstimate(float(v), float(s), (float(v - t * s), float(v + t * s)))
-                for n, v, s in zip(self.names, self.values, std)}
+        return {n: ParameterEstimate(float(v), float(s), (float(v - q * s), float(v + q * s)))
+                for n, v, s, q in zip(self.names, self.values, std, t)}
 
     def as_dict(self) -> dict[str, float]:
         return dict(zip(self.names, map(float, self.values)))
@@ -282,6 +287,49 @@ class Prepared:
     overrides: dict[str, dict[str, np.ndarray]]  # equation -> signals replaced (torque for K i)
     known: dict[str, float]
     block: int
+
+
+def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Batch-means covariance of ``Ai @ sum(G)`` with each parameter's own degrees of freedom.
+
+    Parameters
+    ----------
+    G : ndarray, shape (n, p)
+        Score rows (regressor times residual), one per sample.
+    Ai : ndarray, shape (q, p)
+        Maps the summed score to the parameters (the inverse information).
+    block : int
+        Samples per block.
+
+    Returns
+    -------
+    cov : ndarray, shape (q, q)
+    dof : ndarray, shape (q,)
+        Degrees of freedom of each parameter's variance, for the t quantile of its interval.
+    nb : int
+        Blocks count.
+
+    Notes
+    -----
+    Parameter ``j`` moves with ``c_t = (Ai g_t)_j``. A block's share of its variance is estimated by
+    ``v_b = sum c_t^2`` over the block (less noisy than the squared block sum). When a few blocks
+    carry the parameter (L: only the current transients), the variance rests on about
+    ``k = (sum v_b)^2 / sum v_b^2`` blocks (Kish), not on all of them, and the parameter's own
+    estimate took one of those: as for the mean of ``k`` samples, the variance is scaled by
+    ``k / (k - 1)`` (instead of the all-blocks ``nb / (nb - p)`` when that is larger) and the t
+    quantile has ``k - 1`` degrees of freedom (at most ``nb - p``). Checked by Monte Carlo in
+    tests/estimator/test_parameter_covariance.py.
+    """
+    S, nb = long_run_covariance(G, block)
+    p = G.shape[1]
+    cov = Ai @ S @ Ai.T
+    block = min(block, len(G))
+    v = ((G[:nb * block] @ Ai.T) ** 2).reshape(nb, block, -1).sum(axis=1)
+    total = v.sum(axis=0)
+    k = np.where(total > 0, total ** 2 / np.maximum((v ** 2).sum(axis=0), np.finfo(float).tiny), nb)
+    k = np.clip(k, 1.0 + 1.0 / nb, nb)
+    scale = np.sqrt(np.maximum(k / (k - 1) * max(nb - p, 1) / nb, 1.0))
+    return cov * np.outer(scale, scale), np.clip(k - 1, 1.0, max(nb - p, 1)), nb
 
 
 def long_run_covariance(G: np.ndarray, block: int) -> tuple[np.ndarray, int]:

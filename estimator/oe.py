@@ -25,7 +25,7 @@ from feeddrive.estimator.motion import (
     MethodResult,
     Prepared,
     check_result,
-    long_run_covariance,
+    parameter_covariance,
 )
 from feeddrive.estimator.simulation import MODEL, _ode, _rollout
 
@@ -114,12 +114,13 @@ def output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -
     Jw = (J * weight[:, :, None])  # (2, n-1, nq)
     A = Jw.reshape(-1, len(q)).T @ Jw.reshape(-1, len(q))
     G = np.einsum("ctq,ct->tq", Jw, r)
-    S, nb = long_run_covariance(G, max(1, int(round(max(0.2, options.block()) / h))))
-    Ai = np.linalg.inv(A)
-    cov = (Ai @ S @ Ai.T)[:len(free), :len(free)]
+    block = max(1, int(round(max(0.2, options.block()) / h)))
+    cov, dof, nb = parameter_covariance(G, np.linalg.inv(A), block)
+    cov = cov[:len(free), :len(free)]
     sv = np.linalg.svd(Jw.reshape(-1, len(q)) * scale, compute_uv=False)
     fit = float(np.max(np.sqrt(np.sum((y[:, 1:] - X) ** 2, axis=1) / np.sum(y[:, 1:] ** 2, axis=1))))
-    result = MethodResult("oe", free, q[:len(free)].copy(), cov, nb - len(q), float(sv[0] / sv[-1]), fit, it)
+    result = MethodResult("oe", free, q[:len(free)].copy(), cov, nb - len(q), float(sv[0] / sv[-1]), fit, it,
+                          parameter_dof=dof[:len(free)])
     try:
         check_result(result, options)
     except NotEnoughExcitation as exc:
