@@ -68,7 +68,8 @@ def decision_text(mm) -> str:
     """What decided the model check: the deciding test, its statistic and p-value against alpha, and for
     each residue its RMS (nuisance removed) against the sensor noise (dotted lines: +- that noise)."""
     size = ", ".join(f"{k} RMS {c.rms:.3g} vs noise {c.noise_std:.3g}" for k, c in mm.checks.items())
-    return (f"{'passed' if mm.passed else 'MISMATCH'}: {mm.test} F = {mm.statistic:.3g}, adjusted p = "
+    symbol = "max |z|" if mm.test.endswith("peak") else "F"  # the peak test's statistic is in MAD units
+    return (f"{'passed' if mm.passed else 'MISMATCH'}: {mm.test} {symbol} = {mm.statistic:.3g}, adjusted p = "
             f"{mm.p_value:.3g} {'>=' if mm.passed else '<'} alpha = {mm.alpha:g} ({size})")
 
 

@@ -23,6 +23,9 @@ MAX_AR = 12
 LAG_RCOND = 1e-9
 #: after the null covariance, an AR stage is fitted only if Ljung-Box rejects whiteness at this level
 WHITE_ALPHA = 0.01
+#: asymptotic efficiency of the MAD as a scale estimate of Gaussian data: the peak test's t quantile has
+#: this fraction of the blocks as degrees of freedom
+MAD_EFFICIENCY = 0.37
 
 
 @dataclass(frozen=True)
@@ -78,11 +81,64 @@ def _whiten_segments(a: np.ndarray, sizes: Sequence[int], covariance: Callable[[
     return np.concatenate(out)
 
 
+def _orthonormal_nuisance(N: np.ndarray) -> np.ndarray:
+    # columns scaled to a unit peak; nearly collinear ones (a constant and a flat sensitivity) dropped
+    N = N[:, np.abs(N).max(axis=0) > 0]
+    N = N / np.abs(N).max(axis=0)
+    if N.shape[1]:
+        u_, s_, _ = np.linalg.svd(N, full_matrices=False)
+        N = u_[:, s_ > 1e-9 * s_[0]]
+    return N
+
+
+def peak_test(y: np.ndarray, nuisance: np.ndarray, sizes: Sequence[int],
+              segment_covariance: Callable[[int], np.ndarray] | None = None) -> TestResult:
+    """Is one block of the residue far outside the others? (a transient the model lacks)
+
+    The independence and size tests average over the motion: a fault that acts for a few blocks
+    (backlash crossed at a start or a reversal of a slow motion, ~0.1 s in 10 s) moves neither,
+    though it stands 10-50 times above the residue's noise there. Under the null the block means,
+    with the nuisance removed (and each segment whitened by its null covariance, as the
+    independence test), are Gaussian with one scale: ``z = max |e_b - median(e)| / (1.4826 MAD)``,
+    and ``p = min(1, n 2 t.sf(z, MAD_EFFICIENCY n))`` (Bonferroni over the ``n`` blocks: conservative
+    where neighbouring blocks are correlated). The MAD scale ignores the few blocks of a transient.
+
+    Parameters
+    ----------
+    y : ndarray, shape (n,)
+        Block means of the residue, segment after segment.
+    nuisance : ndarray, shape (n, k)
+        Block means of the nuisance regressors.
+    sizes : sequence of int
+        Blocks per segment (sum n).
+    segment_covariance : callable, optional
+        ``nb -> (nb, nb)`` null covariance of one segment's blocks (the speed residue).
+
+    Returns
+    -------
+    TestResult
+        ``peak``: statistic z, df ``(n, MAD_EFFICIENCY n)``.
+    """
+    N = _orthonormal_nuisance(nuisance)
+    if segment_covariance is not None:
+        y, N = (_whiten_segments(a, sizes, segment_covariance, 0) for a in (y, N))
+    e = y - N @ np.linalg.lstsq(N, y, rcond=None)[0] if N.shape[1] else y
+    d = np.abs(e - np.median(e))
+    scale = 1.4826 * float(np.median(d))
+    n = e.size
+    dof = MAD_EFFICIENCY * n
+    if not scale > 0:
+        return TestResult("peak", 0.0, (float(n), dof), 1.0)
+    z = float(d.max() / scale)
+    return TestResult("peak", z, (float(n), dof), float(min(1.0, n * 2 * stats.t.sf(z, dof))))
+
+
 def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: np.ndarray, h: float,
                   alpha: float, rate_hz: float = 50.0, lags: int = 10, ar_order: int | None = None,
                   noise_std: float | None = None, noise_dof: float = np.inf,
                   groups: np.ndarray | None = None, constant: bool = True,
-                  segment_covariance: Callable[[int], np.ndarray] | None = None) -> tuple[dict[str, TestResult], float, np.ndarray, float]:
+                  segment_covariance: Callable[[int], np.ndarray] | None = None,
+                  peak: bool = False) -> tuple[dict[str, TestResult], float, np.ndarray, float]:
     """Independence and size tests of one residue; see the module docstring.
 
     Parameters
@@ -107,6 +163,10 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
         Segment labels: blocks never straddle two segments.
     constant : bool
         A constant is a nuisance regressor.
+    segment_covariance : callable, optional
+        ``nb -> (nb, nb)`` null covariance of one segment's blocks (see ``integrated_noise_covariance``).
+    peak : bool
+        Also run ``peak_test``.
 
     Returns
     -------
@@ -123,13 +183,15 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     # constant and the segments' free responses (nuisance) span the response to a constant torque, so a
     # load torque or a friction change between two segments would pass unseen
     Z = np.column_stack([nuisance, np.ones(residue.size)]) if constant else nuisance
-    rb, Zb, Xb, lagged = [], [], [], []
+    rb, Zb, Xb, lagged, r_all, Z_all = [], [], [], [], [], []
     for idx in parts:
         nb = idx.size // block
         if nb <= lags + 1:
             continue
         take = idx[:nb * block]
         r_, Z_, X_ = _blocks(residue[take], block), _blocks(Z[take], block), _blocks(inputs[take], block)
+        r_all.append(r_)
+        Z_all.append(Z_)
         rb.append(r_[lags:])
         Zb.append(Z_[lags:])
         lagged.append(np.column_stack([X_[lags - k:nb - k, j] for j in range(X_.shape[1])
@@ -143,12 +205,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     # lags of smooth inputs are nearly collinear: test the well-conditioned principal directions only
     uL, sL, _ = np.linalg.svd(L, full_matrices=False)
     T = uL[:, sL > LAG_RCOND * sL[0]]
-    N = N[:, np.abs(N).max(axis=0) > 0]
-    N = N / np.abs(N).max(axis=0)
-    # nuisance columns nearly collinear with others (a constant and a flat sensitivity) are dropped
-    if N.shape[1]:
-        u_, s_, _ = np.linalg.svd(N, full_matrices=False)
-        N = u_[:, s_ > 1e-9 * s_[0]]
+    N = _orthonormal_nuisance(N)
     if segment_covariance is not None:
         # GLS first stage: each segment whitened by the covariance the model implies under the null
         sizes = [len(r) for r in rb]
@@ -185,6 +242,9 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     corr = (wl.T @ white) / np.sqrt(np.sum(wl ** 2, axis=0) * (white @ white)).clip(1e-300)
     correlation = corr.reshape(inputs.shape[1], lags + 1).T
     band = float(stats.norm.isf(alpha / 2) / np.sqrt(white.size))
+    if peak:
+        tests["peak"] = peak_test(np.concatenate(r_all), np.vstack(Z_all), [len(r) for r in r_all],
+                                  segment_covariance)
     Zfull = Z[:, np.abs(Z).max(axis=0) > 0]
     e = residue - Zfull @ np.linalg.lstsq(Zfull, residue, rcond=None)[0]
     rms = float(np.sqrt(np.mean(e ** 2)))

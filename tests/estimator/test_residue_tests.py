@@ -44,3 +44,42 @@ def test_null_covariance_keeps_the_level_of_the_speed_test():
             rejected[key] += tests["independence"].p_value < 0.05
     assert rejected["gls"] <= 14, rejected  # P(X > 14 | n = 150, p = 0.05) < 1 %
     assert rejected["ar"] > 2 * rejected["gls"]
+
+
+def test_peak_test_level_and_a_transient_of_a_few_blocks():
+    """Gaussian block means with smooth nuisance columns: the peak test rejects at most at its level
+    (Bonferroni over the blocks; 2000 draws); 3 blocks 8 noise levels out of 500 give p < 1e-6, which
+    the mean square (the size test's statistic) barely notices (+40 %)."""
+    from feeddrive.estimator.residue_tests import peak_test
+
+    rng = np.random.default_rng(11)
+    n = 500
+    t = np.linspace(0, 1, n)
+    nuisance = np.column_stack([np.ones(n), t, np.exp(-5 * t)])
+    p = np.array([peak_test(rng.standard_normal(n) + nuisance @ rng.standard_normal(3), nuisance, [n]).p_value
+                  for _ in range(2000)])
+    assert 0.002 <= np.mean(p < 0.01) <= 0.015
+    y = rng.standard_normal(n)
+    y[200:203] += 8.0
+    assert peak_test(y, nuisance, [n]).p_value < 1e-6
+    assert np.mean(y ** 2) < 1.5
+
+
+def test_peak_test_keeps_its_level_on_the_integrated_noise_of_each_segment():
+    """The speed residue's integrated current noise (a near-unit root started at each segment's start):
+    whitened by the null covariance, the peak test rejects at most at its level (400 draws)."""
+    from feeddrive.estimator.residue_tests import peak_test
+
+    rng = np.random.default_rng(12)
+    sizes, rho, ratio = [150, 150], 0.996, 0.5
+    cov = lambda nb: integrated_noise_covariance(nb, rho, ratio)  # noqa: E731
+    nuisance = np.zeros((300, 2))
+    nuisance[:150, 0] = rho ** np.arange(150)
+    nuisance[150:, 1] = rho ** np.arange(150)
+    rejected = []
+    for _ in range(400):
+        y = np.concatenate([np.linalg.cholesky(cov(s)) @ rng.standard_normal(s) for s in sizes])
+        rejected.append(peak_test(y, nuisance, sizes, cov).p_value < 0.01)
+    assert np.mean(rejected) <= 0.02
+    y[100:102] += 6 * np.sqrt(np.diag(cov(150))[100:102])  # a transient of 2 blocks in the first segment
+    assert peak_test(y, nuisance, sizes, cov).p_value < 1e-3
