@@ -96,5 +96,6 @@ def test_backlash_on_a_slow_motion_is_a_speed_peak(tmp_path, v_max, accel):
         (motion,) = run.report["motions"]
         outcome[gap] = motion["mismatch"]
     assert outcome[0.0]["passed"], outcome[0.0]["checks"]
-    assert not outcome[0.02]["passed"] and outcome[0.02]["test"] == "speed peak"
-    assert outcome[0.02]["p_value"] < 1e-6
+    assert not outcome[0.02]["passed"] and outcome[0.02]["p_value"] < 1e-6
+    # the peak test sees it whichever test decided (at 0.045 m/s, 0.3 m/s^2 the independence test also does)
+    assert outcome[0.02]["checks"]["speed"]["peak"]["p_value"] < 1e-4, outcome[0.02]["checks"]["speed"]
