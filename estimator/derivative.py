@@ -44,6 +44,11 @@ def zero_forcing_derivative(x: np.ndarray, h: float) -> tuple[np.ndarray, slice]
     return dx, slice(PAST, n - FUTURE)
 
 
+# first and third moments of the weights about the output sample (taps at +1, 0, -1, -2 samples)
+_TAPS = np.array((1.0, 0.0, -1.0, -2.0))
+_M1, _M3 = float(np.dot(ZERO_FORCING_WEIGHTS, _TAPS)), float(np.dot(ZERO_FORCING_WEIGHTS, _TAPS ** 3))
+
+
 def matched_average(x: np.ndarray) -> np.ndarray:
     """The signal as the zero-forcing derivative sees it: ``D x = d/dt (S x)`` to second order in ``w h``.
 
@@ -64,8 +69,6 @@ def matched_average(x: np.ndarray) -> np.ndarray:
         ``S x``; the first and last samples (no neighbour) are ``m1 x``.
     """
     x = np.asarray(x, dtype=float)
-    k = np.array((1.0, 0.0, -1.0, -2.0))
-    m1, m3 = float(np.dot(ZERO_FORCING_WEIGHTS, k)), float(np.dot(ZERO_FORCING_WEIGHTS, k ** 3))
-    out = m1 * x
-    out[1:-1] += m3 / 6.0 * (x[2:] - 2.0 * x[1:-1] + x[:-2])
+    out = _M1 * x
+    out[1:-1] += _M3 / 6.0 * (x[2:] - 2.0 * x[1:-1] + x[:-2])
     return out

@@ -256,8 +256,9 @@ def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 
     dof_t = np.concatenate([fits[reg.equation].theta_dof for reg in p.regressions])
     with np.errstate(divide="ignore", invalid="ignore"):
         parameter_dof = parts.sum(axis=1) ** 2 / (parts ** 2 / dof_t).sum(axis=1)
-    parameter_dof = np.where(np.isfinite(parameter_dof), parameter_dof, min(f.dof for f in fits.values()))
-    return MethodResult(method, tuple(names), values, cov, min(f.dof for f in fits.values()),
+    dof = min(f.dof for f in fits.values())
+    parameter_dof = np.where(np.isfinite(parameter_dof), parameter_dof, dof)
+    return MethodResult(method, tuple(names), values, cov, dof,
                         max(f.cond for f in fits.values()), max(f.fit for f in fits.values()), iterations,
                         parameter_dof=parameter_dof)
 

@@ -72,7 +72,7 @@ from scipy import ndimage, signal
 
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
-from feeddrive.estimator.residue_tests import TestResult, integrated_noise_covariance, residue_tests
+from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.estimator.validation import MeasurementValidation, model_reference, noise_std
 
@@ -362,7 +362,7 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     if noise.get("speed", 0) > 0 and noise.get("current", 0) > 0:
         # the speed residue integrates the current sensor's noise through the model (see
         # integrated_noise_covariance): its share per block from the sensor noises and the parameters
-        tb = max(1, int(round(1.0 / (rate_hz * h)))) * h
+        tb = block_samples(rate_hz, h) * h
         rho = float(np.exp(-params["ft"] / params["Jt"] * tb))
         ratio = (params["K"] * tb / params["Jt"] * noise["current"] / noise["speed"]) ** 2
         null_covariance = lambda nb: integrated_noise_covariance(nb, rho, ratio)  # noqa: E731
@@ -372,20 +372,21 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         k = keep[name]
         if k.sum() < 2 / h * MIN_SEGMENT_S:
             raise EstimatorInputError(f"model check ({name}): only {k.sum()} samples to test")
+        base = simulated if fi is f else simulate(params, fi)
         D = sensitivity_directions(lambda p, s=simulate, k=k: s(p, fi)[k], params, names, covariance, USES[name],
-                                   simulate(params, fi)[k])
+                                   base[k])
         if name == "speed":
             D = np.column_stack([D, free_responses(labels, params, h)[k]])
         X = np.column_stack([fi[s] for s in INPUTS[name]])[k]
         tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[k], D, X, h, alpha, rate_hz, lags,
                                                ar_order, noise.get(name), noise_dof,
                                                labels[k] if name == "speed" else None, constant=name == "current",
-                                               segment_covariance=null_covariance if name == "speed" else None,
-                                               # the speed only (on the vendor FMU the current residue's
-                                               # acceleration transients stood 4.9 MAD out on 1 of 40 healthy
-                                               # motions), and only with its null known (a confirmed pair):
-                                               # a differentiated encoder's quantisation has peaks of its own
-                                               peak=name == "speed" and null_covariance is not None)
+                                               # with a null covariance the peak test runs too: the speed
+                                               # only (on the vendor FMU the current residue's acceleration
+                                               # transients stood 4.9 MAD out on 1 of 40 healthy motions), and
+                                               # only with both pairs confirmed (a differentiated encoder's
+                                               # quantisation has peaks of its own)
+                                               segment_covariance=null_covariance if name == "speed" else None)
         residue = np.where(k, f[x] - simulated, np.nan)  # the samples tested (filter edges out)
         checks[name] = ResidueCheck(name, tests, rms, float(noise.get(name, np.nan)), simulated, residue, corr, band)
     results = [(f"{name} {t}", r) for name, c in checks.items() for t, r in c.tests.items()]

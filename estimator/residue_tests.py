@@ -43,6 +43,11 @@ class TestResult:
         return {"statistic": self.statistic, "df": list(self.df), "p_value": self.p_value}
 
 
+def block_samples(rate_hz: float, h: float) -> int:
+    """Samples per block of the tests' decimated rate ``rate_hz`` [Hz] at sample time ``h`` [s]."""
+    return max(1, int(round(1.0 / (rate_hz * h))))
+
+
 def _blocks(x: np.ndarray, block: int) -> np.ndarray:
     nb = x.shape[0] // block
     return x[:nb * block].reshape(nb, block, *x.shape[1:]).mean(axis=1)
@@ -137,8 +142,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
                   alpha: float, rate_hz: float = 50.0, lags: int = 10, ar_order: int | None = None,
                   noise_std: float | None = None, noise_dof: float = np.inf,
                   groups: np.ndarray | None = None, constant: bool = True,
-                  segment_covariance: Callable[[int], np.ndarray] | None = None,
-                  peak: bool = False) -> tuple[dict[str, TestResult], float, np.ndarray, float]:
+                  segment_covariance: Callable[[int], np.ndarray] | None = None) -> tuple[dict[str, TestResult], float, np.ndarray, float]:
     """Independence and size tests of one residue; see the module docstring.
 
     Parameters
@@ -165,8 +169,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
         A constant is a nuisance regressor.
     segment_covariance : callable, optional
         ``nb -> (nb, nb)`` null covariance of one segment's blocks (see ``integrated_noise_covariance``).
-    peak : bool
-        Also run ``peak_test``.
+        With it (the null of the residue is known) ``peak_test`` runs too.
 
     Returns
     -------
@@ -176,14 +179,14 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     correlation : ndarray, shape (lags + 1, m)
     band : float
     """
-    block = max(1, int(round(1.0 / (rate_hz * h))))
+    block = block_samples(rate_hz, h)
     groups = np.ones(residue.size, dtype=int) if groups is None else np.asarray(groups)
     parts = [np.flatnonzero(groups == g) for g in np.unique(groups)]
     # the current: a constant (a voltage or current sensor offset) is a nuisance. Not for the speed: a
     # constant and the segments' free responses (nuisance) span the response to a constant torque, so a
     # load torque or a friction change between two segments would pass unseen
     Z = np.column_stack([nuisance, np.ones(residue.size)]) if constant else nuisance
-    rb, Zb, Xb, lagged, r_all, Z_all = [], [], [], [], [], []
+    r_all, Z_all, lagged = [], [], []  # block means of each segment; lagged inputs after the warm-up
     for idx in parts:
         nb = idx.size // block
         if nb <= lags + 1:
@@ -192,15 +195,13 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
         r_, Z_, X_ = _blocks(residue[take], block), _blocks(Z[take], block), _blocks(inputs[take], block)
         r_all.append(r_)
         Z_all.append(Z_)
-        rb.append(r_[lags:])
-        Zb.append(Z_[lags:])
         lagged.append(np.column_stack([X_[lags - k:nb - k, j] for j in range(X_.shape[1])
                                        for k in range(lags + 1)]))
-        Xb.append(X_[lags:])
+    rb = [r[lags:] for r in r_all]  # the independence test starts after the lags' warm-up
     if not rb or sum(len(r) for r in rb) < (lags + 1) * inputs.shape[1] + Z.shape[1] + 10:
         raise EstimatorInputError(f"model check ({name}): {residue.size} samples give too few {rate_hz:g} Hz blocks "
                                   f"for {lags} lags of {inputs.shape[1]} input(s)")
-    y, N, L = np.concatenate(rb), np.vstack(Zb), np.vstack(lagged)
+    y, N, L = np.concatenate(rb), np.vstack([Z_[lags:] for Z_ in Z_all]), np.vstack(lagged)
     L = (L - L.mean(axis=0)) / L.std(axis=0).clip(1e-300)
     # lags of smooth inputs are nearly collinear: test the well-conditioned principal directions only
     uL, sL, _ = np.linalg.svd(L, full_matrices=False)
@@ -242,7 +243,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     corr = (wl.T @ white) / np.sqrt(np.sum(wl ** 2, axis=0) * (white @ white)).clip(1e-300)
     correlation = corr.reshape(inputs.shape[1], lags + 1).T
     band = float(stats.norm.isf(alpha / 2) / np.sqrt(white.size))
-    if peak:
+    if segment_covariance is not None:
         tests["peak"] = peak_test(np.concatenate(r_all), np.vstack(Z_all), [len(r) for r in r_all],
                                   segment_covariance)
     Zfull = Z[:, np.abs(Z).max(axis=0) > 0]
