@@ -195,11 +195,11 @@ NO_VARIABLES(fmi2SetBoolean, const fmi2Boolean, M_SET_DISCRETE)
 NO_VARIABLES(fmi2SetString, const fmi2String, M_SET_DISCRETE)
 
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *state) {
-    Instance *c = comp;
+    Core *c = comp;
     REQUIRE("fmi2GetFMUstate", M_ALIVE, ANY);
-    if (!*state) *state = c->cb->allocateMemory(1, sizeof(Snapshot));
-    if (!*state) FAIL(&c->core, "fmi2GetFMUstate: out of memory");
-    core_take_snapshot(&c->core, *state);
+    if (!*state) *state = alloc(c, 1, sizeof(Snapshot));
+    if (!*state) FAIL(c, "fmi2GetFMUstate: out of memory");
+    core_take_snapshot(c, *state);
     return fmi2OK;
 }
 
@@ -211,9 +211,9 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate state) {
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *state) {
-    Instance *c = comp;
+    Core *c = comp;
     REQUIRE("fmi2FreeFMUstate", M_ALIVE, ANY);
-    if (state && *state) c->cb->freeMemory(*state);
+    if (state && *state) release(c, *state);
     if (state) *state = NULL;
     return fmi2OK;
 }
@@ -237,13 +237,13 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate state, fmi2Byt
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte bytes[], size_t size, fmi2FMUstate *state) {
-    Instance *c = comp;
+    Core *c = comp;
     const char *fn = "fmi2DeSerializeFMUstate";
     REQUIRE(fn, M_ALIVE, ANY);
     Snapshot s;
-    if (!core_check_serialized(&c->core, fn, bytes, size, &s)) return fmi2Error;
-    if (!*state) *state = c->cb->allocateMemory(1, sizeof(Snapshot));
-    if (!*state) FAIL(&c->core, "%s: out of memory", fn);
+    if (!core_check_serialized(c, fn, bytes, size, &s)) return fmi2Error;
+    if (!*state) *state = alloc(c, 1, sizeof(Snapshot));
+    if (!*state) FAIL(c, "%s: out of memory", fn);
     memcpy(*state, &s, size);
     return fmi2OK;
 }
