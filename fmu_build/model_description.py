@@ -8,6 +8,8 @@ listed in value-reference order); FMI 3.0 by value reference.
 """
 from __future__ import annotations
 
+import math
+import re
 import xml.etree.ElementTree as ET
 from typing import TYPE_CHECKING
 
@@ -30,6 +32,87 @@ def check_fmi_version(fmi_version: object) -> int:
     if fmi_version not in FMI_VERSIONS or isinstance(fmi_version, bool):
         raise FMUBuildInputError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
     return int(fmi_version)
+
+
+#: The units models may use, in SI base units: (exponents of kg, m, s, A, K, mol, cd, rad; factor).
+#: A table, not pint: every scenario load generates the description (pint would add ~2.5 s to it).
+_BASE_NAMES = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+_UNITS: dict[str, tuple[tuple[int, ...], float]] = {
+    "kg": ((1, 0, 0, 0, 0, 0, 0, 0), 1.0), "g": ((1, 0, 0, 0, 0, 0, 0, 0), 1e-3),
+    "m": ((0, 1, 0, 0, 0, 0, 0, 0), 1.0), "mm": ((0, 1, 0, 0, 0, 0, 0, 0), 1e-3),
+    "um": ((0, 1, 0, 0, 0, 0, 0, 0), 1e-6), "s": ((0, 0, 1, 0, 0, 0, 0, 0), 1.0),
+    "ms": ((0, 0, 1, 0, 0, 0, 0, 0), 1e-3), "min": ((0, 0, 1, 0, 0, 0, 0, 0), 60.0),
+    "A": ((0, 0, 0, 1, 0, 0, 0, 0), 1.0), "mA": ((0, 0, 0, 1, 0, 0, 0, 0), 1e-3),
+    "K": ((0, 0, 0, 0, 1, 0, 0, 0), 1.0), "mol": ((0, 0, 0, 0, 0, 1, 0, 0), 1.0),
+    "cd": ((0, 0, 0, 0, 0, 0, 1, 0), 1.0), "rad": ((0, 0, 0, 0, 0, 0, 0, 1), 1.0),
+    "deg": ((0, 0, 0, 0, 0, 0, 0, 1), math.pi / 180), "rev": ((0, 0, 0, 0, 0, 0, 0, 1), 2 * math.pi),
+    "rpm": ((0, 0, -1, 0, 0, 0, 0, 1), math.pi / 30), "Hz": ((0, 0, -1, 0, 0, 0, 0, 0), 1.0),
+    "N": ((1, 1, -2, 0, 0, 0, 0, 0), 1.0), "J": ((1, 2, -2, 0, 0, 0, 0, 0), 1.0),
+    "W": ((1, 2, -3, 0, 0, 0, 0, 0), 1.0), "C": ((0, 0, 1, 1, 0, 0, 0, 0), 1.0),
+    "V": ((1, 2, -3, -1, 0, 0, 0, 0), 1.0), "Ohm": ((1, 2, -3, -2, 0, 0, 0, 0), 1.0),
+    "H": ((1, 2, -2, -2, 0, 0, 0, 0), 1.0), "Wb": ((1, 2, -2, -1, 0, 0, 0, 0), 1.0),
+    "F": ((-1, -2, 4, 2, 0, 0, 0, 0), 1.0), "Pa": ((1, -1, -2, 0, 0, 0, 0, 0), 1.0),
+}
+
+
+def base_unit(unit: str) -> dict[str, str]:
+    """The ``BaseUnit`` attributes of a model unit: non-zero SI exponents (``kg m s A K mol cd rad``)
+    and ``factor`` when not 1. Units are products (``.``) and quotients (``/``, left to right) of the
+    names in ``_UNITS`` with optional integer powers (``m2``, ``s-1``) and parentheses: ``N.m.s/rad``,
+    ``V/(A.s)``, ``kg.m2``, ``rad/s/s``; ``1`` is dimensionless.
+
+    Raises
+    ------
+    FMUBuildInputError
+        The unit has a name outside the table or does not parse.
+    """
+    tokens = re.findall(r"[A-Za-z]+-?\d*|[./()]|\S", unit)
+    pos = 0
+
+    def fail() -> FMUBuildInputError:
+        return FMUBuildInputError(f"unit {unit!r}: expected products and quotients of {', '.join(_UNITS)} "
+                                  "with integer powers (e.g. 'N.m', 'rad/s', 'kg.m2', 'V/(A.s)') or '1'")
+
+    def factor() -> tuple[list[int], float]:
+        nonlocal pos
+        if pos < len(tokens) and tokens[pos] == "(":
+            pos += 1
+            value = product()
+            if pos >= len(tokens) or tokens[pos] != ")":
+                raise fail()
+            pos += 1
+            return value
+        if pos < len(tokens) and tokens[pos] == "1":  # 1/s
+            pos += 1
+            return [0] * len(_BASE_NAMES), 1.0
+        m = re.fullmatch(r"([A-Za-z]+)(-?\d*)", tokens[pos]) if pos < len(tokens) else None
+        if not m or m.group(1) not in _UNITS:
+            raise fail()
+        pos += 1
+        power = int(m.group(2) or 1)
+        exponents, scale = _UNITS[m.group(1)]
+        return [power * e for e in exponents], scale ** power
+
+    def product() -> tuple[list[int], float]:
+        nonlocal pos
+        exponents, scale = factor()
+        while pos < len(tokens) and tokens[pos] in "./":
+            sign = 1 if tokens[pos] == "." else -1
+            pos += 1
+            more, more_scale = factor()
+            exponents = [a + sign * b for a, b in zip(exponents, more)]
+            scale *= more_scale ** sign
+        return exponents, scale
+
+    if unit in ("", "1"):
+        return {}
+    exponents, scale = product()
+    if pos != len(tokens):
+        raise fail()
+    attrs = {name: str(e) for name, e in zip(_BASE_NAMES, exponents) if e}
+    if not math.isclose(scale, 1.0, rel_tol=1e-12):
+        attrs["factor"] = repr(scale)
+    return attrs
 
 
 def _dependencies(expr: ca.SX, known: ca.SX) -> list[list[int]]:
@@ -66,10 +149,15 @@ def _root(version: str, model: Model, token_key: str, extra: dict[str, str]) -> 
 
 
 def _common(root: ET.Element, variables: list[FMUVariable]) -> None:
-    """UnitDefinitions, LogCategories and DefaultExperiment: the same elements in both versions."""
+    """UnitDefinitions (each unit with its SI base-unit exponents where ``base_unit`` knows it), LogCategories and DefaultExperiment:
+    the same elements in both versions."""
     units = ET.SubElement(root, "UnitDefinitions")
     for unit in sorted({v.unit for v in variables}):
-        ET.SubElement(units, "Unit", {"name": unit})
+        element = ET.SubElement(units, "Unit", {"name": unit})
+        try:
+            ET.SubElement(element, "BaseUnit", base_unit(unit))
+        except FMUBuildInputError:
+            pass  # a unit outside the table keeps its name only (valid FMI; the importer reads the name)
     cats = ET.SubElement(root, "LogCategories")
     ET.SubElement(cats, "Category", {"name": "logStatusError",
                                      "description": "rejected input (unknown variable, bad value) and failed steps"})

@@ -4,6 +4,7 @@ the cache; ``cosim build-fmu --fmi-version 3``; and the estimates through the ma
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import zipfile
 from collections.abc import Callable, Iterator
@@ -23,6 +24,7 @@ from feeddrive.cosim.cli import main as cosim_main
 from feeddrive.fmu_build import FMUBuildInputError, build_fmu, builtin_fmu, fmu_variables
 from feeddrive.fmu_build.build import FMI_HEADERS, compiler
 from feeddrive.fmu_build.codegen import generate
+from feeddrive.fmu_build.model_description import base_unit
 from feeddrive.models import feed_drive
 
 NOMINAL = feed_drive().nominal()
@@ -80,6 +82,48 @@ def test_validates_and_declares_the_same_variables_as_fmi2(fmi3_fmu, feeddrive_f
     assert {u.name for u in md3.unitDefinitions} == {v.unit for v in md3.modelVariables}
     with zipfile.ZipFile(fmi3_fmu) as z:
         assert sorted(z.namelist()) == ["binaries/x86_64-linux/FeedDrive.so", "modelDescription.xml"]
+
+
+def test_unit_definitions_carry_si_base_units_consistent_with_the_equations(fmi3_fmu, feeddrive_fmu):
+    """Each unit has its SI exponents (rad counted, as FMI does); with them, every term of the paper's
+    electrical equation u = R i + L di/dt + K w is in volts and every torque of the mechanical one
+    Jt dw/dt = K i - ft w - Cd - Tl in N.m, up to the radian exponent (SI's rad is 1: K is in N.m/A,
+    the same number as V.s/rad, and kg.m2 rad/s2 is N.m). Both versions declare the same units."""
+    md3, md2 = read_model_description(str(fmi3_fmu)), read_model_description(str(feeddrive_fmu))
+    exps = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+
+    def base(md) -> dict[str, tuple]:
+        return {u.name: (tuple(getattr(u.baseUnit, e) for e in exps), u.baseUnit.factor) for u in md.unitDefinitions}
+
+    units = base(md3)
+    assert units == base(md2)
+    unit_of = {v.name: units[v.unit][0] for v in md3.modelVariables}
+    assert all(factor == 1.0 for _, factor in units.values())  # the model is in SI throughout
+
+    def times(*names: str) -> tuple[int, ...]:  # exponents of a product, without rad
+        return tuple(map(sum, zip(*(unit_of[n] for n in names))))[:7]
+
+    assert unit_of["R"] == (1, 2, -3, -2, 0, 0, 0, 0) and unit_of["w"] == (0, 0, -1, 0, 0, 0, 0, 1)
+    assert unit_of["u"] == (1, 2, -3, -1, 0, 0, 0, 0)
+    assert times("R", "i") == times("L", "der(i)") == times("K", "w") == times("u")
+    assert unit_of["Tl"] == unit_of["Cd"] == (1, 2, -2, 0, 0, 0, 0, 0)
+    assert times("Jt", "der(w)") == times("K", "i") == times("ft", "w") == times("Tl")
+
+
+@pytest.mark.parametrize("unit,attrs", [
+    ("V/(A.s)", {"kg": "1", "m": "2", "s": "-4", "A": "-2"}),
+    ("rad/s/s", {"s": "-2", "rad": "1"}),  # left to right
+    ("1/s", {"s": "-1"}), ("1", {}), ("mm", {"m": "1", "factor": "0.001"}),
+    ("rpm", {"s": "-1", "rad": "1", "factor": repr(math.pi / 30)}),
+])
+def test_base_unit_reads_products_quotients_and_powers(unit, attrs):
+    assert base_unit(unit) == attrs
+
+
+@pytest.mark.parametrize("unit", ["furlong", "V/(A.s", "N m", "m^2", "m..s"])
+def test_base_unit_refuses_what_it_cannot_read(unit):
+    with pytest.raises(FMUBuildInputError, match=f"unit '{re.escape(unit)}': expected products and quotients"):
+        base_unit(unit)
 
 
 def test_cached_beside_fmi2_and_reused(fmu_cache_dir, fmi3_fmu, feeddrive_fmu):
