@@ -12,8 +12,13 @@ calculated outputs         the model's outputs that are not states (``i_ref, u_r
 derivatives                ``der(<state>)`` in state order
 =========================  ===========================================================
 
-The C wrapper (``fmu_build/c/fmi2_wrapper.c``) reads this layout from the generated header
-``fmu_model.h``, so a second model needs no C changes.
+The C wrapper reads this layout from the generated header ``fmu_model.h``, so a second model needs no
+C changes. It is one version-independent core (``fmu_build/c/fmu_core.c``: values, checks, RK4
+stepping, FMU states, logging) under a thin API layer, ``fmi2_wrapper.c`` or ``fmi3_wrapper.c``
+(``generate(..., fmi_version=3)``); both versions of a model compile the same generated code and core,
+so they compute the same numbers. FMI 3.0 adds the independent variable ``time`` at value reference
+``NR`` (read-only) and has no input derivatives (inputs held over each communication step); its
+modelDescription.xml is written by ``model_description.xml3``.
 
 Integration (Co-Simulation). ``fmi2DoStep`` splits a communication step h into
 ``n = ceil(h / cs_substep - 1e-9)`` equal substeps of the classical explicit RK4 method.
@@ -64,7 +69,7 @@ from pathlib import Path
 import casadi as ca
 
 from feeddrive.fmu_build.errors import FMUBuildInputError
-from feeddrive.fmu_build.model_description import GUID_PLACEHOLDER, check_fmi_version, xml2, xml3
+from feeddrive.fmu_build.model_description import GUID_PLACEHOLDER, FMUVariable, check_fmi_version, xml2, xml3
 from feeddrive.models import Model
 
 #: Default RK4 substep of the Co-Simulation interface [s]; see the module docstring.
@@ -79,24 +84,6 @@ WRAPPER_SOURCE = Path(__file__).parent / "c" / "fmi2_wrapper.c"
 WRAPPER3_SOURCE = Path(__file__).parent / "c" / "fmi3_wrapper.c"
 #: The version-independent core both API layers share (state, checks, RK4 stepping, FMU states, logging).
 CORE_SOURCES = (Path(__file__).parent / "c" / "fmu_core.h", Path(__file__).parent / "c" / "fmu_core.c")
-
-
-@dataclass(frozen=True)
-class FMUVariable:
-    """One real variable of the FMU: value reference ``vr`` is its index in the flat array."""
-
-    vr: int
-    name: str
-    kind: str  # 's' state, 'i' input, 't' tunable parameter, 'f' fixed parameter, 'c' calculated
-    unit: str
-    description: str
-    causality: str
-    variability: str
-    start: float | None = None
-    lower: float | None = None
-    lower_strict: bool = False
-    upper: float | None = None
-    derivative_of: int | None = None  # value reference of the state, for der() variables
 
 
 @dataclass(frozen=True)

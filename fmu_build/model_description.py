@@ -11,15 +11,32 @@ from __future__ import annotations
 import math
 import re
 import xml.etree.ElementTree as ET
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
 import casadi as ca
 
 from feeddrive.fmu_build.errors import FMUBuildInputError
 from feeddrive.models import Model
 
-if TYPE_CHECKING:
-    from feeddrive.fmu_build.codegen import FMUVariable
+
+@dataclass(frozen=True)
+class FMUVariable:
+    """One real variable of the FMU: value reference ``vr`` is its index in the flat array."""
+
+    vr: int
+    name: str
+    kind: str  # 's' state, 'i' input, 't' tunable parameter, 'f' fixed parameter, 'c' calculated
+    unit: str
+    description: str
+    causality: str
+    variability: str
+    start: float | None = None
+    lower: float | None = None
+    lower_strict: bool = False
+    upper: float | None = None
+    derivative_of: int | None = None  # value reference of the state, for der() variables
+
+
 
 #: Replaced by the GUID (FMI 2.0) or instantiation token (FMI 3.0) once the content hash is known.
 GUID_PLACEHOLDER = "@GUID@"
