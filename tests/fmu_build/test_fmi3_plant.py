@@ -21,7 +21,7 @@ from fmpy.validation import validate_fmu
 from test_plant_fmu import OPEN_LOOP, U_STEP, open_loop_exact  # same directory, on sys.path
 
 from feeddrive.cosim.cli import main as cosim_main
-from feeddrive.fmu_build import FMUBuildInputError, build_fmu, builtin_fmu, fmu_variables
+from feeddrive.fmu_build import MAX_SUBSTEPS, FMUBuildInputError, build_fmu, builtin_fmu, fmu_variables
 from feeddrive.fmu_build.build import FMI_HEADERS, compiler
 from feeddrive.fmu_build.codegen import generate
 from feeddrive.fmu_build.model_description import base_unit
@@ -321,6 +321,24 @@ def test_model_exchange_takes_parameters_in_event_mode_only(instance3):
     sim.fmu.getContinuousStateDerivatives(dx, 6)
     assert dx[0] == pytest.approx(U_STEP / NOMINAL["L"], rel=1e-15)  # at rest the resistance does not act yet
     assert sim.get("R")[0] == 2 * R
+
+
+def test_overflowing_outputs_and_overlong_steps_are_errors_that_change_nothing(instance3):
+    """The core's checks, under the fmi3 names: a finite input whose derivative overflows, and a step
+    beyond the substep cap (before the cap, 1e14 s overflowed the substep count)."""
+    sim, clean = instance3(**OPEN_LOOP), instance3(**OPEN_LOOP)
+    sim.set(w_ref=1e308)
+    refused(sim, lambda: sim.get("der(w_rf)"),
+            "fmi3GetFloat64: der(w_rf) = inf at t = 0 s is not a finite number (inputs or parameters beyond the "
+            "model's numeric range)")
+    sim.set(w_ref=0.0)
+    refused(sim, lambda: sim.fmu.doStep(0.0, 1e14),
+            f"fmi3DoStep: h = 1e+14 s with cs_substep = 1e-05 s needs 1e+19 RK4 substeps, more than the cap of "
+            f"{MAX_SUBSTEPS} per step; use shorter communication steps or a larger cs_substep")
+    for s in (sim, clean):
+        s.steps(0, 1000)
+    np.testing.assert_array_equal(sim.get(*STATES), clean.get(*STATES))
+    np.testing.assert_allclose(sim.get("i", "w", "theta"), open_loop_exact(np.array([0.1]))[0], rtol=1e-6)
 
 
 def test_time_is_readable_and_not_settable(instance3):
