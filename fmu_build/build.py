@@ -15,11 +15,12 @@ import fmpy
 
 from feeddrive.fmu_build.codegen import DEFAULT_CS_SUBSTEP, Sources, generate
 from feeddrive.fmu_build.errors import CompilerError, FMUBuildError
+from feeddrive.fmu_build.model_description import check_fmi_version
 from feeddrive.models import Model, feed_drive
 
-#: Flags for the shared library. Hidden visibility exports only the fmi2 functions.
+#: Flags for the shared library. Hidden visibility exports only the fmi2 (fmi3) functions.
 CFLAGS = ("-O2", "-fPIC", "-shared", "-fvisibility=hidden")
-#: The FMI 2.0 standard headers, as shipped with fmpy.
+#: The FMI 2.0 and FMI 3.0 standard headers, as shipped with fmpy (BSD 2-clause, license in each header).
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 
 
@@ -46,9 +47,11 @@ def _compile(sources: Sources, workdir: Path) -> Path:
 
 
 def _pack(sources: Sources, library: Path, out: Path) -> None:
+    # FMI 2.0 names the binary folder by platform ("linux64"), FMI 3.0 by platform tuple ("x86_64-linux")
+    platform = fmpy.platform_tuple if "fmi3_wrapper.c" in sources.files else fmpy.platform
     with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("modelDescription.xml", sources.files["modelDescription.xml"])
-        z.write(library, f"binaries/{fmpy.platform}/{library.name}")
+        z.write(library, f"binaries/{platform}/{library.name}")
 
 
 def _build(sources: Sources, out: Path) -> Path:
@@ -64,8 +67,8 @@ def _build(sources: Sources, out: Path) -> Path:
 
 
 def build_fmu(model: Model | None = None, out: Path | str | None = None, *,
-              cs_substep: float = DEFAULT_CS_SUBSTEP) -> Path:
-    """Generate, compile and pack an FMI 2.0 FMU (Co-Simulation and Model Exchange).
+              cs_substep: float = DEFAULT_CS_SUBSTEP, fmi_version: int = 2) -> Path:
+    """Generate, compile and pack an FMI 2.0 or 3.0 FMU (Co-Simulation and Model Exchange).
 
     Parameters
     ----------
@@ -76,6 +79,9 @@ def build_fmu(model: Model | None = None, out: Path | str | None = None, *,
         ``<model name>.fmu`` in the working directory.
     cs_substep : float
         Default of the FMU's fixed parameter ``cs_substep`` [s], the Co-Simulation RK4 substep.
+    fmi_version : {2, 3}
+        FMI version. Both are built from the same generated model code and the same wrapper core,
+        and compute bit-identical numbers for the same calls.
 
     Returns
     -------
@@ -86,9 +92,11 @@ def build_fmu(model: Model | None = None, out: Path | str | None = None, *,
     ------
     CompilerError
         The C compiler (``$CC`` or ``cc``) failed; the message names it and shows its error.
+    FMUBuildInputError
+        ``fmi_version`` is not 2 or 3, or ``cs_substep`` is not a valid substep.
     """
     model = model or feed_drive()
-    return _build(generate(model, cs_substep), Path(out or f"{model.name}.fmu"))
+    return _build(generate(model, cs_substep, fmi_version), Path(out or f"{model.name}.fmu"))
 
 
 def cache_key(sources: Sources) -> str:
@@ -97,23 +105,25 @@ def cache_key(sources: Sources) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-def _generated(backlash: bool) -> tuple[Model, Sources]:
+def _generated(backlash: bool, fmi_version: int = 2) -> tuple[Model, Sources]:
     """The model and its generated sources, generated once per process and input (~60 ms each: every
     scenario load needs the cache key). The memo's key is what they are made of: the model function,
-    the variant and the wrapper source file with its modification time."""
+    the variant, the FMI version and the C source files (wrapper and core) with their modification times."""
     from feeddrive.fmu_build import codegen
 
-    wrapper = Path(codegen.WRAPPER_SOURCE)
-    return _generate(feed_drive, backlash, wrapper, wrapper.stat().st_mtime_ns)
+    check_fmi_version(fmi_version)
+    c_files = (Path(codegen.WRAPPER_SOURCE if fmi_version == 2 else codegen.WRAPPER3_SOURCE), *codegen.CORE_SOURCES)
+    stamps = tuple((path, path.stat().st_mtime_ns) for path in c_files)
+    return _generate(feed_drive, backlash, fmi_version, stamps)
 
 
-@functools.lru_cache(maxsize=4)
-def _generate(model_function: Any, backlash: bool, wrapper: Path, wrapper_mtime_ns: int) -> tuple[Model, Sources]:
+@functools.lru_cache(maxsize=8)
+def _generate(model_function: Any, backlash: bool, fmi_version: int, c_files: tuple) -> tuple[Model, Sources]:
     model = model_function(backlash=backlash)
-    return model, generate(model)
+    return model, generate(model, fmi_version=fmi_version)
 
 
-def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False) -> Path:
+def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, fmi_version: int = 2) -> Path:
     """The built-in feed-drive plant FMU, built once and cached.
 
     The cache is ``<cache_dir>/<hash>/FeedDrive.fmu`` with ``cache_dir`` defaulting to
@@ -128,13 +138,16 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False) 
     backlash : bool
         Build the ``FeedDriveBacklash`` variant (``models.feed_drive(backlash=True)``), a plant
         with backlash in the drive chain that the monitor's model does not describe.
+    fmi_version : {2, 3}
+        FMI version of the FMU. The hash covers it (the API layer and the XML differ), so the two
+        versions are cached side by side.
 
     Returns
     -------
     pathlib.Path
         Path of the cached ``FeedDrive.fmu``.
     """
-    model, sources = _generated(backlash)
+    model, sources = _generated(backlash, fmi_version)
     root = Path(cache_dir or os.environ.get("FEEDDRIVE_CACHE") or Path.home() / ".cache" / "feeddrive")
     target = root / cache_key(sources) / f"{model.name}.fmu"
     if target.is_file():
