@@ -202,7 +202,11 @@ def write_history_page(path: str | Path, axis: str, motions: Sequence[Mapping], 
     times = [m["time"] for m in motions if m.get("time") is not None]
     history = {"axis": axis, "db": db, "n": len(motions), "validated": sum(bool(m.get("validated")) for m in motions),
                "first": min(times, default=None), "last": max(times, default=None),
-               "diagnosed": [m for m in motions if m.get("diagnosis")]}
+               "diagnosed": [m for m in motions if m.get("diagnosis")],
+               "sensor_faults": sum(bool(m.get("sensor_faults")) or m.get("measurements_valid") is False
+                                    for m in motions),
+               "mismatches": sum(isinstance(m.get("mismatch"), Mapping) and m["mismatch"].get("passed") is False
+                                 for m in motions)}
     index = {name: {k: j for j, k in enumerate(s["number"])} for name, s in series.items()}
     rows = []
     for k, m in enumerate(motions, 1):

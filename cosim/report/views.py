@@ -22,6 +22,11 @@ def _n(x: Any, digits: int = 4) -> str:
     return f"{x:.{digits}g}" if finite(x) else "not computed"
 
 
+def _dof(d: Any) -> str:
+    """Degrees of freedom: an integer count in full (34879, not 3.488e+04), a fractional one to 4 digits."""
+    return f"{d:.0f}" if finite(d) and float(d).is_integer() else _n(d, 4)
+
+
 def model_check(mm: Mapping | None) -> dict | None:
     """The model check (report.json ``motions[k].mismatch``) as a table of its tests.
 
@@ -49,7 +54,7 @@ def model_check(mm: Mapping | None) -> dict | None:
         reject = finite(p) and each is not None and p < each
         rows.append({"test": f"{sig} residue {what}", "key": f"{sig} {name}", "symbol": symbol,
                      "statistic": _n(t.get("statistic")),
-                     "df": ", ".join(_n(d, 4) for d in df) if isinstance(df, Sequence) and df else "-",
+                     "df": ", ".join(_dof(d) for d in df) if isinstance(df, Sequence) and df else "-",
                      "p_value": _n(p, 3), "threshold": "-" if each is None else f"{each:.3g}",
                      "decision": "not computed" if not finite(p) else ("reject: mismatch" if reject else "pass"),
                      "reject": bool(reject)})
