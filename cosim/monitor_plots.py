@@ -37,7 +37,7 @@ def plot_motion(trace, path: Path) -> Path:
         axes[0].step(tw, res.means, where="mid", color="C0", label=f"window means ({res.kind})")
         axes[0].plot(tw, res.offset + res.gain_diff * res.levels, "C3--", lw=1, label="offset + gain diff x level")
     axes[0].set_ylabel("residue [A]")
-    axes[0].legend(loc="upper right", fontsize=7)
+    _legend_outside(axes[0])
     if mm is not None:
         cur, speed = mm.checks["current"], mm.checks["speed"]
         axes[1].plot(t, cur.simulated + cur.residue, label="measured (filtered)")
@@ -47,37 +47,55 @@ def plot_motion(trace, path: Path) -> Path:
         axes[2].plot(t, speed.simulated, "--", label="simulated on each constant-sign segment")
         axes[2].set_ylabel("speed [rad/s]")
         for ax, check, unit, color in ((axes[3], speed, "rad/s", "C3"), (axes[3].twinx(), cur, "A", "C0")):
-            ax.plot(t, check.residue, color=color, lw=0.6, label=f"{check.signal} residue")
+            ax.plot(t, check.residue, color=color, lw=0.6, label=f"{check.signal} residue [{unit}]")
             if np.isfinite(check.noise_std):
                 ax.axhline(check.noise_std, color=color, ls=":", lw=0.8)
                 ax.axhline(-check.noise_std, color=color, ls=":", lw=0.8)
             ax.set_ylabel(f"{check.signal} residue [{unit}]", color=color)
-        axes[3].set_title(decision_text(mm), fontsize=8)
+        axes[3].set_title(decision_text(mm), fontsize=8, wrap=True)
         for ax in axes[1:3]:
-            ax.legend(loc="upper right", fontsize=7)
+            _legend_outside(ax)
+        handles = [h for a in (axes[3], *fig.axes[len(axes):]) for h in a.get_legend_handles_labels()[0]]
+        axes[3].legend(handles, [h.get_label() for h in handles], loc="upper left", bbox_to_anchor=(1.12, 1),
+                       fontsize=7, frameon=False)
     axes[-1].set_xlabel("time [s]")
-    state = "validated" if trace.result.get("validated") else "not validated"
-    fig.suptitle(f"motion {trace.motion}: {state}", fontsize=10)
+    from feeddrive.cosim.report.verdict import verdict_line
+
+    fig.suptitle(f"motion {trace.motion}: {verdict_line(trace.result)}", fontsize=10, wrap=True)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 
 
+def _legend_outside(ax: plt.Axes) -> None:
+    """The legend right of the axes, off the traces."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=7, frameon=False)
+
+
+def _noise_text(check) -> str:  # noqa: ANN001 - estimator.mismatch.SignalCheck
+    """``RMS 0.03 vs noise 0.05``, or why the noise is unknown (never ``nan``)."""
+    rms = f"RMS {check.rms:.3g}" if np.isfinite(check.rms) else "RMS not computed"
+    if np.isfinite(check.noise_std):
+        return f"{rms} vs noise {check.noise_std:.3g}"
+    return f"{rms}, noise not checked: no confirmed redundant {'current' if check.signal == 'current' else 'speed'} pair"
+
+
 def decision_text(mm) -> str:
     """What decided the model check: the deciding test, its statistic and p-value against alpha, and for
     each residue its RMS (nuisance removed) against the sensor noise (dotted lines: +- that noise)."""
-    size = ", ".join(f"{k} RMS {c.rms:.3g} vs noise {c.noise_std:.3g}" for k, c in mm.checks.items())
+    size = "; ".join(f"{k} {_noise_text(c)}" for k, c in mm.checks.items())
     symbol = "max |z|" if mm.test.endswith("peak") else "F"  # the peak test's statistic is in MAD units
-    return (f"{'passed' if mm.passed else 'MISMATCH'}: {mm.test} {symbol} = {mm.statistic:.3g}, adjusted p = "
-            f"{mm.p_value:.3g} {'>=' if mm.passed else '<'} alpha = {mm.alpha:g} ({size})")
+    m = sum(len(c.tests) for c in mm.checks.values())
+    return (f"{'passed' if mm.passed else 'MISMATCH'}: {mm.test} {symbol} = {mm.statistic:.3g}, Bonferroni-adjusted p = "
+            f"{mm.p_value:.3g} {'>=' if mm.passed else '<'} alpha = {mm.alpha:g} ({m} tests)\n{size}")
 
 
 def plot_correlation(trace, path: Path) -> Path:
     """Correlation of each prewhitened residue with each prewhitened input against the lag, with the band
     of independence at the check's level (as MATLAB's ``resid``), into ``path`` (PNG)."""
     mm = trace.mismatch
-    fig, axes = plt.subplots(1, len(mm.checks), figsize=(9, 2.8), squeeze=False)
+    fig, axes = plt.subplots(1, len(mm.checks), figsize=(10, 3.2), squeeze=False)
     from feeddrive.estimator.mismatch import INPUTS
 
     for ax, (name, check) in zip(axes[0], mm.checks.items()):
@@ -85,11 +103,15 @@ def plot_correlation(trace, path: Path) -> Path:
         for j, x in enumerate(INPUTS[name]):
             ax.stem(lags + 0.15 * j, check.correlation[:, j], linefmt=f"C{j}-", markerfmt=f"C{j}o",
                     basefmt=" ", label=f"input {x}")
-        ax.axhspan(-check.band, check.band, color="0.85", zorder=0, label=f"{100 * (1 - mm.alpha):g} % band")
+        ax.axhspan(-check.band, check.band, color="0.9", zorder=0, label=f"{100 * (1 - mm.alpha):g} % band")
+        for y in (-check.band, check.band):  # the band's edges, inside the axes: limits from the data and the band
+            ax.axhline(y, color="0.4", ls="--", lw=0.8)
+        top = max(float(np.nanmax(np.abs(check.correlation), initial=0.0)), float(check.band))
+        ax.set_ylim(-1.35 * top, 1.35 * top)
         p = check.tests["independence"].p_value
         ax.set_title(f"{name} residue vs past inputs: F-test p = {p:.3g}", fontsize=8)
         ax.set_xlabel("lag [blocks of 20 ms]")
-        ax.legend(fontsize=7)
+        _legend_outside(ax)
     axes[0, 0].set_ylabel("correlation")
     fig.suptitle(f"motion {trace.motion}: residue-input correlation", fontsize=10)
     fig.tight_layout()

@@ -58,34 +58,39 @@ def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str |
         rows = [(label, unit, [s for s in names if s in signals]) for label, unit, names in PROFILES]
         rows = [(label, unit, names[0], names[-1]) for label, unit, names in rows if names]
         if rows:
-            fig, axes = plt.subplots(len(rows), 1, sharex=True, figsize=(8, 2.2 * len(rows) + 0.6))
+            fig, axes = plt.subplots(len(rows), 1, sharex=True, figsize=(9, 2.2 * len(rows) + 0.6))
             for ax, (label, unit, measured, true) in zip(np.atleast_1d(axes), rows):
                 ax.plot(t, signals[measured][idx], lw=0.6, label=measured)
                 if true != measured:
                     ax.plot(t, signals[true][idx], lw=0.9, label=true)
                 ax.set_ylabel(f"{label} [{unit}]")
                 ax.grid(alpha=0.3)
-                ax.legend(loc="upper right", fontsize=7)
+                _legend_outside(ax)
             np.atleast_1d(axes)[-1].set_xlabel("time [s]")
             fig.suptitle(f"{title} high-speed motion {k}: voltage, current and speed")
             written.append(_save(fig, out_dir / f"motion_{k}_profiles.png"))
         if "sensors.Im1" in signals and "sensors.Im2" in signals:
             im1, im2 = signals["sensors.Im1"][idx], signals["sensors.Im2"][idx]
-            fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+            fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(9, 5))
             ax1.plot(t, im1, lw=0.6, label="Im1")
             ax1.plot(t, im2, lw=0.6, label="Im2")
             ax1.set_ylabel("current [A]")
-            ax1.legend(loc="upper right", fontsize=7)
+            _legend_outside(ax1)
             ax2.plot(t, im1 - im2, lw=0.6, color="C3")
             ax2.axhline(float(np.mean(im1 - im2)), color="k", lw=0.8, ls="--", label="mean")
             ax2.set_ylabel("residue Im1 - Im2 [A]")
             ax2.set_xlabel("time [s]")
-            ax2.legend(loc="upper right", fontsize=7)
+            _legend_outside(ax2)
             for ax in (ax1, ax2):
                 ax.grid(alpha=0.3)
             fig.suptitle(f"{title} high-speed motion {k}: redundant current sensors")
             written.append(_save(fig, out_dir / f"motion_{k}_currents.png"))
     return written
+
+
+def _legend_outside(ax: plt.Axes) -> None:
+    """The legend right of the axes, off the traces."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=7, frameon=False)
 
 
 def _save(fig: plt.Figure, path: Path) -> Path:

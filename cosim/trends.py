@@ -73,7 +73,9 @@ def trend_series(motions: Sequence[Mapping], thresholds: Mapping | None = None) 
     dict name -> dict of lists
         ``number`` (motion in history order, from 1), ``time`` [s since the epoch] or None, ``value``,
         ``ci_low``, ``ci_high``, ``validated``, ``diagnosed`` (the parameter is in one of the motion's
-        diagnoses), ``any_diagnosis`` (the motion has one), ``reference``, ``band_low``, ``band_high`` (None where no reference exists).
+        diagnoses), ``any_diagnosis`` (the motion has one), ``sensor_fault`` (the motion has a sensor fault or an
+        untrusted measurement), ``mismatch`` (its model check rejected the model), ``reference``, ``band_low``,
+        ``band_high`` (None where no reference exists).
     """
     thresholds = thresholds or {}
     out: dict[str, dict[str, list]] = {}
@@ -83,8 +85,8 @@ def trend_series(motions: Sequence[Mapping], thresholds: Mapping | None = None) 
         diagnosed = {p for d in m.get("diagnosis") or () for p in d.get("parameters", ())}
         for name, p in m["parameters"].items():
             s = out.setdefault(name, {key: [] for key in ("number", "time", "value", "ci_low", "ci_high", "validated",
-                                                          "diagnosed", "any_diagnosis", "reference", "band_low",
-                                                          "band_high")})
+                                                          "diagnosed", "any_diagnosis", "sensor_fault", "mismatch",
+                                                          "reference", "band_low", "band_high")})
             ref = (own.get("baseline") or {}).get(name)
             z, rel = own.get("z_crit"), (own.get("min_relative") or {}).get(name)
             if ref is None:  # not diagnosed: where the current baseline would put the alarm
@@ -99,6 +101,8 @@ def trend_series(motions: Sequence[Mapping], thresholds: Mapping | None = None) 
             s["validated"].append(bool(m.get("validated")))
             s["diagnosed"].append(name in diagnosed)
             s["any_diagnosis"].append(bool(diagnosed))
+            s["sensor_fault"].append(bool(m.get("sensor_faults")) or m.get("measurements_valid") is False)
+            s["mismatch"].append(isinstance(m.get("mismatch"), Mapping) and m["mismatch"].get("passed") is False)
             if ref is None or z is None or rel is None:
                 for key in ("reference", "band_low", "band_high"):
                     s[key].append(None)
@@ -233,9 +237,38 @@ def _draw_parameter(ax: plt.Axes, xs: np.ndarray, s: Mapping[str, list], pad: fl
         ax.plot(xs[diag], val[diag], "X", color="C3", ms=9, mec="k", mew=0.5, label="diagnosis")
     for xd in xs[np.asarray(s["any_diagnosis"], dtype=bool)]:  # where a diagnosis occurred, on every panel
         ax.axvline(xd, color="C3", lw=4, alpha=0.12, zorder=0)
-    lo_all = np.nanmin(np.concatenate([lo, val, blo]))
-    hi_all = np.nanmax(np.concatenate([hi, val, bhi]))
-    span = hi_all - lo_all
-    if np.isfinite(span) and span > 0:
-        ax.set_ylim(lo_all - 0.08 * span, hi_all + 0.08 * span)
+    for key, color, marker, label in (("sensor_fault", "C1", "s", "sensor fault"),
+                                      ("mismatch", "C4", "D", "model mismatch")):
+        flag = np.asarray(s.get(key) or [False] * len(xs), dtype=bool)
+        if flag.any():  # on every panel: the estimate of that motion is not what a healthy axis shows
+            ax.plot(xs[flag], val[flag], marker, mfc="none", mec=color, mew=1.6, ms=11, ls="none", label=label)
+            for xd in xs[flag]:
+                ax.axvline(xd, color=color, lw=1.2, ls=":", zorder=0)
+    _set_ylim(ax, np.concatenate([lo, val, hi, ref]), blo, bhi)
     ax.set_xlim(xs[0] - pad, xs[-1] + pad)
+
+
+#: the band is drawn whole when it is at most this many times the data's spread
+BAND_ZOOM = 8.0
+
+
+def _set_ylim(ax: plt.Axes, data: np.ndarray, blo: np.ndarray, bhi: np.ndarray) -> None:
+    """Limits from the data and the band together.
+
+    The estimates with their CIs and the baseline always fill a readable part of the axes. The alarm band
+    is drawn whole when it is at most ``BAND_ZOOM`` times their spread; a wider band (5 % of R against a CI
+    of 0.01 %) would put every estimate on one line, so the scale follows the data and the off-scale
+    thresholds are written in the panel.
+    """
+    lo_d, hi_d = np.nanmin(data, initial=np.inf), np.nanmax(data, initial=-np.inf)
+    if not np.isfinite(lo_d) or not np.isfinite(hi_d):
+        return
+    lo_b, hi_b = np.nanmin(blo, initial=np.inf), np.nanmax(bhi, initial=-np.inf)
+    span = hi_d - lo_d if hi_d > lo_d else max(abs(hi_d), 1e-12) * 1e-3
+    if np.isfinite(lo_b) and np.isfinite(hi_b) and max(hi_b, hi_d) - min(lo_b, lo_d) <= BAND_ZOOM * span:
+        lo_d, hi_d = min(lo_b, lo_d), max(hi_b, hi_d)
+        span = hi_d - lo_d
+    elif np.isfinite(lo_b) and np.isfinite(hi_b):
+        ax.text(0.01, 0.97, f"alarm thresholds {lo_b:.4g} / {hi_b:.4g}: off this scale", transform=ax.transAxes,
+                fontsize=7, va="top", color="C3")
+    ax.set_ylim(lo_d - 0.15 * span, hi_d + 0.2 * span)

@@ -187,6 +187,59 @@ def aggregate(records: list[dict]) -> Aggregates:
 
 
 # -- plots -----------------------------------------------------------------------------------------------
+#: units of swept keys, by the key's last part and its quantity (the campaign files' own comments)
+_UNITS = {("current", "offset"): "A", ("current", "noise"): "A", ("voltage", "offset"): "V",
+          ("voltage", "noise"): "V", ("speed", "offset"): "rad/s", ("speed", "noise"): "rad/s",
+          ("position", "offset"): "rad", ("position", "noise"): "rad"}
+_PLANT_UNITS = {"R": "Ohm", "L": "H", "K": "N.m/A", "Jt": "kg.m2", "ft": "N.m.s/rad", "Cd": "N.m", "backlash": "rad"}
+
+
+def sweep_unit(key: str) -> str:
+    """The unit of a swept key (``sensors.current[0].offset`` -> ``A``, a gain -> ``1``), or ``""``."""
+    last = key.rsplit(".", 1)[-1]
+    if last == "gain":
+        return "1"
+    quantity = next((q for q in ("current", "voltage", "speed", "position") if f"sensors.{q}" in key), None)
+    return _UNITS.get((quantity, last), _PLANT_UNITS.get(last, ""))
+
+
+def detection_curves(records: list[dict], keys: list[str]) -> dict[str, dict]:
+    """Per swept key, its detection, isolation and false-alarm rates with the other swept keys fault-free.
+
+    A point of key ``k`` at value ``x`` counts only the runs where ``k == x`` and every other swept key holds
+    its fault-free value: the value with the largest share of healthy runs (an offset of 0, a gain of 1).
+    Pooling the other keys' faults into each point showed a detection of 1 at offset 0.
+
+    Returns
+    -------
+    dict key -> dict
+        ``x`` (sorted values), ``detection``, ``isolation`` (over the faulty runs at x, None where none),
+        ``false_alarm`` (over the fault-free runs at x, None where none), ``runs`` (counted at x) and
+        ``others`` (the other keys' fault-free values).
+    """
+    outcomes = [(r["overrides"], _run_outcome(r["result"])) for r in records]
+    neutral = {}
+    for key in keys:
+        values = sorted({o[key] for o, _ in outcomes if key in o})
+        share = {x: np.mean([out["class"] == "healthy" for o, out in outcomes if o.get(key) == x]) for x in values}
+        neutral[key] = max(values, key=lambda x: share[x])
+    curves = {}
+    for key in keys:
+        others = {k: neutral[k] for k in keys if k != key}
+        xs = sorted({o[key] for o, _ in outcomes if key in o})
+        c = {"x": xs, "detection": [], "isolation": [], "false_alarm": [], "runs": [], "others": others}
+        for x in xs:
+            at = [out for o, out in outcomes if o.get(key) == x and all(o.get(k) == v for k, v in others.items())]
+            faulty = [out for out in at if out["class"] != "healthy"]
+            healthy = [out for out in at if out["class"] == "healthy"]
+            c["detection"].append(_rate(sum(out["detected"] for out in faulty), len(faulty)))
+            c["isolation"].append(_rate(sum(out["isolated"] for out in faulty), len(faulty)))
+            c["false_alarm"].append(_rate(sum(out["false_alarm"] for out in healthy), len(healthy)))
+            c["runs"].append(len(at))
+        curves[key] = c
+    return curves
+
+
 def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> list[Path]:
     """Detection rate against each swept key, parameter error against the noise key, one drift with its alarm.
 
@@ -203,18 +256,23 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> lis
     keys = sorted({k for r in ok for k, v in r["overrides"].items() if isinstance(v, (int, float))})
     sweep_keys = [k for k in keys if len({r["overrides"].get(k) for r in ok}) <= max(10, len(ok) // 3)]
     if sweep_keys and any(row["fault_class"] not in ("healthy", "(failed)") for row in aggregates.detection):
-        fig, axes = plt.subplots(1, len(sweep_keys), figsize=(4.5 * len(sweep_keys), 3.6), squeeze=False)
+        curves = detection_curves(ok, sweep_keys)
+        fig, axes = plt.subplots(1, len(sweep_keys), figsize=(5.2 * len(sweep_keys), 4.2), squeeze=False)
         for ax, key in zip(axes[0], sweep_keys):
-            xs = sorted({r["overrides"][key] for r in ok if key in r["overrides"]})
-            outs = {x: [_run_outcome(r["result"]) for r in ok if r["overrides"].get(key) == x] for x in xs}
-            for name, pick, faulty in (("detection", "detected", True), ("isolation", "isolated", True),
-                                       ("false alarm (healthy runs)", "false_alarm", False)):
-                rates = [np.mean([o[pick] for o in outs[x] if (o["class"] != "healthy") == faulty] or [np.nan])
-                         for x in xs]
-                ax.plot(xs, rates, "o-" if faulty else "x--", label=name)
-            ax.set(xlabel=key, ylabel="rate", ylim=(-0.05, 1.05), title="detection against fault size")
+            c = curves[key]
+            xs = np.asarray(c["x"], dtype=float)
+            for name, style in (("detection", "o-"), ("isolation", "s--")):
+                y = np.array([np.nan if v is None else v for v in c[name]], dtype=float)
+                ax.plot(xs, y, style, label=f"{name} rate (faulty runs)")
+            fa = np.array([np.nan if v is None else v for v in c["false_alarm"]], dtype=float)
+            ax.plot(xs, fa, "x", color="C3", ms=9, mew=2, label="false-alarm rate (fault-free runs)")
+            unit = sweep_unit(key)
+            others = ", ".join(f"{k} = {v:g}" for k, v in c["others"].items())
+            ax.set(xlabel=f"{key} [{unit}]" if unit else key, ylabel="rate [fraction of runs]", ylim=(-0.05, 1.05),
+                   title=f"detection against {key}" + (f"\n(other swept keys fault-free: {others})" if others else ""))
+            ax.title.set_fontsize(8)
             ax.grid(True)
-            ax.legend()
+            ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.22), fontsize=7, frameon=False)
         fig.tight_layout()
         written.append(out / "detection_rate.png")
         fig.savefig(written[-1], dpi=110)
@@ -239,7 +297,7 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> lis
                         rms.append(row["rms_pct"])
                 if centres:
                     ax.plot(centres, rms, style, color=colours[c % len(colours)], label=f"{name} {method}")
-        ax.set(xlabel=noise, ylabel="RMS relative error [%]", yscale="log", title="parameter error against noise")
+        ax.set(xlabel=f"{noise} [{sweep_unit(noise)}]" if sweep_unit(noise) else noise, ylabel="RMS relative error [%]", yscale="log", title="parameter error against noise")
         ax.grid(True, which="both")
         ax.legend(fontsize=7, ncol=3)
         fig.tight_layout()

@@ -162,19 +162,26 @@ def _jsonable(x):  # noqa: ANN001, ANN202 - numpy scalars in the results
 
 def table(results: list[dict]) -> str:
     """One block per motion: verdicts, sensor faults, parameters with 95 % CIs, model check, diagnosis."""
+    from feeddrive.cosim.report.verdict import finite, verdict_line
+
     lines = []
     for r in results:
         verdict = "validated" if r["validated"] else "NOT validated"
-        lines.append(f"motion {r['motion']}: {r['start']:.4g}-{r['end']:.4g} s, {verdict}, "
-                     f"processing {r['processing_s']:.3g} s")
+        lines.append(f"motion {r['motion']}: {verdict_line(r)}")  # the verdict first (cosim/report/verdict.py)
+        cpu = r.get("processing_cpu_s")
+        lines.append(f"  {r['start']:.4g}-{r['end']:.4g} s, {verdict}, processing "
+                     + (f"{cpu:.3g} s CPU ({r['processing_s']:.3g} s wall)" if cpu is not None
+                        else f"{r['processing_s']:.3g} s wall"))
         if r["error"]:
             lines.append(f"  not identified: {r['error']}")
         for f in r["sensor_faults"]:
             lines.append(f"  sensor fault {f['sensor']}: {f['kind']}, gain {f['gain']:.4f} "
                          f"[{f['gain_ci95'][0]:.4f}, {f['gain_ci95'][1]:.4f}], offset {f['offset']:.4g} "
                          f"[{f['offset_ci95'][0]:.4g}, {f['offset_ci95'][1]:.4g}]")
-        if r["gain_ratio"] is not None:
+        if finite(r["gain_ratio"]):
             lines.append(f"  current gain ratio a1/a2 = {r['gain_ratio']:.4f}")
+        elif r["gain_ratio"] is not None:
+            lines.append("  current gain ratio a1/a2: not checked (one current sensor)")
         for name, p in r["parameters"].items():
             lines.append(f"  {name:3} {p['value']:12.6g} {p.get('unit', ''):10} 95 % CI "
                          f"[{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")

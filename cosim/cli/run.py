@@ -49,6 +49,8 @@ def main(args: argparse.Namespace) -> int:
 
 def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
     """A few lines: simulated time and speed, final position against the NC's target, motions, files."""
+    from feeddrive.cosim.report.verdict import verdict_line
+
     r, s = result.report, result.signals
     lines = [f"{r['scenario']}: {r['stop_time_s']:.4g} s simulated in {r['wall_time_s']:.3g} s "
              f"({r['steps']} steps of {r['step_s']:.3g} s) -> {result.out_dir}"]
@@ -58,7 +60,8 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
         if isinstance(m, dict):
             params = m.get("parameters") or {}
             text = " ".join(f"{p}={v['value']:.4g}" for p, v in params.items() if isinstance(v, dict) and "value" in v)
-            lines.append(f"  motion {k}: {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
+            lines.append(f"  motion {k}: {verdict_line(m)}")  # the verdict first (cosim/report/verdict.py)
+            lines.append(f"    {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
             for f in m.get("sensor_faults") or []:
                 lines.append(f"    sensor fault: {f['sensor']} {f['kind']} (gain {f['gain']:.4g}, offset {f['offset']:.4g})")
             if isinstance(m.get("mismatch"), dict) and not m["mismatch"].get("passed", True):

@@ -22,6 +22,8 @@ from typing import Any
 
 import jinja2
 
+from feeddrive.cosim.report import views
+from feeddrive.cosim.report.verdict import motion_verdict
 from feeddrive.cosim.trends import UNITS, trend_series, use_dates
 
 PAGE = "report.html"
@@ -39,7 +41,7 @@ def num(x: Any, digits: int = 6) -> str:
     if isinstance(x, int):
         return str(x)
     if isinstance(x, float):
-        return "nan" if math.isnan(x) else f"{x:.{digits}g}"
+        return "not computed" if not math.isfinite(x) else f"{x:.{digits}g}"  # never "nan" on the page
     if isinstance(x, (list, tuple)):
         return "[" + ", ".join(num(v, digits) for v in x) + "]"
     if isinstance(x, Mapping):
@@ -100,12 +102,10 @@ def motion_view(m: Mapping, thresholds: Mapping | None, units: Mapping[str, str]
                      "repr": repr(value), "std": p.get("std"), "ci95": list(p.get("ci95") or (None, None)),
                      "reference": ref, "band": None if ref is None else (lo, hi),
                      "change": None if not ref else (value - ref) / abs(ref), "status": status})
-    processing = m.get("processing_s")
-    return {"m": m, "rows": rows, "status": _motion_status(m),
-            "budget_s": budget_s, "processing_s": processing,
-            "within_budget": None if processing is None or budget_s is None else processing <= budget_s,
-            "mismatch": _flat(m.get("mismatch")) if m.get("mismatch") else None,
-            "residues": m.get("residues") or {}, "figures": []}
+    verdict = motion_verdict(m, {r["name"]: r["status"] for r in rows})
+    return {"m": m, "rows": rows, "verdict": verdict,
+            "processing": views.processing(m, budget_s), "check": views.model_check(m.get("mismatch")),
+            "residues": views.residue_rows(m), "gain_ratio": views.gain_ratio(m), "figures": []}
 
 
 def parameter_status(validated: bool, diagnosed: bool, value: float, ref: float | None, lo: float | None,
@@ -118,25 +118,6 @@ def parameter_status(validated: bool, diagnosed: bool, value: float, ref: float 
     if ref is not None and abs(value - ref) > (hi - lo) / 4:
         return "drifting"
     return "healthy"
-
-
-def _motion_status(m: Mapping) -> str:
-    if m.get("error") and not m.get("parameters"):
-        return "not identified"
-    if not m.get("validated"):
-        return "not validated"
-    return "diagnosed" if m.get("diagnosis") else "validated, healthy"
-
-
-def _flat(d: Any, prefix: str = "") -> list[tuple[str, Any]]:
-    """``[(dotted key, scalar or list)]`` of a nested dict, whatever keys it holds (the model check)."""
-    if not isinstance(d, Mapping):
-        return [(prefix or "value", d)]
-    out = []
-    for k, v in d.items():
-        key = f"{prefix}.{k}" if prefix else str(k)
-        out += _flat(v, key) if isinstance(v, Mapping) else [(key, v)]
-    return out
 
 
 def _units(report: Mapping) -> dict[str, str]:
@@ -221,7 +202,11 @@ def write_history_page(path: str | Path, axis: str, motions: Sequence[Mapping], 
     times = [m["time"] for m in motions if m.get("time") is not None]
     history = {"axis": axis, "db": db, "n": len(motions), "validated": sum(bool(m.get("validated")) for m in motions),
                "first": min(times, default=None), "last": max(times, default=None),
-               "diagnosed": [m for m in motions if m.get("diagnosis")]}
+               "diagnosed": [m for m in motions if m.get("diagnosis")],
+               "sensor_faults": sum(bool(m.get("sensor_faults")) or m.get("measurements_valid") is False
+                                    for m in motions),
+               "mismatches": sum(isinstance(m.get("mismatch"), Mapping) and m["mismatch"].get("passed") is False
+                                 for m in motions)}
     index = {name: {k: j for j, k in enumerate(s["number"])} for name, s in series.items()}
     rows = []
     for k, m in enumerate(motions, 1):
@@ -233,7 +218,8 @@ def write_history_page(path: str | Path, axis: str, motions: Sequence[Mapping], 
             cells[name] = {"value": s["value"][j], "status": parameter_status(
                 s["validated"][j], s["diagnosed"][j], s["value"][j], s["reference"][j], s["band_low"][j],
                 s["band_high"][j])}
-        rows.append({"number": k, "m": m, "cells": cells})
+        rows.append({"number": k, "m": m, "cells": cells,
+                     "verdict": motion_verdict(m, {n: c["status"] for n, c in cells.items()})})
     html = _ENV.get_template("report.html.j2").render(
         kind="history", title=f"axis {axis}", report={}, motions=[], figures=figures, thresholds=thresholds,
         units=units, history=history, rows=rows, data_json=json.dumps({"axis": axis, "thresholds": thresholds, "trends": series}).replace("</", "<\\/"))

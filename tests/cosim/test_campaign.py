@@ -10,6 +10,7 @@ import pytest
 import yaml
 
 from feeddrive.cosim.campaign import Campaign, CampaignError, aggregate, expand, load_campaign, run_campaign
+from feeddrive.cosim.campaign.aggregate import detection_curves, plot_campaign, sweep_unit
 from feeddrive.cosim.errors import ScenarioError
 
 NOMINAL = {"R": 0.6, "L": 4.0e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
@@ -216,3 +217,20 @@ def test_cosimulation_campaign_tracks_cd_and_records_a_failing_fmu(tmp_path):
     rows = {r["fault_class"]: r for r in res.aggregates.detection}
     assert rows["plant:Cd"]["detection_rate"] == 1.0 and rows["plant:Cd"]["isolation_rate"] == 1.0
     assert rows["(failed)"]["runs"] == 2
+
+
+def test_detection_curves_do_not_pool_the_other_swept_fault(tmp_path):
+    """Cd x offset: each key's curve counts only the runs with the other key fault-free (offset 0, Cd 1.2).
+    Pooled, Cd 1.3 (not diagnosed) showed detection 0.5 from the offset runs and offset 0 showed detection."""
+    records = [{"status": "ok", "overrides": s.overrides, "result": toy_run(s)} for s in expand(campaign(tmp_path))]
+    curves = detection_curves(records, ["plant.parameters.Cd", "sensors.current[0].offset"])
+    cd, offset = curves["plant.parameters.Cd"], curves["sensors.current[0].offset"]
+    assert cd["others"] == {"sensors.current[0].offset": 0.0} and offset["others"] == {"plant.parameters.Cd": 1.2}
+    assert (cd["x"], cd["detection"], cd["false_alarm"], cd["runs"]) == (
+        [1.2, 1.3, 1.5], [None, 0.0, 1.0], [0.0, None, None], [2, 2, 2])
+    assert (offset["x"], offset["detection"], offset["isolation"], offset["false_alarm"]) == (
+        [0.0, 0.2], [None, 1.0], [None, 1.0], [0.0, None])
+    assert (sweep_unit("sensors.current[0].offset"), sweep_unit("sensors.current[1].gain"),
+            sweep_unit("plant.parameters.backlash"), sweep_unit("sensors.voltage.noise")) == ("A", "1", "rad", "V")
+    (png,) = [p for p in plot_campaign(records, aggregate(records), tmp_path / "plots") if p.name == "detection_rate.png"]
+    assert png.stat().st_size > 0

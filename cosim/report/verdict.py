@@ -1,0 +1,118 @@
+"""One verdict per motion, from report.json's keys: what a reader must see first.
+
+Precedence (the first that applies decides):
+
+1. ``sensor fault``: a measurement was not trusted (``sensor_faults`` non-empty or
+   ``measurements_valid`` false). Even when the faulty sensor was isolated and the parameters were
+   estimated from its healthy partner, the motion is never shown healthy;
+2. ``not estimated``: no parameter could be estimated (``error``);
+3. ``model mismatch``: the model check rejected the estimated model (parameters not validated);
+4. ``diagnosis``: a Table I fault was diagnosed;
+5. ``drifting``: a validated parameter lies beyond half the alarm band (``page.parameter_status``);
+6. ``healthy``.
+
+A motion may carry its own ``verdict`` (written by the monitor): a string or ``{"kind", "text"}``; it is
+used as it is, and derived here the same way otherwise.
+
+This module imports nothing heavy: the console summaries (``cosim run``, ``cosim monitor``) use it too.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+#: verdict kinds in order of precedence, with the CSS class of their colour
+KINDS = {"sensor fault": "bad", "not estimated": "not-judged", "model mismatch": "bad", "diagnosis": "diagnosed",
+         "drifting": "drifting", "healthy": "healthy", "not validated": "not-judged"}
+#: sensor -> (redundant pair, unit of its offset)
+SENSORS = {"Im1": ("current", "A"), "Im2": ("current", "A"), "u": ("voltage", "V"), "u_ref": ("voltage", "V"),
+           "w_tach": ("speed", "rad/s"), "w_enc": ("speed", "rad/s")}
+
+
+def finite(x: Any) -> bool:
+    """True for a real, finite number (not None, not a bool, not nan or inf)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def fault_text(f: Mapping) -> str:
+    """``Im1 gain 1.030, offset 0.200 A`` (the isolated sensor fault, report.json ``sensor_faults[k]``)."""
+    unit = SENSORS.get(f.get("sensor"), ("", ""))[1]
+    parts = []
+    if finite(f.get("gain")):
+        parts.append(f"gain {f['gain']:.4g}")
+    if finite(f.get("offset")):
+        parts.append(f"offset {f['offset']:.3g}{' ' + unit if unit else ''}")
+    return f"{f.get('sensor', '?')} {', '.join(parts) or f.get('kind', 'fault')}"
+
+
+def _kind_of(text: str) -> str:
+    low = text.lower()
+    return next((k for k in KINDS if low.startswith(k)), "healthy" if low.startswith("healthy") else "not validated")
+
+
+def motion_verdict(m: Mapping, statuses: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The verdict of one motion result (report.json ``motions[k]`` or a history row).
+
+    Parameters
+    ----------
+    m : mapping
+        The motion result.
+    statuses : mapping name -> str, optional
+        Each parameter's colour against the alarm band (``page.parameter_status``); without it a motion
+        cannot be called drifting.
+
+    Returns
+    -------
+    dict
+        ``kind`` (a key of ``KINDS``), ``text`` (one line, starting with the kind) and ``css``.
+    """
+    own = m.get("verdict")
+    if isinstance(own, str) and own:
+        kind = _kind_of(own)
+        return {"kind": kind, "text": own, "css": KINDS[kind]}
+    if isinstance(own, Mapping) and own.get("text"):
+        kind = own.get("kind") if own.get("kind") in KINDS else _kind_of(own["text"])
+        return {"kind": kind, "text": str(own["text"]), "css": KINDS[kind]}
+    kind, text = _derive(m, statuses or {})
+    return {"kind": kind, "text": text, "css": KINDS[kind]}
+
+
+def _derive(m: Mapping, statuses: Mapping[str, str]) -> tuple[str, str]:
+    faults = m.get("sensor_faults") or []
+    estimated = bool(m.get("parameters"))
+    if faults or m.get("measurements_valid") is False:
+        what = "; ".join(fault_text(f) for f in faults) or "a redundant pair disagrees and the faulty sensor is unknown"
+        trusted = sorted({r.get("trusted") for r in (m.get("residues") or {}).values()
+                          if isinstance(r, Mapping) and r.get("trusted")})
+        if not estimated:
+            tail = f"; not estimated: {m.get('error') or 'no parameters'}"
+        elif m.get("validated"):
+            tail = f"; parameters estimated from {', '.join(trusted)}" if trusted else "; parameters estimated"
+        else:
+            tail = "; parameters not validated"
+        return "sensor fault", f"sensor fault: {what}{tail}"
+    if not estimated:
+        return "not estimated", f"not estimated: {m.get('error') or 'no parameters in this result'}"
+    mm = m.get("mismatch")
+    if isinstance(mm, Mapping) and mm.get("passed") is False:
+        p = f", adjusted p = {mm['p_value']:.3g} < alpha = {mm['alpha']:g}" if finite(mm.get("p_value")) and \
+            finite(mm.get("alpha")) else ""
+        return "model mismatch", f"model mismatch: the {mm.get('test', 'model check')} test rejects{p}; " \
+                                 "parameters not validated"
+    if not m.get("validated"):
+        return "not validated", "not validated: " + ("; ".join(m.get("notes") or ()) or "no model check")
+    if m.get("diagnosis"):
+        faults = "; ".join(dict.fromkeys(d.get("fault", "?") for d in m["diagnosis"]))
+        params = ", ".join(dict.fromkeys(p for d in m["diagnosis"] for p in d.get("parameters", ())))
+        return "diagnosis", f"diagnosis: {faults} ({params})"
+    drifting = [k for k, s in statuses.items() if s == "drifting"]
+    if drifting:
+        return "drifting", f"drifting: {', '.join(drifting)} beyond half the alarm band (no fault diagnosed)"
+    learning = next((n for n in m.get("notes") or () if n.startswith("healthy baseline")), None)
+    return "healthy", "healthy: validated, no drift" + (f" ({learning})" if learning else "")
+
+
+def verdict_line(m: Mapping, statuses: Mapping[str, str] | None = None) -> str:
+    """The verdict as one console line (``cosim run``, ``cosim monitor``)."""
+    return motion_verdict(m, statuses)["text"]

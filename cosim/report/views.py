@@ -1,0 +1,147 @@
+"""What the page shows of a motion's model check, measurement validation and processing time.
+
+Every quantity that could not be computed is shown with the reason, never as ``nan``.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from feeddrive.cosim.report.verdict import SENSORS, fault_text, finite
+
+#: (signal, test) -> what the test asks, and its statistic (estimator/mismatch.py)
+TESTS = {
+    "independence": ("independent of past inputs", "F"),
+    "size": ("no larger than the sensor noise", "F = mean(e²) / σ²"),
+    "peak": ("no block far outside the others", "max |z| (MAD units)"),
+}
+SIGNAL_UNITS = {"current": "A", "speed": "rad/s", "voltage": "V"}
+
+
+def _n(x: Any, digits: int = 4) -> str:
+    return f"{x:.{digits}g}" if finite(x) else "not computed"
+
+
+def _dof(d: Any) -> str:
+    """Degrees of freedom: an integer count in full (34879, not 3.488e+04), a fractional one to 4 digits."""
+    return f"{d:.0f}" if finite(d) and float(d).is_integer() else _n(d, 4)
+
+
+def model_check(mm: Mapping | None) -> dict | None:
+    """The model check (report.json ``motions[k].mismatch``) as a table of its tests.
+
+    Returns
+    -------
+    dict or None
+        ``rows``: one per test ``{test, statistic, df, p_value, threshold, decision, reject}``;
+        ``sizes``: per residue its RMS against the sensor noise (or why the noise is unknown);
+        ``level``: the adjusted level named (``alpha/m = 0.01/5 = 0.002, Bonferroni``); ``summary``: the
+        deciding test with its adjusted p-value. None when the check did not run.
+    """
+    if not isinstance(mm, Mapping):
+        return None
+    checks = mm.get("checks") or {}
+    tests = [(sig, name, t) for sig, c in checks.items() if isinstance(c, Mapping)
+             for name, t in c.items() if isinstance(t, Mapping) and "p_value" in t]
+    m = len(tests)
+    alpha = mm.get("alpha")
+    each = alpha / m if finite(alpha) and m else None
+    rows = []
+    for sig, name, t in tests:
+        what, symbol = TESTS.get(name, (name, "statistic"))
+        df = t.get("df")
+        p = t.get("p_value")
+        reject = finite(p) and each is not None and p < each
+        rows.append({"test": f"{sig} residue {what}", "key": f"{sig} {name}", "symbol": symbol,
+                     "statistic": _n(t.get("statistic")),
+                     "df": ", ".join(_dof(d) for d in df) if isinstance(df, Sequence) and df else "-",
+                     "p_value": _n(p, 3), "threshold": "-" if each is None else f"{each:.3g}",
+                     "decision": "not computed" if not finite(p) else ("reject: mismatch" if reject else "pass"),
+                     "reject": bool(reject)})
+    sizes = []
+    for sig, c in checks.items():
+        if not isinstance(c, Mapping):
+            continue
+        unit = SIGNAL_UNITS.get(sig, "")
+        noise = c.get("noise_std")
+        sizes.append({"signal": sig, "rms": f"{c['rms']:.3g} {unit}" if finite(c.get("rms")) else "not computed",
+                      "noise": f"{noise:.3g} {unit}" if finite(noise) else
+                      f"not checked: no confirmed redundant {'current' if sig == 'current' else 'speed'} sensor pair "
+                      "(one sensor, or the pair disagrees)"})
+    level = (f"alpha/m = {alpha:g}/{m} = {each:.3g} per test (Bonferroni: family-wise level {alpha:g} over the "
+             f"{m} tests)") if each is not None else "level not recorded"
+    p_adj = mm.get("p_value")
+    summary = (f"deciding test: {mm.get('test', '?')}, smallest p-value; Bonferroni-adjusted p = min(1, {m} p) = "
+               f"{_n(p_adj, 3)} {'<' if mm.get('passed') is False else '>='} alpha = {alpha:g}"
+               if finite(alpha) else f"deciding test: {mm.get('test', '?')}")
+    return {"rows": rows, "sizes": sizes, "level": level, "summary": summary, "passed": mm.get("passed")}
+
+
+def residue_rows(m: Mapping) -> list[dict]:
+    """Each redundant pair's residue; a pair holding a faulty sensor is not valid, whatever its residue says.
+
+    report.json's ``residues[q].valid`` is the validity of the pair after isolation (the fault was
+    attributed and the partner trusted); the page shows the pair's sensors as valid only without a fault.
+    """
+    faulty: dict[str, list[Mapping]] = {}
+    for f in m.get("sensor_faults") or ():
+        faulty.setdefault(SENSORS.get(f.get("sensor"), ("?", ""))[0], []).append(f)
+    rows = []
+    for q, r in (m.get("residues") or {}).items():
+        if not isinstance(r, Mapping):
+            continue
+        faults = faulty.get(q, [])
+        valid = bool(r.get("valid")) and not faults
+        unit = SIGNAL_UNITS.get(q, "")
+        rows.append({"pair": q, "kind": r.get("kind", "-"),
+                     "gain_diff": _ci(r.get("gain_diff"), r.get("gain_diff_ci95"), ""),
+                     "offset": _ci(r.get("offset"), r.get("offset_ci95"), unit),
+                     "noise": f"{r['noise_std']:.3g} {unit}" if finite(r.get("noise_std")) else "not computed",
+                     "trusted": r.get("trusted") or "-", "valid": "yes" if valid else "no",
+                     "faults": "; ".join(fault_text(f) for f in faults) or ("-" if valid else "not isolated")})
+    return rows
+
+
+def _ci(x: Any, ci: Any, unit: str) -> str:
+    if not finite(x):
+        return "not computed"
+    text = f"{x:.4g}"
+    if isinstance(ci, Sequence) and len(ci) == 2 and all(finite(v) for v in ci):
+        text += f" [{ci[0]:.4g}, {ci[1]:.4g}]"
+    return f"{text} {unit}".rstrip()
+
+
+def gain_ratio(m: Mapping) -> tuple[str, str]:
+    """(a1/a2, relative gain error) of the current sensors, or why they were not computed."""
+    if not finite(m.get("gain_ratio")):
+        why = "not checked: one current sensor" if "current" not in (m.get("residues") or {}) else "not computed"
+        return why, why
+    rel = m.get("relative_gain_error")
+    return f"{m['gain_ratio']:.5g}", f"{100 * rel:+.3g} %" if finite(rel) else "not computed"
+
+
+def processing(m: Mapping, budget_s: float | None) -> dict:
+    """The motion's processing time against the budget: judged on CPU time; wall time only labelled as such.
+
+    Returns ``{text, css, within}``: ``within`` None when it cannot be judged.
+    """
+    cpu, wall = m.get("processing_cpu_s"), m.get("processing_s")
+    paper = "paper: 1–2 s between the end of the rapid motion and the tool engaging the work-piece"
+    if finite(cpu):
+        text = f"{cpu:.3g} s CPU time" + (f" ({wall:.3g} s wall time)" if finite(wall) else "")
+        if budget_s is None:
+            return {"text": text, "css": "", "within": None}
+        within = cpu <= budget_s
+        verdict = "within budget" if within else "over budget (CPU time)"
+        return {"text": f"{text} against the budget of {budget_s:.3g} s ({paper}): {verdict}",
+                "css": "healthy" if within else "diagnosed", "within": within}
+    if not finite(wall):
+        return {"text": "not measured", "css": "", "within": None}
+    text = f"{wall:.3g} s wall time (CPU time not recorded; wall time grows with the host's load)"
+    if budget_s is None:
+        return {"text": text, "css": "", "within": None}
+    if wall <= budget_s:
+        return {"text": f"{text} against the budget of {budget_s:.3g} s ({paper}): within budget",
+                "css": "healthy", "within": True}
+    return {"text": f"{text}, above the budget of {budget_s:.3g} s: not judged, the wall time may be the host's load",
+            "css": "", "within": None}
