@@ -14,13 +14,13 @@ as independent.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import binary_erosion
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
-from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
 from feeddrive.estimator.motion import (
     MEASURED,
     METHODS,
@@ -42,8 +42,11 @@ __all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionDa
            "ParameterEstimate", "Prepared", "estimate_motion", "instrumental_variables", "least_squares", "prepare"]
 
 
-def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
+def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -> Prepared:
     """Filter, differentiate and align the signals; derive the regressions the data allow.
+
+    With ``strict`` False an equation without enough fast samples is left out and its parameters are
+    listed in ``Prepared.refused`` with the reason, instead of raising ``NotEnoughExcitation``.
 
     Returns
     -------
@@ -79,9 +82,7 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
     if edge:
         keep = slice(edge, -edge if options.filter.zero_phase else None)
         if len(sig["w"][keep]) < 10:
-            raise NotEnoughExcitation([v.name for v in PHYSICAL if not v.optional],
-                                      f"motion too short: {len(sig['w'])} samples, the filter's start-up "
-                                      f"needs {edge} at each end")
+            raise NotEnoughExcitation([v.name for v in PHYSICAL if not v.optional], too_short(data, options, edge))
         sig = {k: v[keep] for k, v in sig.items()}
     sig["sgn_w"] = np.sign(sig["w"])
     free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
@@ -97,7 +98,7 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
             overrides[eq.name] = over
     if not regressions:
         raise EstimatorInputError(f"no model equation can be used with the signals {sorted(raw)}")
-    rows = {}
+    rows, refused = {}, {}
     speed = np.abs(sig["w"])
     peak = float(speed.max())
     # relative to the motion's own speed range unless the user sets an absolute value
@@ -107,17 +108,36 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
         if "sgn_w" in reg.signals:
             fast = speed >= threshold
             if fast.sum() < 20 * len(reg.names):  # the real cause, with numbers, rather than "too short"
-                raise NotEnoughExcitation(
-                    list(reg.names) + ([reg.normaliser] if reg.normaliser else []),
-                    f"{int((~fast).sum())} of {fast.size} samples have |speed| < speed_threshold {threshold:.3g} "
-                    f"{options.speed_unit} (largest |speed| {peak:.3g} {options.speed_unit}); the {reg.equation} "
-                    f"equation needs at least {20 * len(reg.names)} faster ones")
+                names = list(reg.names) + ([reg.normaliser] if reg.normaliser else [])
+                why = (f"{int((~fast).sum())} of {fast.size} samples have |speed| < speed_threshold {threshold:.3g} "
+                       f"{options.speed_unit} (largest |speed| {peak:.3g} {options.speed_unit}); the {reg.equation} "
+                       f"equation needs at least {20 * len(reg.names)} faster ones")
+                if strict:
+                    raise NotEnoughExcitation(names, why)
+                refused.update({n: why for n in reg.names})
+                continue
             # the filter smears sign(w) over about 1/cutoff around each zero crossing: widen the gap
             r &= binary_erosion(fast, iterations=int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h))),
                                 border_value=True)
         rows[reg.equation] = r
     block = max(1, int(round(options.block() / h)))
-    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block)
+    regressions = [r for r in regressions if r.equation in rows]
+    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused)
+
+
+def too_short(data: MotionData, options: EstimationOptions, edge: int) -> str:
+    """Why a motion is too short, in one line: what each equation needs at this rate, and what is left."""
+    h, n = data.h, data.n
+    free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
+    needs = []
+    for eq in MODEL.equations.values():
+        names = derive_regression(MODEL, eq.name, free, dict(options.known)).names
+        if names:
+            need = 2 * edge + 20 * len(names) + PAST + FUTURE
+            needs.append(f"the {eq.name} equation needs {need} ({need * h:.3g} s)")
+    return (f"motion too short: {n} samples ({n * h:.3g} s at {1 / h:.3g} Hz); the filter's start-up (cut-off "
+            f"{options.filter.cutoff_hz:.3g} Hz) takes {edge} at each end; " + ", ".join(needs)
+            + ": nothing can be estimated from this motion")
 
 
 def _signals_for(p: Prepared, reg: Regression, instruments: Mapping[str, np.ndarray] | None = None) -> dict:
@@ -170,7 +190,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     if used < 20 * p:
         raise NotEnoughExcitation(list(reg.names) + ([reg.normaliser] if reg.normaliser else []),
                                   f"motion too short: {used} usable samples in the {reg.equation} "
-                                  f"equation, need at least {20 * p}")
+                                  f"equation, its {p} parameters ({', '.join(reg.names)}) need at least {20 * p}")
     def rows(x, r):
         return x if r.all() else x[r]
 
@@ -326,7 +346,8 @@ def split_halves(data: MotionData) -> tuple[MotionData, MotionData]:
     return half(1), half(0)
 
 
-def instrumental_variables(data: MotionData, start: MethodResult, options: EstimationOptions) -> MethodResult:
+def instrumental_variables(data: MotionData, start: MethodResult, options: EstimationOptions,
+                           check: bool = True) -> MethodResult:
     """Split-sample IDIM-IV, iterated to convergence from ``start``.
 
     The regression of the odd samples uses instruments simulated from the even samples, and the
@@ -338,7 +359,10 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h).
     """
     odd, even = split_halves(data)
-    halves = (prepare(odd, options), prepare(even, options))
+    halves = (prepare(odd, options, strict=check), prepare(even, options, strict=check))
+    if [r.equation for r in halves[0].regressions] != [r.equation for r in halves[1].regressions]:
+        raise NotEnoughExcitation(sorted(set(halves[0].refused) | set(halves[1].refused)),
+                                  "the odd and even samples do not allow the same equations")
     measured = {(reg.equation, k): reg.evaluate(_signals_for(half, reg))
                 for k, half in enumerate(halves) for reg in half.regressions}
     cur = start
@@ -357,8 +381,14 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
         cur = new
         if change < options.iv_tolerance:
             break
-    check_result(cur, options)
+    if check:
+        check_result(cur, options)
     return cur
+
+
+def fell_back(result: MethodResult, method: str, reason: str) -> MethodResult:
+    """``result`` standing in for ``method``, which could not run: labelled ``method``, ``ran`` says what ran."""
+    return replace(result, method=method, message=reason, ran=result.method_used)
 
 
 def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOptions()) -> MotionEstimate:
@@ -386,7 +416,10 @@ def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOpt
     ls = least_squares(p, options)
     iv = oe = None
     if options.method in ("iv", "oe"):
-        iv = instrumental_variables(data, ls, options)
+        try:
+            iv = instrumental_variables(data, ls, options)
+        except (NumericalFailure, np.linalg.LinAlgError) as exc:  # e.g. L/R far below the instruments' step
+            iv = fell_back(ls, "iv", f"IV fell back to LS: {exc}")
     if options.method == "oe":
         from feeddrive.estimator.oe import output_error
 
