@@ -249,6 +249,9 @@ class MotionEstimate:
     bounded: Mapping[str, float] = field(default_factory=dict)
     #: parameter -> the value it was fixed at in the re-fit of the others (L = 0: quasi-static equation)
     fixed: Mapping[str, float] = field(default_factory=dict)
+    #: the given parameters with their covariance before a refused one was fixed at its estimate (the
+    #: intervals not conditional on it): what several motions or files are pooled and compared with
+    joint: MethodResult | None = None
 
     @property
     def method_used(self) -> str:

@@ -58,16 +58,14 @@ def _apriori(p, options: EstimationOptions, fixed: dict, refused: dict, lumped: 
     rows = p.rows["mechanical"]
     w = p.signals["w"][rows]
     changed = False
-    if "Cd" in mech.names and "Cd" not in refused:
+    if "Cd" in mech.names and "T0" in mech.names and "Cd" not in refused:
         pos, neg = int((w > 0).sum()), int((w < 0).sum())
         if min(pos, neg) < MIN_REVERSED:
-            names = ["Cd"] + (["T0"] if "T0" in mech.names else [])
             why = (f"one direction only: {pos} usable samples at w > 0, {neg} at w < 0 (need {MIN_REVERSED} of "
-                   f"each): Cd and a constant torque offset are confounded (only their sum is determined)")
-            refused.update({n: why for n in names})
+                   f"each): Cd and the torque offset T0 are confounded (only Cd + T0 is determined)")
+            refused.update({"Cd": why, "T0": why})
             lumped.add("Cd")
-            if "T0" in mech.names:
-                fixed["T0"], changed = 0.0, True
+            fixed["T0"], changed = 0.0, True
     if "ft" in mech.names and "Cd" in mech.names and "ft" not in refused:
         lo, hi = np.percentile(np.abs(w), [5, 95]) if w.size else (0.0, 0.0)
         spread = (hi - lo) / hi if hi > 0 else 0.0
@@ -173,13 +171,38 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
     raise EstimatorInputError("the re-fits without the refused parameters did not settle")  # pragma: no cover
 
 
-def _rule(result: MethodResult, options: EstimationOptions, refused: dict) -> None:
-    """The relative standard error rule, for every parameter of ``result`` (refusals added to ``refused``)."""
-    for name, est in result.parameters.items():
-        rel = est.std / abs(est.value) if est.value != 0 else np.inf
-        if not rel <= options.max_relative_std and name not in refused:
-            refused[name] = (f"relative standard error {rel:.0%} > {options.max_relative_std:.0%} "
-                             f"({result.method_used.upper()}: {est.value:.4g} +- {est.std:.3g})")
+def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed: dict) -> MethodResult:
+    """The relative standard error rule, for every parameter of ``result``; refusals added to ``refused``.
+
+    A parameter refused by it is fixed at its own estimate (stated in ``fixed``) for the others: their
+    covariance becomes the one given that value (the Schur complement, what a re-fit with it known gives
+    for least squares), so its uncertainty and collinearity do not spoil them. Repeated until no more is
+    refused. Returns ``result`` with that covariance.
+    """
+    names, values = list(result.names), np.asarray(result.values, dtype=float)
+    cov = np.array(result.covariance, dtype=float)
+    out: list[int] = []
+    while True:
+        std = np.sqrt(np.clip(np.diag(cov), 0, None))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = np.where(values != 0, std / np.abs(values), np.inf)
+        over = [j for j, n in enumerate(names) if j not in out and n not in refused
+                and not rel[j] <= options.max_relative_std]
+        if not over:
+            break
+        new = [max(over, key=lambda j: rel[j])]  # the worst first: fixing it may bring the others within the rule
+        for j in new:
+            refused[names[j]] = (f"relative standard error {rel[j]:.0%} > {options.max_relative_std:.0%} "
+                                 f"({result.method_used.upper()}: {values[j]:.4g} +- {std[j]:.3g})")
+            fixed[names[j]] = float(values[j])
+        out += new
+        keep = [j for j in range(len(names)) if j not in out]
+        C = np.zeros_like(cov)
+        if keep:
+            kk, kr, rr = np.ix_(keep, keep), np.ix_(keep, out), np.ix_(out, out)
+            C[kk] = cov[kk] - cov[kr] @ np.linalg.pinv(cov[rr], hermitian=True) @ cov[kr].T
+        cov = C
+    return replace(result, covariance=cov) if out else result
 
 
 def _subset(result: MethodResult, names: list[str]) -> MethodResult:
@@ -229,7 +252,14 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
         if options.method == "oe":
             oe = _oe(p, iv, options, fixed)
             final = oe
-        _rule(final, options, refused)
+        unconditional = final
+        final = _rule(final, options, refused, fixed)
+        if options.method == "ls":
+            ls = final
+        elif options.method == "iv":
+            iv = final
+        else:
+            oe = final
         given = [n for n in final.names if n not in refused and n not in lumped]
         subsets = {m: None if r is None else _subset(r, [n for n in given if n in r.names])
                    for m, r in (("ls", ls), ("iv", iv), ("oe", oe))}
@@ -240,7 +270,8 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
     order = [v.name for v in PHYSICAL]
     refused = {n: refused[n] for n in sorted(refused, key=order.index) if n not in options.known}
     return MotionEstimate(options.method, start, end, subsets["ls"], subsets["iv"], subsets["oe"], refused=refused,
-                          flags=flags, bounded=bounded, fixed={n: v for n, v in fixed.items() if n in refused})
+                          flags=flags, bounded=bounded, fixed={n: v for n, v in fixed.items() if n in refused},
+                          joint=_subset(unconditional, list(shown.names)))
 
 
 def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float]) -> MethodResult:

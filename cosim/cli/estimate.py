@@ -23,7 +23,8 @@ reported on stderr and left out; if no motion is left, the exit status is 2.
 Several recordings (``cosim estimate A.csv B.csv`` or a quoted glob ``'run*.csv'``) of one machine: a row
 per file (its motions pooled), a test of whether the files agree within their intervals and the pooled
 estimate (``estimator.pooling``); ``--json``: ``{"side", "files": [{"file", "segments", "estimate"}],
-"consistency": {"chi2", "dof", "p_value", "verdict", "differ", "per_parameter", "pooled"}}``.
+"consistency": {"p_value", "verdict", "differ", "joint": {"chi2", "dof", "p_value"}, "per_parameter",
+"pooled"}}``.
 """
 from __future__ import annotations
 
@@ -153,9 +154,11 @@ def main(args: argparse.Namespace) -> int:
         else:
             print(table(results, units))
         return 0
-    rows = [(path, results, pool([r.result for r in results])) for path, _, results in per_file]
+    # pooled and compared with the intervals not conditional on a refused parameter (MotionEstimate.joint)
+    rows = [(path, results, pool([r.joint or r.result for r in results])) for path, _, results in per_file]
     # between files: a file's one motion with its full covariance, or its motions pooled
-    verdict = pool([results[0].result if len(results) == 1 else pooled.as_result() for _, results, pooled in rows])
+    verdict = pool([(results[0].joint or results[0].result) if len(results) == 1 else pooled.as_result()
+                    for _, results, pooled in rows])
     if args.json:
         files_out = [{"file": path, "segments": [_with_units(r.to_dict(), units) for r in results],
                       "estimate": _units(_params(pooled.parameters), units)} for path, results, pooled in rows]
@@ -197,8 +200,9 @@ def several_table(rows, verdict, units: dict[str, str]) -> str:  # noqa: ANN001 
                 lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} refused: {why}")
             for n, why in r.flags.items():
                 lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} FLAGGED, not to be validated: {why}")
-    lines.append(f"agreement: chi2 = {verdict.chi2:.3g} on {verdict.dof} dof, p = {verdict.p_value:.3g}: "
-                 f"{verdict.verdict}")
+    per = ", ".join(f"{n} chi2 {c:.3g} on {d} p {p:.3g}" for n, (c, d, p) in verdict.per_parameter.items())
+    lines.append(f"agreement: {verdict.verdict} (p = {verdict.p_value:.3g}, Bonferroni over {per}; joint chi2 "
+                 f"{verdict.chi2:.3g} on {verdict.dof} dof, p = {verdict.joint_p:.3g})")
     lines.append("pooled:")
     for n, p in verdict.parameters.items():
         lines.append(f"  {n:3} {p.value:12.6g} {units[n]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}] "
