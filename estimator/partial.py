@@ -294,5 +294,5 @@ def _oe(p, iv: MethodResult, options: EstimationOptions, fixed: Mapping[str, flo
 
     if fixed:
         return _fallback(iv, "parameters fixed in the re-fit (" + ", ".join(f"{n} = {v:g}" for n, v in fixed.items())
-                         + ")")
+                         + ")" + (f"; {iv.message}" if iv.message else ""))
     return output_error(p, iv, options)
