@@ -56,6 +56,9 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     raw = {k: getattr(data, k) for k in ("u", "i", "w", "position", "torque") if getattr(data, k) is not None}
     if data.w is not None:
         raw.pop("position", None)  # a tachometer is preferred to the differentiated encoder
+    edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
+    if options.filter.zero_phase and data.n <= 3 * (2 * len(options.filter.sos(h)) + 1):  # sosfiltfilt's padding
+        raise too_short(data, options, edge)
     f = options.filter.apply(raw, h)
     for name, delay in data.delays.items():
         if delay and name in f:  # a sample stamped t_n is the signal at t_n - delay: read it `delay` later
@@ -78,11 +81,10 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
                 for k, v in f.items()})
     # the filter's start-up (both ends for zero phase: sosfiltfilt pads with a mirror image that does
     # not obey the model) would bias the fits: those samples are dropped, like the derivative's edges
-    edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
     if edge:
         keep = slice(edge, -edge if options.filter.zero_phase else None)
         if len(sig["w"][keep]) < 10:
-            raise NotEnoughExcitation([v.name for v in PHYSICAL if not v.optional], too_short(data, options, edge))
+            raise too_short(data, options, edge)
         sig = {k: v[keep] for k, v in sig.items()}
     sig["sgn_w"] = np.sign(sig["w"])
     free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
@@ -98,7 +100,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
             overrides[eq.name] = over
     if not regressions:
         raise EstimatorInputError(f"no model equation can be used with the signals {sorted(raw)}")
-    rows, refused = {}, {}
+    rows, refused, notes = {}, {}, {}
     speed = np.abs(sig["w"])
     peak = float(speed.max())
     # relative to the motion's own speed range unless the user sets an absolute value
@@ -117,27 +119,42 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
                 refused.update({n: why for n in reg.names})
                 continue
             # the filter smears sign(w) over about 1/cutoff around each zero crossing: widen the gap
-            r &= binary_erosion(fast, iterations=int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h))),
-                                border_value=True)
+            guard = int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h)))
+            r &= binary_erosion(fast, iterations=guard, border_value=True)
+            notes[reg.equation] = (
+                f"{int(r.sum())} of {r.size} samples usable: {int((~fast).sum())} have |speed| < {threshold:.3g} "
+                f"{options.speed_unit}, {int((fast & ~r).sum())} more are within the sign guard of {guard} samples "
+                f"({guard * h:.3g} s = sign_guard {options.sign_guard:g} / filter cut-off "
+                f"{options.filter.cutoff_hz:.3g} Hz) around them")
         rows[reg.equation] = r
     block = max(1, int(round(options.block() / h)))
     regressions = [r for r in regressions if r.equation in rows]
-    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused)
+    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused, notes)
 
 
-def too_short(data: MotionData, options: EstimationOptions, edge: int) -> str:
+def too_short(data: MotionData, options: EstimationOptions, edge: int) -> NotEnoughExcitation:
     """Why a motion is too short, in one line: what each equation needs at this rate, and what is left."""
     h, n = data.h, data.n
     free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
-    needs = []
+    have = {k for k in ("u", "i", "w", "torque") if getattr(data, k) is not None}
+    have |= {"w"} if data.position is not None else set()
+    needs, wanted = [], []
     for eq in MODEL.equations.values():
-        names = derive_regression(MODEL, eq.name, free, dict(options.known)).names
+        reg = derive_regression(MODEL, eq.name, free, dict(options.known))
+        base = {x[1:] if x.startswith("D") else x for x in reg.signals if x != "sgn_w"}
+        if eq.normaliser and "torque" in have:
+            base = (base - {eq.output}) | {"torque"}
+        names = reg.names if base <= have else ()
         if names:
+            wanted += [n for n in (*names, reg.normaliser) if n and n not in wanted]
             need = 2 * edge + 20 * len(names) + PAST + FUTURE
             needs.append(f"the {eq.name} equation needs {need} ({need * h:.3g} s)")
-    return (f"motion too short: {n} samples ({n * h:.3g} s at {1 / h:.3g} Hz); the filter's start-up (cut-off "
-            f"{options.filter.cutoff_hz:.3g} Hz) takes {edge} at each end; " + ", ".join(needs)
-            + ": nothing can be estimated from this motion")
+    order = [v.name for v in PHYSICAL]
+    return NotEnoughExcitation(
+        sorted(wanted, key=order.index) or free,
+        f"motion too short: {n} samples ({n * h:.3g} s at {1 / h:.3g} Hz); the filter's start-up (cut-off "
+        f"{options.filter.cutoff_hz:.3g} Hz) takes {edge} at each end; " + ", ".join(needs)
+        + ": nothing can be estimated from this motion")
 
 
 def _signals_for(p: Prepared, reg: Regression, instruments: Mapping[str, np.ndarray] | None = None) -> dict:
@@ -177,7 +194,7 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
 
 
 def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
-           reference: np.ndarray | None = None) -> _Fit:
+           reference: np.ndarray | None = None, note: str = "") -> _Fit:
     """LS or basic IV on the usable rows of one or more sample sets, column-scaled.
 
     Each part is ``(y (n,), Phi (n, p), Z (n, p) or None, rows (n,) bool)``. With ``Z`` None: LS
@@ -190,7 +207,8 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     if used < 20 * p:
         raise NotEnoughExcitation(list(reg.names) + ([reg.normaliser] if reg.normaliser else []),
                                   f"motion too short: {used} usable samples in the {reg.equation} "
-                                  f"equation, its {p} parameters ({', '.join(reg.names)}) need at least {20 * p}")
+                                  f"equation, its {p} parameters ({', '.join(reg.names)}) need at least {20 * p}"
+                                  + (f" ({note})" if note else ""))
     def rows(x, r):
         return x if r.all() else x[r]
 
@@ -290,7 +308,7 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
         y, Phi = reg.evaluate(_signals_for(p, reg))
         try:
             fits[reg.equation] = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, options,
-                                        _column_reference(reg, _signals_for(p, reg), p.h))
+                                        _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
         except NotEnoughExcitation as exc:
             refused.append(exc)
     if refused:

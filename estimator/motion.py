@@ -322,6 +322,8 @@ class Prepared:
     block: int
     #: parameter -> reason, for the regressions ``prepare(..., strict=False)`` left out
     refused: dict[str, str] = field(default_factory=dict)
+    #: equation -> how many samples are usable and why the others are not (for the messages)
+    notes: dict[str, str] = field(default_factory=dict)
 
 
 def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray, int]:

@@ -134,7 +134,7 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
             y, Phi = reg.evaluate(_signals_for(p, reg))
             try:
                 fit = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, opts,
-                             _column_reference(reg, _signals_for(p, reg), p.h))
+                             _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
             except NotEnoughExcitation as exc:
                 again |= _weak(exc, reg, fixed, refused, lumped)
                 continue
@@ -243,7 +243,8 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
             reasons = {}
             for n, why in refused.items():
                 reasons.setdefault(why, []).append(n)
-            raise NotEnoughExcitation(list(refused), "; ".join(f"{', '.join(ns)}: {why}" for why, ns in reasons.items()))
+            raise NotEnoughExcitation(list(refused), next(iter(reasons)) if len(reasons) == 1 else
+                                      "; ".join(f"{', '.join(ns)}: {why}" for why, ns in reasons.items()))
         final = ls
         iv = oe = None
         if options.method in ("iv", "oe"):
