@@ -200,13 +200,16 @@ def several_table(rows, verdict, units: dict[str, str]) -> str:  # noqa: ANN001 
                 lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} refused: {why}")
             for n, why in r.flags.items():
                 lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} FLAGGED, not to be validated: {why}")
-    per = ", ".join(f"{n} chi2 {c:.3g} on {d} p {p:.3g}" for n, (c, d, p) in verdict.per_parameter.items())
-    lines.append(f"agreement: {verdict.verdict} (p = {verdict.p_value:.3g}, Bonferroni over {per}; joint chi2 "
-                 f"{verdict.chi2:.3g} on {verdict.dof} dof, p = {verdict.joint_p:.3g})")
+    lines.append(f"agreement: {verdict.verdict} (p = {verdict.p_value:.3g}, Bonferroni over "
+                 f"{len(verdict.per_parameter)} parameters; joint chi2 {verdict.chi2:.3g} on {verdict.dof} dof, "
+                 f"p = {verdict.joint_p:.3g})")
+    lines.append("  per parameter: " + ", ".join(f"{n} chi2 {c:.3g} on {d}, p {p:.3g}"
+                                                 for n, (c, d, p) in verdict.per_parameter.items()))
     lines.append("pooled:")
     for n, p in verdict.parameters.items():
+        note = ", the files differ" if n in verdict.differ else ""
         lines.append(f"  {n:3} {p.value:12.6g} {units[n]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}] "
-                     f"({verdict.count[n]} file(s))")
+                     f"({verdict.count[n]} file(s){note})")
     return "\n".join(lines)
 
 
