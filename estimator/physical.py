@@ -43,6 +43,20 @@ def parse_bounds(items: list[str], where: str = "--bounds") -> dict[str, tuple[f
     return out
 
 
+def bounds_mapping(raw: object, where: str = "monitor.bounds") -> dict[str, tuple[float | None, float | None]]:
+    """A scenario's ``bounds:`` mapping, ``{Jt: "4e-6:", ft: [0, null]}``, as ``parse_bounds`` gives it."""
+    if not isinstance(raw, Mapping):
+        raise EstimatorInputError(f"{where}: expected a mapping NAME: 'LOW:HIGH' or [LOW, HIGH], got {raw!r}")
+    items = []
+    for name, rng in raw.items():
+        if isinstance(rng, (list, tuple)) and len(rng) == 2:
+            rng = ":".join("" if x is None else str(x) for x in rng)
+        if not isinstance(rng, str):
+            raise EstimatorInputError(f"{where}: {name}: expected 'LOW:HIGH' or [LOW, HIGH], got {rng!r}")
+        items.append(f"{name}={rng}")
+    return parse_bounds(items, where)
+
+
 def physical_flags(result: MethodResult | None, bounds: Bounds) -> dict[str, str]:
     """Given parameters outside their physical range or the user's bounds -> the reason, with the numbers."""
     flags: dict[str, str] = {}
