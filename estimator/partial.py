@@ -138,6 +138,9 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
             except NotEnoughExcitation as exc:
                 again |= _weak(exc, reg, fixed, refused, lumped)
                 continue
+            except (np.linalg.LinAlgError, FloatingPointError) as exc:  # e.g. eigh not converging on extreme values
+                refused.update({n: f"the {reg.equation} fit failed numerically ({exc})" for n in reg.names})
+                continue
             if not np.all(np.isfinite(fit.theta)) or not np.all(np.isfinite(fit.cov)):
                 refused.update({n: f"non-finite {reg.equation} fit" for n in reg.names})
                 continue
