@@ -12,7 +12,8 @@ and names the others with the rule that refuses them and its numbers:
   ``MIN_TAU_SAMPLES`` sample periods: L refused, R and K from the quasi-static equation ``u = R i + K w``;
 * ``excitation``: the estimator's rules, per parameter: too few (fast) samples in its equation, a weak
   direction of the column-scaled regressor (condition number above ``max_condition``), and, for every
-  parameter, a relative standard error above ``max_relative_std``.
+  parameter, a 95 % interval wider than ``+-1.96 max_relative_std`` of its value (the printed interval
+  itself, so a t quantile with few degrees of freedom counts), or fewer covariance blocks than parameters.
 
 One rule decides what is given: a parameter is printed only if no rule refuses it, so no printed
 interval is wider than the one that refuses another file's parameter. A parameter refused because it is
@@ -144,10 +145,10 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
             if not np.all(np.isfinite(fit.theta)) or not np.all(np.isfinite(fit.cov)):
                 refused.update({n: f"non-finite {reg.equation} fit" for n in reg.names})
                 continue
-            if fit.dof < 1:
+            if fit.dof + len(reg.names) < len(reg.names):  # fewer blocks than parameters: a singular covariance
                 nb = fit.dof + len(reg.names)
                 why = (f"the motion holds {nb} block(s) of {p.block * p.h:.3g} s for the uncertainty of the "
-                       f"{reg.equation} equation; its {len(reg.names)} parameters need at least {len(reg.names) + 1}")
+                       f"{reg.equation} equation; its {len(reg.names)} parameters need at least {len(reg.names)}")
                 refused.update({n: why for n in reg.names})
                 continue
             if _tau_rule(fit, reg, p.h, fixed, refused):
@@ -184,9 +185,13 @@ def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed
     """
     names, values = list(result.names), np.asarray(result.values, dtype=float)
     cov = np.array(result.covariance, dtype=float)
+    dof = np.full(len(names), float(result.dof)) if result.parameter_dof is None else np.asarray(result.parameter_dof)
+    # judged on the printed interval: its half-width against that of a standard error of max_relative_std
+    # with many degrees of freedom (a t quantile with few dof widens both alike)
+    widen = stats.t.ppf(0.975, np.maximum(dof, 1.0)) / stats.norm.ppf(0.975)
     out: list[int] = []
     while True:
-        std = np.sqrt(np.clip(np.diag(cov), 0, None))
+        std = np.sqrt(np.clip(np.diag(cov), 0, None)) * widen
         with np.errstate(divide="ignore", invalid="ignore"):
             rel = np.where(values != 0, std / np.abs(values), np.inf)
         over = [j for j, n in enumerate(names) if j not in out and n not in refused
@@ -195,8 +200,9 @@ def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed
             break
         new = [max(over, key=lambda j: rel[j])]  # the worst first: fixing it may bring the others within the rule
         for j in new:
-            refused[names[j]] = (f"relative standard error {rel[j]:.0%} > {options.max_relative_std:.0%} "
-                                 f"({result.method_used.upper()}: {values[j]:.4g} +- {std[j]:.3g})")
+            refused[names[j]] = (f"95 % interval +-{rel[j] * stats.norm.ppf(0.975):.0%} of the value, more than "
+                                 f"+-{options.max_relative_std * stats.norm.ppf(0.975):.0%} (a relative standard error "
+                                 f"above {options.max_relative_std:.0%}; {result.method_used.upper()}: {values[j]:.4g})")
             fixed[names[j]] = float(values[j])
         out += new
         keep = [j for j in range(len(names)) if j not in out]

@@ -226,7 +226,8 @@ def table(results, units: dict[str, str]) -> str:  # noqa: ANN001 - list of esti
             flag = "  FLAGGED" if name in r.flags else ""
             lines.append(f"  {name:3} {p.value:12.6g} {units[name]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]{flag}")
         for name, why in r.refused.items():
-            fixed = f" (fixed at {r.fixed[name]:g} in the re-fit)" if name in r.fixed else ""
+            fixed = (f" (fixed at {r.fixed[name]:.4g} in the re-fit of the others: their intervals hold given this "
+                     f"value)" if name in r.fixed else "")
             lines.append(f"  {name:3} refused: {why}{fixed}")
         for name, why in r.flags.items():
             lines.append(f"  {name:3} FLAGGED, not to be validated: {why}")

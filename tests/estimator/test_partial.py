@@ -62,11 +62,14 @@ def test_narrow_speed_range_refuses_ft_and_cd_and_gives_jt():
 
 
 def test_no_printed_interval_is_wider_than_the_rule_that_refuses():
-    """One rule: every parameter given has a relative standard error within max_relative_std."""
+    """One rule: every interval given is within +-1.96 max_relative_std of its value (the refusal's limit)."""
     for d in (record(ROUND_TRIP, H, snr_db=25, seed=3), record(FORWARD, H, snr_db=25, seed=3)):
         est = estimate_parameters(motion(d), EstimationOptions(method="iv", offset=True))
         for n, p in est.parameters.items():
-            assert p.std <= 0.3 * abs(p.value), n
+            assert (p.ci95[1] - p.ci95[0]) / 2 <= 1.96 * 0.3 * abs(p.value) * (1 + 1e-9), n
+        for n, why in est.refused.items():
+            if why.startswith("95 % interval"):
+                assert float(why.split("+-")[1].split("%")[0]) > 59, why
         assert set(est.parameters) | set(est.refused) == {"R", "L", "K", "Jt", "ft", "Cd", "T0"}
 
 
