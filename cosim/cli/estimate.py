@@ -66,6 +66,10 @@ ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position":
          "state": None}
 
 
+class NothingEstimated(InputError):
+    """No motion of a recording could be estimated (each was reported on stderr)."""
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser, ROLES, EstimationOptions().filter.cutoff_hz, several=True)
     parser.add_argument("--known", action="append", default=[], metavar="NAME=VALUE",
@@ -109,7 +113,7 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
         speed = np.gradient(sig["position"], rec.h)
     segments = segment(args.segment, rec.n, rec.h, speed, rec.signals.get("state"))
     if not segments:
-        raise InputError(f"{path}: no high-speed motion found (--segment {args.segment})")
+        raise NothingEstimated(f"{path}: no high-speed motion found (--segment {args.segment})")
     results = []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
@@ -122,7 +126,7 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
             print(f"cosim estimate: motion {data.t0:.4g}-{data.t0 + (data.n - 1) * data.h:.4g} s left out: {exc}",
                   file=sys.stderr)
     if not results:
-        raise InputError(f"{path}: no motion could be estimated (see above)")
+        raise NothingEstimated(f"{path}: no motion could be estimated (see above)")
     return side, results
 
 
@@ -140,7 +144,16 @@ def main(args: argparse.Namespace) -> int:
     files = data_files(args.data)
     with warnings.catch_warnings():  # numerical trouble becomes a refusal or a fallback with its reason
         warnings.simplefilter("ignore", RuntimeWarning)
-        per_file = [(path, *estimate_file(path, args, known, bounds)) for path in files]
+        per_file = []
+        for path in files:
+            try:
+                per_file.append((path, *estimate_file(path, args, known, bounds)))
+            except (NotEnoughExcitation, NothingEstimated) as exc:  # one of several repeats: the others still count
+                if len(files) == 1:
+                    raise
+                print(f"cosim estimate: {path} left out: {exc}", file=sys.stderr)
+    if not per_file:
+        raise InputError(f"none of the {len(files)} recordings could be estimated (see above)")
     sides = {side for _, side, _ in per_file}
     if len(sides) > 1:
         raise InputError(f"the recordings are on different sides ({', '.join(sorted(sides))}): give --pitch or "

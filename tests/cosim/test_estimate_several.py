@@ -95,3 +95,13 @@ def test_json_says_which_method_ran_when_oe_falls_back(tmp_path, capsys):
     assert seg["fixed"] == {"L": 0.0}
     for name in ("R", "K"):
         assert seg["parameters"][name]["value"] == pytest.approx(TRUTH[name], rel=0.02)
+
+
+def test_a_repeat_of_which_nothing_can_be_estimated_is_left_out_with_a_note(runs, tmp_path, capsys):
+    short = tmp_path / "short.csv"
+    lines = runs["run0"].read_text().splitlines()
+    short.write_text("\n".join(lines[:1] + lines[600:611]) + "\n")  # 11 samples: too short for the filter
+    code, out, err = run(capsys, runs["run0"], runs["run1"], short, *MAP, "--json", "--segment", "none")
+    assert code == 0 and len(json.loads(out)["files"]) == 2
+    assert err.startswith(f"cosim estimate: {short} left out: ") and "motion too short: 11 samples" in err
+    assert err.count("\n") == 1
