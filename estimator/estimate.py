@@ -321,7 +321,7 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
 
 
 def instruments(source: Prepared, params: Mapping[str, float], options: EstimationOptions, shift: float = 0.0,
-                n: int | None = None) -> dict[str, np.ndarray]:
+                n: int | None = None, skip: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """Noise-free copies of the signals, simulated from the model and ``params`` (IDIM-IV instruments).
 
     Each equation is simulated alone, solved for its derivative and driven by the measured filtered
@@ -340,6 +340,8 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
     at = np.arange(n) + shift
     out = {}
     for reg in source.regressions:
+        if reg.equation in skip:  # not simulated: its state is its own (measured) instrument
+            continue
         eq = MODEL.equations[reg.equation]
         sig = _signals_for(source, reg)
         inputs = {x: sig[x] for x in reg.signals if x in MEASURED and x != eq.solves_for}
@@ -365,7 +367,7 @@ def split_halves(data: MotionData) -> tuple[MotionData, MotionData]:
 
 
 def instrumental_variables(data: MotionData, start: MethodResult, options: EstimationOptions,
-                           check: bool = True) -> MethodResult:
+                           check: bool = True, skip: tuple[str, ...] = ()) -> MethodResult:
     """Split-sample IDIM-IV, iterated to convergence from ``start``.
 
     The regression of the odd samples uses instruments simulated from the even samples, and the
@@ -374,7 +376,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     whose only noise-free information is in the (noisy) voltage; instruments simulated from the
     same samples would bias L (about +15 % at 30 dB SNR here). Noise correlated from one sample to
     the next (not white) brings part of that bias back. The halves are sampled every 2 h, so the
-    filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h).
+    filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h). The equations in
+    ``skip`` are not simulated (a derivative coefficient fixed at 0): their own state is its instrument.
     """
     odd, even = split_halves(data)
     halves = (prepare(odd, options, strict=check), prepare(even, options, strict=check))
@@ -386,8 +389,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     cur = start
     for it in range(1, options.iv_iterations + 1):
         params = cur.as_dict()
-        z = (instruments(halves[1], params, options, +0.5, len(halves[0].signals["w"])),
-             instruments(halves[0], params, options, -0.5, len(halves[1].signals["w"])))
+        z = (instruments(halves[1], params, options, +0.5, len(halves[0].signals["w"]), skip),
+             instruments(halves[0], params, options, -0.5, len(halves[1].signals["w"]), skip))
         fits = {}
         for reg in halves[0].regressions:
             parts = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],

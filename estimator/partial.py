@@ -257,7 +257,8 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
         final = ls
         iv = oe = None
         if options.method in ("iv", "oe"):
-            iv = _iv(data, ls, replace(options, known={**options.known, **fixed}), fixed)
+            iv = _iv(data, ls, replace(options, known={**options.known, **fixed}), fixed,
+                     {r.equation for r in p.regressions})
             final = iv
         if options.method == "oe":
             oe = _oe(p, iv, options, fixed)
@@ -284,14 +285,20 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
                           joint=_subset(unconditional, list(shown.names)))
 
 
-def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float]) -> MethodResult:
+def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float],
+        equations: set[str]) -> MethodResult:
     """IV from ``ls``, or ``ls`` labelled ``iv`` with the reason it could not run."""
-    dynamic = [n for n in ("L", "Jt") if fixed.get(n) == 0.0]
-    if dynamic:
-        return fell_back(ls, "iv", f"IV fell back to LS: {', '.join(dynamic)} fixed at 0, the instruments cannot be "
-                                   f"simulated")
+    # an equation whose derivative coefficient is fixed at 0 cannot be simulated: its measured state is its own
+    # instrument (IV = LS for it), the other equation still gets simulated instruments
+    dynamic = {eq: n for eq, n in (("electrical", "L"), ("mechanical", "Jt")) if fixed.get(n) == 0.0}
+    if equations <= set(dynamic):
+        return fell_back(ls, "iv", f"IV fell back to LS: {', '.join(dynamic.values())} fixed at 0, the instruments "
+                                   f"cannot be simulated")
     try:
-        res = instrumental_variables(data, ls, options, check=False)
+        res = instrumental_variables(data, ls, options, check=False, skip=tuple(dynamic))
+        if dynamic:
+            res = replace(res, message=f"IV without simulated instruments for the {', '.join(dynamic)} equation "
+                                       f"({', '.join(n + ' fixed at 0' for n in dynamic.values())})")
     except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:  # NotEnoughExcitation, NumericalFailure
         return fell_back(ls, "iv", f"IV fell back to LS: {exc}")
     if not (np.all(np.isfinite(res.values)) and np.all(np.isfinite(res.covariance))):

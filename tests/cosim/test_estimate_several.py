@@ -90,7 +90,7 @@ def test_json_says_which_method_ran_when_oe_falls_back(tmp_path, capsys):
     code, out, err = run(capsys, path, *MAP, "--method", "oe", "--json")
     assert code == 0 and "Warning" not in err
     (seg,) = json.loads(out)["segments"]
-    assert seg["method"] == "ls" and seg["method_requested"] == "oe" and "L fixed at 0" in seg["fallback"]
+    assert seg["method"] == "iv" and seg["method_requested"] == "oe" and "L = 0" in seg["fallback"]
     assert seg["refused"]["L"].startswith("sample period 0.001 s too long for the electrical time constant")
     assert seg["fixed"] == {"L": 0.0}
     for name in ("R", "K"):

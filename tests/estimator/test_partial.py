@@ -107,11 +107,18 @@ def test_iv_on_an_electrical_time_constant_far_below_the_step_falls_back_with_it
         assert "L/R = 0.0002 s" in est.iv.message
         out = est.to_dict()
         assert out["method"] == "ls" and out["method_requested"] == "iv" and out["fallback"] == est.iv.message
-        # the per-parameter estimator refuses L first; IV cannot simulate without it and says so
+        # the per-parameter estimator refuses L first: IV simulates the mechanical equation only, and says so;
+        # OE, which needs both, falls back to that IV
         part = estimate_parameters(motion(d), EstimationOptions(method=method))
         out = part.to_dict()
-        assert out["method"] == "ls" and out["method_requested"] == method
-        assert "L fixed at 0" in out["fallback"] and "L" in out["refused"]
+        assert out["method"] == "iv" and "L" in out["refused"]
+        assert part.iv.message == "IV without simulated instruments for the electrical equation (L fixed at 0)"
+        if method == "oe":
+            assert out["method_requested"] == "oe" and out["fallback"].startswith(
+                "output error fell back to IV: parameters fixed in the re-fit (L = 0)")
+        else:
+            assert "method_requested" not in out
+        assert part.parameters["Jt"].value == pytest.approx(TRUTH["Jt"], rel=2e-3)
 
 
 def test_short_records_give_a_refusal_or_estimates_never_a_warning():
