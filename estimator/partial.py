@@ -112,7 +112,7 @@ def _tau_rule(fit, reg, h: float, fixed: dict, refused: dict) -> bool:
     if tau_hi < MIN_TAU_SAMPLES * h:
         refused["L"] = (f"sample period {h:.3g} s too long for the electrical time constant L/R = {tau:.3g} s (95 % "
                         f"upper bound {tau_hi:.3g} s): L cannot be identified; R and K from the quasi-static "
-                        f"equation u = R i + K w (L fixed at 0)")
+                        f"equation u = R i + K w")
         fixed["L"] = 0.0
         return True
     return False
