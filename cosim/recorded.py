@@ -306,7 +306,8 @@ def pairs(items: list[str], what: str) -> dict[str, str]:
     return out
 
 
-def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str], filter_cutoff_hz: float) -> None:
+def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str], filter_cutoff_hz: float,
+                            several: bool = False) -> None:
     """The data file and the options shared by ``cosim estimate`` and ``cosim monitor``.
 
     ``--map`` takes one or more ``ROLE=COLUMN[*SCALE]`` and may be repeated; ``--delimiter`` and
@@ -315,7 +316,10 @@ def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str
     """
     from feeddrive.estimator.segmentation import MODES
 
-    parser.add_argument("data", help="CSV file with a header row (',', ';' or tab separated, UTF-8)")
+    if several:  # cosim estimate: repeated recordings of one machine, or a quoted glob pattern
+        parser.add_argument("data", nargs="+", help="recording(s) of one machine, or a quoted glob pattern ('run*.csv')")
+    else:
+        parser.add_argument("data", help="CSV file with a header row (',', ';' or tab separated, UTF-8)")
     parser.add_argument("--map", action="extend", nargs="+", default=[], metavar="ROLE=COLUMN",
                         help=f"column of a role ({', '.join(roles)}), optionally COLUMN*SCALE to SI (overrides a "
                              "[unit] in the header); several per --map, or repeat --map")

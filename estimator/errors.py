@@ -23,6 +23,11 @@ class NotEnoughExcitation(ValueError):
         super().__init__(f"not enough excitation to identify {', '.join(self.unidentifiable)}: {reason}")
 
 
+class NumericalFailure(EstimatorInputError):
+    """A computation on valid input cannot give a finite answer (an unstable or non-finite simulation of the
+    instruments, a singular system): the caller falls back to a simpler method or refuses, with this reason."""
+
+
 class HistoryError(EstimatorInputError):
     """The history database cannot be used: not SQLite or corrupt, read-only, disk full, locked too long.
 

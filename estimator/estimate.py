@@ -14,13 +14,13 @@ as independent.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import binary_erosion
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
-from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
 from feeddrive.estimator.motion import (
     MEASURED,
     METHODS,
@@ -42,8 +42,11 @@ __all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionDa
            "ParameterEstimate", "Prepared", "estimate_motion", "instrumental_variables", "least_squares", "prepare"]
 
 
-def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
+def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -> Prepared:
     """Filter, differentiate and align the signals; derive the regressions the data allow.
+
+    With ``strict`` False an equation without enough fast samples is left out and its parameters are
+    listed in ``Prepared.refused`` with the reason, instead of raising ``NotEnoughExcitation``.
 
     Returns
     -------
@@ -53,6 +56,9 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
     raw = {k: getattr(data, k) for k in ("u", "i", "w", "position", "torque") if getattr(data, k) is not None}
     if data.w is not None:
         raw.pop("position", None)  # a tachometer is preferred to the differentiated encoder
+    edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
+    if options.filter.zero_phase and data.n <= 3 * (2 * len(options.filter.sos(h)) + 1):  # sosfiltfilt's padding
+        raise too_short(data, options, edge)
     f = options.filter.apply(raw, h)
     for name, delay in data.delays.items():
         if delay and name in f:  # a sample stamped t_n is the signal at t_n - delay: read it `delay` later
@@ -75,13 +81,10 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
                 for k, v in f.items()})
     # the filter's start-up (both ends for zero phase: sosfiltfilt pads with a mirror image that does
     # not obey the model) would bias the fits: those samples are dropped, like the derivative's edges
-    edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
     if edge:
         keep = slice(edge, -edge if options.filter.zero_phase else None)
         if len(sig["w"][keep]) < 10:
-            raise NotEnoughExcitation([v.name for v in PHYSICAL if not v.optional],
-                                      f"motion too short: {len(sig['w'])} samples, the filter's start-up "
-                                      f"needs {edge} at each end")
+            raise too_short(data, options, edge)
         sig = {k: v[keep] for k, v in sig.items()}
     sig["sgn_w"] = np.sign(sig["w"])
     free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
@@ -97,7 +100,7 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
             overrides[eq.name] = over
     if not regressions:
         raise EstimatorInputError(f"no model equation can be used with the signals {sorted(raw)}")
-    rows = {}
+    rows, refused, notes = {}, {}, {}
     speed = np.abs(sig["w"])
     peak = float(speed.max())
     # relative to the motion's own speed range unless the user sets an absolute value
@@ -107,17 +110,51 @@ def prepare(data: MotionData, options: EstimationOptions) -> Prepared:
         if "sgn_w" in reg.signals:
             fast = speed >= threshold
             if fast.sum() < 20 * len(reg.names):  # the real cause, with numbers, rather than "too short"
-                raise NotEnoughExcitation(
-                    list(reg.names) + ([reg.normaliser] if reg.normaliser else []),
-                    f"{int((~fast).sum())} of {fast.size} samples have |speed| < speed_threshold {threshold:.3g} "
-                    f"{options.speed_unit} (largest |speed| {peak:.3g} {options.speed_unit}); the {reg.equation} "
-                    f"equation needs at least {20 * len(reg.names)} faster ones")
+                names = list(reg.names) + ([reg.normaliser] if reg.normaliser else [])
+                why = (f"{int((~fast).sum())} of {fast.size} samples have |speed| < speed_threshold {threshold:.3g} "
+                       f"{options.speed_unit} (largest |speed| {peak:.3g} {options.speed_unit}); the {reg.equation} "
+                       f"equation needs at least {20 * len(reg.names)} faster ones")
+                if strict:
+                    raise NotEnoughExcitation(names, why)
+                refused.update({n: why for n in reg.names})
+                continue
             # the filter smears sign(w) over about 1/cutoff around each zero crossing: widen the gap
-            r &= binary_erosion(fast, iterations=int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h))),
-                                border_value=True)
+            guard = int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h)))
+            r &= binary_erosion(fast, iterations=guard, border_value=True)
+            notes[reg.equation] = (
+                f"{int(r.sum())} of {r.size} samples usable: {int((~fast).sum())} have |speed| < {threshold:.3g} "
+                f"{options.speed_unit}, {int((fast & ~r).sum())} more are within the sign guard of {guard} samples "
+                f"({guard * h:.3g} s = sign_guard {options.sign_guard:g} / filter cut-off "
+                f"{options.filter.cutoff_hz:.3g} Hz) around them")
         rows[reg.equation] = r
     block = max(1, int(round(options.block() / h)))
-    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block)
+    regressions = [r for r in regressions if r.equation in rows]
+    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused, notes)
+
+
+def too_short(data: MotionData, options: EstimationOptions, edge: int) -> NotEnoughExcitation:
+    """Why a motion is too short, in one line: what each equation needs at this rate, and what is left."""
+    h, n = data.h, data.n
+    free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
+    have = {k for k in ("u", "i", "w", "torque") if getattr(data, k) is not None}
+    have |= {"w"} if data.position is not None else set()
+    needs, wanted = [], []
+    for eq in MODEL.equations.values():
+        reg = derive_regression(MODEL, eq.name, free, dict(options.known))
+        base = {x[1:] if x.startswith("D") else x for x in reg.signals if x != "sgn_w"}
+        if eq.normaliser and "torque" in have:
+            base = (base - {eq.output}) | {"torque"}
+        names = reg.names if base <= have else ()
+        if names:
+            wanted += [n for n in (*names, reg.normaliser) if n and n not in wanted]
+            need = 2 * edge + 20 * len(names) + PAST + FUTURE
+            needs.append(f"the {eq.name} equation needs {need} ({need * h:.3g} s)")
+    order = [v.name for v in PHYSICAL]
+    return NotEnoughExcitation(
+        sorted(wanted, key=order.index) or free,
+        f"motion too short: {n} samples ({n * h:.3g} s at {1 / h:.3g} Hz); the filter's start-up (cut-off "
+        f"{options.filter.cutoff_hz:.3g} Hz) takes {edge} at each end; " + ", ".join(needs)
+        + ": nothing can be estimated from this motion")
 
 
 def _signals_for(p: Prepared, reg: Regression, instruments: Mapping[str, np.ndarray] | None = None) -> dict:
@@ -157,7 +194,7 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
 
 
 def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
-           reference: np.ndarray | None = None) -> _Fit:
+           reference: np.ndarray | None = None, note: str = "") -> _Fit:
     """LS or basic IV on the usable rows of one or more sample sets, column-scaled.
 
     Each part is ``(y (n,), Phi (n, p), Z (n, p) or None, rows (n,) bool)``. With ``Z`` None: LS
@@ -170,7 +207,8 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     if used < 20 * p:
         raise NotEnoughExcitation(list(reg.names) + ([reg.normaliser] if reg.normaliser else []),
                                   f"motion too short: {used} usable samples in the {reg.equation} "
-                                  f"equation, need at least {20 * p}")
+                                  f"equation, its {p} parameters ({', '.join(reg.names)}) need at least {20 * p}"
+                                  + (f" ({note})" if note else ""))
     def rows(x, r):
         return x if r.all() else x[r]
 
@@ -270,7 +308,7 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
         y, Phi = reg.evaluate(_signals_for(p, reg))
         try:
             fits[reg.equation] = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, options,
-                                        _column_reference(reg, _signals_for(p, reg), p.h))
+                                        _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
         except NotEnoughExcitation as exc:
             refused.append(exc)
     if refused:
@@ -283,7 +321,7 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
 
 
 def instruments(source: Prepared, params: Mapping[str, float], options: EstimationOptions, shift: float = 0.0,
-                n: int | None = None) -> dict[str, np.ndarray]:
+                n: int | None = None, skip: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """Noise-free copies of the signals, simulated from the model and ``params`` (IDIM-IV instruments).
 
     Each equation is simulated alone, solved for its derivative and driven by the measured filtered
@@ -302,6 +340,8 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
     at = np.arange(n) + shift
     out = {}
     for reg in source.regressions:
+        if reg.equation in skip:  # not simulated: its state is its own (measured) instrument
+            continue
         eq = MODEL.equations[reg.equation]
         sig = _signals_for(source, reg)
         inputs = {x: sig[x] for x in reg.signals if x in MEASURED and x != eq.solves_for}
@@ -326,7 +366,8 @@ def split_halves(data: MotionData) -> tuple[MotionData, MotionData]:
     return half(1), half(0)
 
 
-def instrumental_variables(data: MotionData, start: MethodResult, options: EstimationOptions) -> MethodResult:
+def instrumental_variables(data: MotionData, start: MethodResult, options: EstimationOptions,
+                           check: bool = True, skip: tuple[str, ...] = ()) -> MethodResult:
     """Split-sample IDIM-IV, iterated to convergence from ``start``.
 
     The regression of the odd samples uses instruments simulated from the even samples, and the
@@ -335,17 +376,21 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     whose only noise-free information is in the (noisy) voltage; instruments simulated from the
     same samples would bias L (about +15 % at 30 dB SNR here). Noise correlated from one sample to
     the next (not white) brings part of that bias back. The halves are sampled every 2 h, so the
-    filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h).
+    filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h). The equations in
+    ``skip`` are not simulated (a derivative coefficient fixed at 0): their own state is its instrument.
     """
     odd, even = split_halves(data)
-    halves = (prepare(odd, options), prepare(even, options))
+    halves = (prepare(odd, options, strict=check), prepare(even, options, strict=check))
+    if [r.equation for r in halves[0].regressions] != [r.equation for r in halves[1].regressions]:
+        raise NotEnoughExcitation(sorted(set(halves[0].refused) | set(halves[1].refused)),
+                                  "the odd and even samples do not allow the same equations")
     measured = {(reg.equation, k): reg.evaluate(_signals_for(half, reg))
                 for k, half in enumerate(halves) for reg in half.regressions}
     cur = start
     for it in range(1, options.iv_iterations + 1):
         params = cur.as_dict()
-        z = (instruments(halves[1], params, options, +0.5, len(halves[0].signals["w"])),
-             instruments(halves[0], params, options, -0.5, len(halves[1].signals["w"])))
+        z = (instruments(halves[1], params, options, +0.5, len(halves[0].signals["w"]), skip),
+             instruments(halves[0], params, options, -0.5, len(halves[1].signals["w"]), skip))
         fits = {}
         for reg in halves[0].regressions:
             parts = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
@@ -357,8 +402,14 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
         cur = new
         if change < options.iv_tolerance:
             break
-    check_result(cur, options)
+    if check:
+        check_result(cur, options)
     return cur
+
+
+def fell_back(result: MethodResult, method: str, reason: str) -> MethodResult:
+    """``result`` standing in for ``method``, which could not run: labelled ``method``, ``ran`` says what ran."""
+    return replace(result, method=method, message=reason, ran=result.method_used)
 
 
 def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOptions()) -> MotionEstimate:
@@ -386,7 +437,10 @@ def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOpt
     ls = least_squares(p, options)
     iv = oe = None
     if options.method in ("iv", "oe"):
-        iv = instrumental_variables(data, ls, options)
+        try:
+            iv = instrumental_variables(data, ls, options)
+        except (NumericalFailure, np.linalg.LinAlgError) as exc:  # e.g. L/R far below the instruments' step
+            iv = fell_back(ls, "iv", f"IV fell back to LS: {exc}")
     if options.method == "oe":
         from feeddrive.estimator.oe import output_error
 

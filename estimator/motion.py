@@ -208,6 +208,11 @@ class MethodResult:
     iterations: int = 1
     message: str = ""
     parameter_dof: np.ndarray | None = None
+    ran: str = ""  # the method that actually produced the numbers when it fell back ("" = ``method``)
+
+    @property
+    def method_used(self) -> str:
+        return self.ran or self.method
 
     @property
     def parameters(self) -> dict[str, ParameterEstimate]:
@@ -236,6 +241,22 @@ class MotionEstimate:
     ls: MethodResult
     iv: MethodResult | None
     oe: MethodResult | None
+    #: refused parameter -> the rule and its numbers (``estimator.partial``; empty from ``estimate_motion``)
+    refused: Mapping[str, str] = field(default_factory=dict)
+    #: given parameter outside its physical range or the user's bounds -> why (never validated)
+    flags: Mapping[str, str] = field(default_factory=dict)
+    #: parameter -> value of the bounded least squares fit, offered when something is flagged
+    bounded: Mapping[str, float] = field(default_factory=dict)
+    #: parameter -> the value it was fixed at in the re-fit of the others (L = 0: quasi-static equation)
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    #: the given parameters with their covariance before a refused one was fixed at its estimate (the
+    #: intervals not conditional on it): what several motions or files are pooled and compared with
+    joint: MethodResult | None = None
+
+    @property
+    def method_used(self) -> str:
+        """The method whose numbers are given (``iv`` when ``oe`` fell back, ``ls`` when IV did)."""
+        return self.result.method_used
 
     @property
     def result(self) -> MethodResult:
@@ -263,11 +284,23 @@ class MotionEstimate:
 
     def to_dict(self) -> dict:
         """``{"start","end","method","parameters": {name: {"value","ci95"}},"condition_number","fit_error"}``."""
-        return {
-            "start": self.start, "end": self.end, "method": self.method,
+        out = {
+            "start": self.start, "end": self.end, "method": self.method_used,
             "parameters": {n: {"value": p.value, "ci95": list(p.ci95)} for n, p in self.parameters.items()},
             "condition_number": float(self.condition_number), "fit_error": float(self.fit_error),
         }
+        # the keys below appear only when they have something to say
+        if self.method_used != self.method:
+            out |= {"method_requested": self.method, "fallback": self.result.message}
+        if self.refused:
+            out["refused"] = dict(self.refused)
+        if self.fixed:
+            out["fixed"] = {k: float(v) for k, v in self.fixed.items()}
+        if self.flags:
+            out["flags"] = dict(self.flags)
+        if self.bounded:
+            out["bounded"] = {n: {"value": float(v), "bounded": True} for n, v in self.bounded.items()}
+        return out
 
 
 @dataclass
@@ -287,6 +320,10 @@ class Prepared:
     overrides: dict[str, dict[str, np.ndarray]]  # equation -> signals replaced (torque for K i)
     known: dict[str, float]
     block: int
+    #: parameter -> reason, for the regressions ``prepare(..., strict=False)`` left out
+    refused: dict[str, str] = field(default_factory=dict)
+    #: equation -> how many samples are usable and why the others are not (for the messages)
+    notes: dict[str, str] = field(default_factory=dict)
 
 
 def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray, int]:
@@ -327,8 +364,9 @@ def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int) -> tuple[np.
     v = ((G[:nb * block] @ Ai.T) ** 2).reshape(nb, block, -1).sum(axis=1)
     total = v.sum(axis=0)
     k = np.where(total > 0, total ** 2 / np.maximum((v ** 2).sum(axis=0), np.finfo(float).tiny), nb)
-    k = np.clip(k, 1.0 + 1.0 / nb, nb)
-    scale = np.sqrt(np.maximum(k / (k - 1) * max(nb - p, 1) / nb, 1.0))
+    # one block (a short record) leaves k = 1: its k / (k - 1) is capped rather than divided by zero
+    k = np.clip(k, 1.0 + 1.0 / max(nb, 2), max(nb, 2))
+    scale = np.sqrt(np.maximum(k / (k - 1) * max(nb - p, 1) / max(nb, 1), 1.0))
     return cov * np.outer(scale, scale), np.clip(k - 1, 1.0, max(nb - p, 1)), nb
 
 

@@ -51,16 +51,30 @@ def _sensitivities(n: int, free: tuple[str, ...]) -> tuple[ca.Function, ca.Funct
             ca.Function("oe_jac", [q, U, fixed, h], [X, ca.jacobian(ca.vec(X), q)]))
 
 
+def _fallback(start: MethodResult, reason: str) -> MethodResult:
+    return replace(start, method="oe", message=f"output error fell back to {start.method_used.upper()}: {reason}",
+                   ran=start.method_used)
+
+
 def output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -> MethodResult:
     """Refine ``start`` (the IV result) by output error; see the module docstring.
 
     Returns
     -------
     MethodResult
-        Method ``oe``; or ``start`` relabelled ``oe`` with ``message`` saying why it fell back.
+        Method ``oe``; or ``start`` relabelled ``oe`` with ``message`` saying why it fell back (a
+        non-finite simulation or a singular system included: never an exception).
     """
+    try:
+        with np.errstate(all="ignore"):  # non-finite values are tested for and become a fallback
+            return _output_error(p, start, options)
+    except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
+        return _fallback(start, f"{type(exc).__name__}: {exc}")
+
+
+def _output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -> MethodResult:
     def fallback(reason: str) -> MethodResult:
-        return replace(start, method="oe", message=f"output error fell back to IV: {reason}")
+        return _fallback(start, reason)
 
     s = p.signals
     if {r.equation for r in p.regressions} != {"electrical", "mechanical"} or any(p.overrides.values()):
@@ -81,6 +95,9 @@ def output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -
         return np.asarray(X), np.asarray(ca.densify(J)).reshape(2, n - 1, -1, order="F")
 
     X, J = jacobian(q)
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(J))):
+        return fallback(f"the simulation from the {start.method_used.upper()} estimate is unstable or non-finite "
+                        f"at the {h:.3g} s step")
     weight = 1.0 / np.sqrt(np.mean((y[:, 1:] - X) ** 2, axis=1)).clip(1e-12)[:, None]
 
     def residual(X):
@@ -118,6 +135,8 @@ def output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -
     cov, dof, nb = parameter_covariance(G, np.linalg.inv(A), block)
     cov = cov[:len(free), :len(free)]
     sv = np.linalg.svd(Jw.reshape(-1, len(q)) * scale, compute_uv=False)
+    if not (np.all(np.isfinite(cov)) and sv[-1] > 0):
+        return fallback("singular or non-finite output-error covariance")
     fit = float(np.max(np.sqrt(np.sum((y[:, 1:] - X) ** 2, axis=1) / np.sum(y[:, 1:] ** 2, axis=1))))
     result = MethodResult("oe", free, q[:len(free)].copy(), cov, nb - len(q), float(sv[0] / sv[-1]), fit, it,
                           parameter_dof=dof[:len(free)])

@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.models import feed_drive
 
 MODEL = feed_drive()
@@ -139,6 +139,13 @@ def simulate(equations: tuple[str, ...], inputs: Mapping[str, np.ndarray], param
         last = _rollout(model, tuple(equations), names, 2, 2)
         xe = np.asarray(last(X[:, -1], np.concatenate([S[:, m - 1], S[:, m]]), values + [w_eps], hk[-1]))
         X = np.hstack([X, xe.reshape(-1, 1)])
+    if not np.all(np.isfinite(X)):
+        # e.g. an electrical time constant L/R far below the integration step: explicit RK4 diverges
+        tau = {"electrical": ("L", "R"), "mechanical": ("Jt", "ft")}
+        hint = "; ".join(f"{e} time constant {a}/{b} = {params[a] / params[b]:.3g} s"
+                         for e, (a, b) in tau.items() if e in equations and params.get(b) and a in params)
+        raise NumericalFailure(f"the simulation of the {' and '.join(equations)} equation(s) is unstable or non-finite "
+                               f"with an integration step of {k * h:.3g} s" + (f" ({hint})" if hint else ""))
     if k > 1 or at is not None:
         X = CubicSpline(idx, X, axis=1)(np.arange(n) if at is None else at)
     return {s: X[j] for j, s in enumerate(states)}

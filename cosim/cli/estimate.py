@@ -12,15 +12,28 @@ a table per motion with 95 % confidence intervals, or with ``--json``::
     {"side": "motor"|"table", "segments": [{"start": s, "end": s, "method": m,
       "parameters": {"R": {"value": v, "ci95": [lo, hi], "unit": u}, ...}, "condition_number": c, "fit_error": e}]}
 
-holding only the parameters the data determine. When there are several motions, one that cannot
-be estimated (too short, not exciting every parameter) is reported on stderr and left out; if no
-motion is left, the exit status is 2.
+holding only the parameters the data determine; the others are listed in ``"refused"`` with the rule
+that refuses them and its numbers (``estimator.partial``), and ``"fixed"`` says what was fixed in the
+re-fit of the others (L = 0: the quasi-static electrical equation). A given parameter outside its physical
+range or the ``--bounds`` is listed in ``"flags"`` (never to be validated), with the bounded estimate
+(``"bounded"``). ``"method"`` is the method that ran; ``"method_requested"`` and ``"fallback"`` appear when
+it is not the one asked for. When there are several motions, one of which nothing can be estimated is
+reported on stderr and left out; if no motion is left, the exit status is 2.
+
+Several recordings (``cosim estimate A.csv B.csv`` or a quoted glob ``'run*.csv'``) of one machine: a row
+per file (its motions pooled), a test of whether the files agree within their intervals and the pooled
+estimate (``estimator.pooling``); ``--json``: ``{"side", "files": [{"file", "segments", "estimate"}],
+"consistency": {"p_value", "verdict", "differ", "joint": {"chi2", "dof", "p_value"}, "per_parameter",
+"pooled"}}``.
 """
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import sys
+import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -42,33 +55,53 @@ from feeddrive.estimator import (
     FilterSpec,
     MotionData,
     NotEnoughExcitation,
-    estimate_motion,
 )
 from feeddrive.estimator.motion import SAMPLING_DELAY
+from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.physical import parse_bounds
+from feeddrive.estimator.pooling import pool
 from feeddrive.estimator.segmentation import segment
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
          "state": None}
 
 
+class NothingEstimated(InputError):
+    """No motion of a recording could be estimated (each was reported on stderr)."""
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_recording_arguments(parser, ROLES, EstimationOptions().filter.cutoff_hz)
+    add_recording_arguments(parser, ROLES, EstimationOptions().filter.cutoff_hz, several=True)
     parser.add_argument("--known", action="append", default=[], metavar="NAME=VALUE",
                         help="a parameter known in advance, e.g. K=1.05 (mechanical equation only)")
     parser.add_argument("--offset", action="store_true", help="also estimate a constant torque offset T0")
+    parser.add_argument("--bounds", action="extend", nargs="+", default=[], metavar="NAME=LOW:HIGH",
+                        help="bounds on a parameter beyond its physical range, either side may be empty, e.g. "
+                             "Jt=4e-6: (the rotor's own inertia) ft=0:1; an estimate outside is flagged and a "
+                             "bounded estimate offered")
 
 
-def main(args: argparse.Namespace) -> int:
+def data_files(patterns: list[str]) -> list[str]:
+    """The recordings named, a quoted glob pattern expanded (sorted); a pattern matching nothing is an error."""
+    files = []
+    for item in patterns:
+        if not Path(item).exists() and glob.has_magic(item):
+            found = sorted(glob.glob(item))
+            if not found:
+                raise InputError(f"{item}: no file matches this pattern")
+            files.extend(found)
+        else:
+            files.append(item)
+    return files
+
+
+def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict) -> tuple[str, list]:
+    """Load one recording (``cosim.recorded.load_recording``: any reader that returns a ``Recording`` plugs in
+    here), cut it into motions and estimate each; returns (side, estimates). Motions of which nothing can be
+    estimated are reported on stderr and left out; none left is an ``InputError``."""
     roles = mapped_roles(args, ROLES)
-    known = {}
-    for name, value in pairs(args.known, "--known").items():
-        try:
-            known[name] = float(value)
-        except ValueError:
-            raise InputError(f"--known {name}={value!r}: expected a number") from None
-    rec = to_motor_side(load_recording(args.data, roles, args.sample_time, args.delimiter, args.decimal), args)
+    rec = to_motor_side(load_recording(path, roles, args.sample_time, args.delimiter, args.decimal), args)
     side = rec.side or "motor"
-    units = parameter_units(side, "linear" if side == "table" else "rotary")
     options = EstimationOptions(method=args.method, filter=FilterSpec(filter_cutoff(args, rec.h)), known=known,
                                 offset=args.offset, speed_threshold=args.speed_threshold,
                                 speed_unit="m/s" if side == "table" else "rad/s")
@@ -80,39 +113,137 @@ def main(args: argparse.Namespace) -> int:
         speed = np.gradient(sig["position"], rec.h)
     segments = segment(args.segment, rec.n, rec.h, speed, rec.signals.get("state"))
     if not segments:
-        raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
+        raise NothingEstimated(f"{path}: no high-speed motion found (--segment {args.segment})")
     results = []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
         data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, delays=delays, **part)
         try:
-            results.append(estimate_motion(data, options))
+            results.append(estimate_parameters(data, options, bounds))
         except (NotEnoughExcitation, EstimatorInputError) as exc:  # e.g. a rapid block too short to filter
             if len(segments) == 1:
                 raise
             print(f"cosim estimate: motion {data.t0:.4g}-{data.t0 + (data.n - 1) * data.h:.4g} s left out: {exc}",
                   file=sys.stderr)
     if not results:
-        raise InputError(f"{args.data}: no motion could be estimated (see above)")
+        raise NothingEstimated(f"{path}: no motion could be estimated (see above)")
+    return side, results
+
+
+def main(args: argparse.Namespace) -> int:
+    known = {}
+    for name, value in pairs(args.known, "--known").items():
+        try:
+            known[name] = float(value)
+        except ValueError:
+            raise InputError(f"--known {name}={value!r}: expected a number") from None
+    try:
+        bounds = parse_bounds(args.bounds)
+    except EstimatorInputError as exc:
+        raise InputError(str(exc)) from None
+    files = data_files(args.data)
+    with warnings.catch_warnings():  # numerical trouble becomes a refusal or a fallback with its reason
+        warnings.simplefilter("ignore", RuntimeWarning)
+        per_file = []
+        for path in files:
+            try:
+                per_file.append((path, *estimate_file(path, args, known, bounds)))
+            except (NotEnoughExcitation, NothingEstimated) as exc:  # one of several repeats: the others still count
+                if len(files) == 1:
+                    raise
+                print(f"cosim estimate: {path} left out: {exc}", file=sys.stderr)
+    if not per_file:
+        raise InputError(f"none of the {len(files)} recordings could be estimated (see above)")
+    sides = {side for _, side, _ in per_file}
+    if len(sides) > 1:
+        raise InputError(f"the recordings are on different sides ({', '.join(sorted(sides))}): give --pitch or "
+                         f"units that agree")
+    side = sides.pop()
+    units = parameter_units(side, "linear" if side == "table" else "rotary")
+    if len(per_file) == 1:
+        results = per_file[0][2]
+        if args.json:
+            print(json.dumps({"side": side, "segments": [_with_units(r.to_dict(), units) for r in results]}))
+        else:
+            print(table(results, units))
+        return 0
+    # pooled and compared with the intervals not conditional on a refused parameter (MotionEstimate.joint)
+    rows = [(path, results, pool([r.joint or r.result for r in results])) for path, _, results in per_file]
+    # between files: a file's one motion with its full covariance, or its motions pooled
+    verdict = pool([(results[0].joint or results[0].result) if len(results) == 1 else pooled.as_result()
+                    for _, results, pooled in rows])
     if args.json:
-        segments = [r.to_dict() for r in results]
-        for seg in segments:
-            for name, p in seg["parameters"].items():
-                p["unit"] = units[name]
-        print(json.dumps({"side": side, "segments": segments}))
+        files_out = [{"file": path, "segments": [_with_units(r.to_dict(), units) for r in results],
+                      "estimate": _units(_params(pooled.parameters), units)} for path, results, pooled in rows]
+        out = verdict.to_dict()
+        _units(out["pooled"], units)
+        print(json.dumps({"side": side, "files": files_out, "consistency": out}))
     else:
-        print(table(results, units))
+        print(several_table(rows, verdict, units))
     return 0
 
 
+def _params(parameters: dict) -> dict:
+    return {n: {"value": p.value, "ci95": list(p.ci95)} for n, p in parameters.items()}
+
+
+def _units(params: dict, units: dict) -> dict:
+    for name, p in params.items():
+        p["unit"] = units[name]
+    return params
+
+
+def _with_units(seg: dict, units: dict) -> dict:
+    _units(seg["parameters"], units)
+    return seg
+
+
+def several_table(rows, verdict, units: dict[str, str]) -> str:  # noqa: ANN001 - [(path, estimates, Pooled)]
+    """A row per file (value +- 95 % half-width of each parameter), the agreement test and the pooled estimate."""
+    names = list(verdict.parameters)
+    lines = ["file".ljust(24) + "".join(f"{n:>24}" for n in names)]
+    for path, results, pooled in rows:
+        cells = []
+        for n in names:
+            p = pooled.parameters.get(n)
+            cells.append(f"{p.value:.5g} +- {(p.ci95[1] - p.ci95[0]) / 2:.2g}".rjust(24) if p else "refused".rjust(24))
+        lines.append(Path(path).name[:23].ljust(24) + "".join(cells))
+        for r in results:
+            for n, why in r.refused.items():
+                lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} refused: {why}")
+            for n, why in r.flags.items():
+                lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} FLAGGED, not to be validated: {why}")
+    lines.append(f"agreement: {verdict.verdict} (p = {verdict.p_value:.3g}, Bonferroni over "
+                 f"{len(verdict.per_parameter)} parameters; joint chi2 {verdict.chi2:.3g} on {verdict.dof} dof, "
+                 f"p = {verdict.joint_p:.3g})")
+    lines.append("  per parameter: " + ", ".join(f"{n} chi2 {c:.3g} on {d}, p {p:.3g}"
+                                                 for n, (c, d, p) in verdict.per_parameter.items()))
+    lines.append("pooled:")
+    for n, p in verdict.parameters.items():
+        note = ", the files differ" if n in verdict.differ else ""
+        lines.append(f"  {n:3} {p.value:12.6g} {units[n]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}] "
+                     f"({verdict.count[n]} file(s){note})")
+    return "\n".join(lines)
+
+
 def table(results, units: dict[str, str]) -> str:  # noqa: ANN001 - list of estimator.MotionEstimate
-    """One block per motion: parameter, value, unit (``units``: the data's side), 95 % confidence interval."""
+    """One block per motion: parameter, value, unit (``units``: the data's side), 95 % confidence interval;
+    then the refused parameters with their reason, the flagged ones and the bounded estimate."""
     lines = []
     for k, r in enumerate(results, 1):
-        lines.append(f"motion {k}: {r.start:.4g}-{r.end:.4g} s, {r.method.upper()}, condition number "
+        lines.append(f"motion {k}: {r.start:.4g}-{r.end:.4g} s, {r.method_used.upper()}, condition number "
                      f"{r.condition_number:.3g}, fit error {r.fit_error:.3g}")
         if r.result.message:
             lines.append(f"  ({r.result.message})")
         for name, p in r.parameters.items():
-            lines.append(f"  {name:3} {p.value:12.6g} {units[name]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]")
+            flag = "  FLAGGED" if name in r.flags else ""
+            lines.append(f"  {name:3} {p.value:12.6g} {units[name]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]{flag}")
+        for name, why in r.refused.items():
+            fixed = (f" (fixed at {r.fixed[name]:.4g} in the re-fit of the others: their intervals hold given this "
+                     f"value)" if name in r.fixed else "")
+            lines.append(f"  {name:3} refused: {why}{fixed}")
+        for name, why in r.flags.items():
+            lines.append(f"  {name:3} FLAGGED, not to be validated: {why}")
+        if r.bounded:
+            lines.append("  bounded estimate: " + ", ".join(f"{n} {v:.6g} {units[n]}" for n, v in r.bounded.items()))
     return "\n".join(lines)

@@ -1,0 +1,315 @@
+"""One parameter at a time: each physical parameter is given or refused on its own reason (issue 22).
+
+``estimate_motion`` gives all the parameters of a motion or raises ``NotEnoughExcitation`` (the monitor
+needs the whole set to validate it). ``estimate_parameters`` gives every parameter the data determine
+and names the others with the rule that refuses them and its numbers:
+
+* ``one direction``: every usable sample of the mechanical equation has the same sign of speed, so
+  ``Cd sign(w)`` is a constant torque, the same as an offset or a load torque: Cd (and T0) refused;
+* ``speed range``: ``|w|`` spans too narrow a range (``MIN_SPEED_SPREAD`` of its largest value between the 5th
+  and 95th percentiles) for ``ft w`` to be told from ``Cd sign(w)``: ft and Cd refused;
+* ``sample period``: the electrical time constant ``L/R`` (its 95 % upper bound) is shorter than
+  ``MIN_TAU_SAMPLES`` sample periods: L refused, R and K from the quasi-static equation ``u = R i + K w``;
+* ``excitation``: the estimator's rules, per parameter: too few (fast) samples in its equation, a weak
+  direction of the column-scaled regressor (condition number above ``max_condition``), and, for every
+  parameter, a 95 % interval wider than ``+-1.96 max_relative_std`` of its value (the printed interval
+  itself, so a t quantile with few degrees of freedom counts), or fewer covariance blocks than parameters.
+
+One rule decides what is given: a parameter is printed only if no rule refuses it, so no printed
+interval is wider than the one that refuses another file's parameter. A parameter refused because it is
+collinear with others is fixed in the re-fit of the others (``fixed``: L, Jt, ft or T0 at 0), or kept as
+a lumped term (Cd carries ``Cd + T0`` or the friction at the motion's speed) and not given.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import replace
+
+import numpy as np
+from scipy import stats
+
+from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.estimate import (
+    _column_reference,
+    _combine,
+    _signals_for,
+    _solve,
+    fell_back,
+    instrumental_variables,
+    prepare,
+)
+from feeddrive.estimator.motion import PHYSICAL, EstimationOptions, MethodResult, MotionData, MotionEstimate
+from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
+
+#: Smallest spread of |w| (5th to 95th percentile, relative to the 95th) that separates ft from Cd.
+MIN_SPEED_SPREAD = 0.2
+#: Fewest sample periods in the electrical time constant L/R for L to be identifiable.
+MIN_TAU_SAMPLES = 1.0
+#: Fewest usable samples of the minority direction for Cd to be told from an offset.
+MIN_REVERSED = 20
+#: Parameters that may be fixed (at 0) in the re-fit of the others when the data cannot determine them.
+FIXABLE = ("L", "Jt", "ft", "T0")
+
+
+def _apriori(p, options: EstimationOptions, fixed: dict, refused: dict, lumped: set) -> bool:
+    """The rules decided from the data alone (one direction, speed range). True if something was fixed."""
+    mech = next((r for r in p.regressions if r.equation == "mechanical"), None)
+    if mech is None:
+        return False
+    rows = p.rows["mechanical"]
+    w = p.signals["w"][rows]
+    changed = False
+    if "Cd" in mech.names and "T0" in mech.names and "Cd" not in refused:
+        pos, neg = int((w > 0).sum()), int((w < 0).sum())
+        if min(pos, neg) < MIN_REVERSED:
+            why = (f"one direction only: {pos} usable samples at w > 0, {neg} at w < 0 (need {MIN_REVERSED} of "
+                   f"each): Cd and the torque offset T0 are confounded (only Cd + T0 is determined)")
+            refused.update({"Cd": why, "T0": why})
+            lumped.add("Cd")
+            fixed["T0"], changed = 0.0, True
+    if "ft" in mech.names and "Cd" in mech.names and "ft" not in refused:
+        lo, hi = np.percentile(np.abs(w), [5, 95]) if w.size else (0.0, 0.0)
+        spread = (hi - lo) / hi if hi > 0 else 0.0
+        if spread < MIN_SPEED_SPREAD:
+            why = (f"too narrow a speed range: |w| within [{lo:.4g}, {hi:.4g}] {options.speed_unit} on 90 % of the "
+                   f"usable samples (spread {spread:.0%} < {MIN_SPEED_SPREAD:.0%}): viscous ft and dry Cd friction "
+                   f"cannot be told apart")
+            refused.update({"ft": why, "Cd": refused.get("Cd", why)})
+            lumped.add("Cd")
+            fixed["ft"], changed = 0.0, True
+    return changed
+
+
+def _weak(exc: NotEnoughExcitation, reg, fixed: dict, refused: dict, lumped: set) -> bool:
+    """A weak direction in ``reg``: fix what can be fixed (True), or refuse the whole equation (False)."""
+    weak = [n for n in exc.unidentifiable if n in reg.names]
+    if weak and "condition number" in exc.reason:
+        if set(weak) <= set(FIXABLE) | {"Cd"}:
+            if "Cd" in weak and ({"ft", "T0"} & set(weak)):
+                weak.remove("Cd")
+                lumped.add("Cd")
+                refused.setdefault("Cd", exc.reason)
+            for n in weak:
+                fixed[n] = 0.0
+                refused.setdefault(n, exc.reason)
+            return True
+    for n in reg.names:  # the whole equation (not its normaliser: K may come from the other equation)
+        refused.setdefault(n, exc.reason)
+    return False
+
+
+def _tau_rule(fit, reg, h: float, fixed: dict, refused: dict) -> bool:
+    """L refused when the electrical time constant is shorter than the sample period (True: L fixed)."""
+    if reg.equation != "electrical" or not {"R", "L"} <= set(reg.names):
+        return False
+    jr, jl = reg.names.index("R"), reg.names.index("L")
+    R, L = fit.theta[jr], fit.theta[jl]
+    sl = float(np.sqrt(max(fit.cov[jl, jl], 0.0)))
+    q = float(stats.t.ppf(0.975, max(float(fit.theta_dof[jl]), 1.0)))
+    if not R > 0:
+        return False
+    tau, tau_hi = L / R, (L + q * sl) / R
+    if tau_hi < MIN_TAU_SAMPLES * h:
+        refused["L"] = (f"sample period {h:.3g} s too long for the electrical time constant L/R = {tau:.3g} s (95 % "
+                        f"upper bound {tau_hi:.3g} s): L cannot be identified; R and K from the quasi-static "
+                        f"equation u = R i + K w")
+        fixed["L"] = 0.0
+        return True
+    return False
+
+
+def _fit_ls(data: MotionData, options: EstimationOptions):
+    """LS with the refusals and the re-fits; returns (Prepared, MethodResult or None, fixed, refused, lumped)."""
+    fixed: dict[str, float] = {}
+    refused: dict[str, str] = {}
+    lumped: set[str] = set()
+    for _ in range(8):  # each round fixes at least one more parameter (at most 4 can be)
+        opts = replace(options, known={**options.known, **fixed})
+        p = prepare(data, opts, strict=False)
+        for n, why in p.refused.items():
+            refused.setdefault(n, why)
+        if _apriori(p, opts, fixed, refused, lumped):
+            continue
+        fits, again = {}, False
+        for reg in p.regressions:
+            y, Phi = reg.evaluate(_signals_for(p, reg))
+            try:
+                fit = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, opts,
+                             _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
+            except NotEnoughExcitation as exc:
+                again |= _weak(exc, reg, fixed, refused, lumped)
+                continue
+            except (np.linalg.LinAlgError, FloatingPointError) as exc:  # e.g. eigh not converging on extreme values
+                refused.update({n: f"the {reg.equation} fit failed numerically ({exc})" for n in reg.names})
+                continue
+            if not np.all(np.isfinite(fit.theta)) or not np.all(np.isfinite(fit.cov)):
+                refused.update({n: f"non-finite {reg.equation} fit" for n in reg.names})
+                continue
+            if fit.dof + len(reg.names) < len(reg.names):  # fewer blocks than parameters: a singular covariance
+                nb = fit.dof + len(reg.names)
+                why = (f"the motion holds {nb} block(s) of {p.block * p.h:.3g} s for the uncertainty of the "
+                       f"{reg.equation} equation; its {len(reg.names)} parameters need at least {len(reg.names)}")
+                refused.update({n: why for n in reg.names})
+                continue
+            if _tau_rule(fit, reg, p.h, fixed, refused):
+                again = True
+                continue
+            fits[reg.equation] = fit
+        if again:
+            continue
+        # an equation scaled by a parameter that is refused cannot give its parameters
+        usable = [r for r in p.regressions if r.equation in fits]
+        names = {n for r in usable for n in r.names}
+        for r in list(usable):
+            if r.normaliser and (r.normaliser not in names or r.normaliser in refused):
+                why = (f"{r.equation} equation is scaled by {r.normaliser}, which is refused "
+                       f"({refused.get(r.normaliser, 'no voltage signal')})")
+                for n in r.names:
+                    refused.setdefault(n, why)
+                usable.remove(r)
+                fits.pop(r.equation)
+        if not usable:
+            return p, None, fixed, refused, lumped
+        p = replace(p, regressions=usable)
+        return p, _combine("ls", p, fits), fixed, refused, lumped
+    raise EstimatorInputError("the re-fits without the refused parameters did not settle")  # pragma: no cover
+
+
+def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed: dict) -> MethodResult:
+    """The relative standard error rule, for every parameter of ``result``; refusals added to ``refused``.
+
+    A parameter refused by it is fixed at its own estimate (stated in ``fixed``) for the others: their
+    covariance becomes the one given that value (the Schur complement, what a re-fit with it known gives
+    for least squares), so its uncertainty and collinearity do not spoil them. Repeated until no more is
+    refused. Returns ``result`` with that covariance.
+    """
+    names, values = list(result.names), np.asarray(result.values, dtype=float)
+    cov = np.array(result.covariance, dtype=float)
+    dof = np.full(len(names), float(result.dof)) if result.parameter_dof is None else np.asarray(result.parameter_dof)
+    # judged on the printed interval: its half-width against that of a standard error of max_relative_std
+    # with many degrees of freedom (a t quantile with few dof widens both alike)
+    widen = stats.t.ppf(0.975, np.maximum(dof, 1.0)) / stats.norm.ppf(0.975)
+    out: list[int] = []
+    while True:
+        std = np.sqrt(np.clip(np.diag(cov), 0, None)) * widen
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = np.where(values != 0, std / np.abs(values), np.inf)
+        over = [j for j, n in enumerate(names) if j not in out and n not in refused
+                and not rel[j] <= options.max_relative_std]
+        if not over:
+            break
+        new = [max(over, key=lambda j: rel[j])]  # the worst first: fixing it may bring the others within the rule
+        for j in new:
+            refused[names[j]] = (f"95 % interval +-{rel[j] * stats.norm.ppf(0.975):.0%} of the value, more than "
+                                 f"+-{options.max_relative_std * stats.norm.ppf(0.975):.0%} (a relative standard error "
+                                 f"above {options.max_relative_std:.0%}; {result.method_used.upper()}: {values[j]:.4g})")
+            fixed[names[j]] = float(values[j])
+        out += new
+        keep = [j for j in range(len(names)) if j not in out]
+        C = np.zeros_like(cov)
+        if keep:
+            kk, kr, rr = np.ix_(keep, keep), np.ix_(keep, out), np.ix_(out, out)
+            C[kk] = cov[kk] - cov[kr] @ np.linalg.pinv(cov[rr], hermitian=True) @ cov[kr].T
+        cov = C
+    return replace(result, covariance=cov) if out else result
+
+
+def _subset(result: MethodResult, names: list[str]) -> MethodResult:
+    idx = [result.names.index(n) for n in names]
+    dof = None if result.parameter_dof is None else np.asarray(result.parameter_dof)[idx]
+    return replace(result, names=tuple(names), values=np.asarray(result.values)[idx],
+                   covariance=np.asarray(result.covariance)[np.ix_(idx, idx)], parameter_dof=dof)
+
+
+def estimate_parameters(data: MotionData, options: EstimationOptions = EstimationOptions(),
+                        bounds: Bounds | None = None) -> MotionEstimate:
+    """Every parameter the motion determines, the others refused with their reason (module docstring).
+
+    Parameters
+    ----------
+    data : MotionData
+    options : EstimationOptions
+    bounds : mapping of str to (lower or None, upper or None), optional
+        The user's bounds (e.g. ``{"Jt": (4e-6, None)}``: a rotor inertia) on top of the physical ranges.
+
+    Returns
+    -------
+    MotionEstimate
+        ``parameters`` holds the given ones only; ``refused`` the others with the reason; ``fixed`` what
+        was fixed in the re-fit; ``flags`` the given ones outside their physical range or bounds (never
+        to be validated), and ``bounded`` the bounded least squares estimate offered then.
+
+    Raises
+    ------
+    NotEnoughExcitation
+        Nothing at all can be estimated (every parameter refused; the reasons are joined).
+    EstimatorInputError
+        Unusable signals or options.
+    """
+    with np.errstate(all="ignore"):  # non-finite values are tested for: they become refusals, never warnings
+        p, ls, fixed, refused, lumped = _fit_ls(data, options)
+        if ls is None:
+            reasons = {}
+            for n, why in refused.items():
+                reasons.setdefault(why, []).append(n)
+            raise NotEnoughExcitation(list(refused), next(iter(reasons)) if len(reasons) == 1 else
+                                      "; ".join(f"{', '.join(ns)}: {why}" for why, ns in reasons.items()))
+        final = ls
+        iv = oe = None
+        if options.method in ("iv", "oe"):
+            iv = _iv(data, ls, replace(options, known={**options.known, **fixed}), fixed,
+                     {r.equation for r in p.regressions})
+            final = iv
+        if options.method == "oe":
+            oe = _oe(p, iv, options, fixed)
+            final = oe
+        unconditional = final
+        final = _rule(final, options, refused, fixed)
+        if options.method == "ls":
+            ls = final
+        elif options.method == "iv":
+            iv = final
+        else:
+            oe = final
+        given = [n for n in final.names if n not in refused and n not in lumped]
+        subsets = {m: None if r is None else _subset(r, [n for n in given if n in r.names])
+                   for m, r in (("ls", ls), ("iv", iv), ("oe", oe))}
+        shown = subsets[options.method]
+        flags = physical_flags(shown, bounds or {})
+        bounded = bounded_fit(p, {**options.known, **fixed}, bounds or {}, given) if flags else {}
+    start, end = float(data.t0), float(data.t0 + (data.n - 1) * data.h)
+    order = [v.name for v in PHYSICAL]
+    refused = {n: refused[n] for n in sorted(refused, key=order.index) if n not in options.known}
+    return MotionEstimate(options.method, start, end, subsets["ls"], subsets["iv"], subsets["oe"], refused=refused,
+                          flags=flags, bounded=bounded, fixed={n: v for n, v in fixed.items() if n in refused},
+                          joint=_subset(unconditional, list(shown.names)))
+
+
+def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float],
+        equations: set[str]) -> MethodResult:
+    """IV from ``ls``, or ``ls`` labelled ``iv`` with the reason it could not run."""
+    # an equation whose derivative coefficient is fixed at 0 cannot be simulated: its measured state is its own
+    # instrument (IV = LS for it), the other equation still gets simulated instruments
+    dynamic = {eq: n for eq, n in (("electrical", "L"), ("mechanical", "Jt")) if fixed.get(n) == 0.0}
+    if equations <= set(dynamic):
+        return fell_back(ls, "iv", f"IV fell back to LS: {', '.join(dynamic.values())} fixed at 0, the instruments "
+                                   f"cannot be simulated")
+    try:
+        res = instrumental_variables(data, ls, options, check=False, skip=tuple(dynamic))
+        if dynamic:
+            res = replace(res, message=f"IV without simulated instruments for the {', '.join(dynamic)} equation "
+                                       f"({', '.join(n + ' fixed at 0' for n in dynamic.values())})")
+    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:  # NotEnoughExcitation, NumericalFailure
+        return fell_back(ls, "iv", f"IV fell back to LS: {exc}")
+    if not (np.all(np.isfinite(res.values)) and np.all(np.isfinite(res.covariance))):
+        return fell_back(ls, "iv", "IV fell back to LS: non-finite IV estimate")
+    return res
+
+
+def _oe(p, iv: MethodResult, options: EstimationOptions, fixed: Mapping[str, float]) -> MethodResult:
+    from feeddrive.estimator.oe import _fallback, output_error
+
+    if fixed:
+        return _fallback(iv, "parameters fixed in the re-fit (" + ", ".join(f"{n} = {v:g}" for n, v in fixed.items())
+                         + ")" + (f"; {iv.message}" if iv.message else ""))
+    return output_error(p, iv, options)

@@ -1,0 +1,113 @@
+"""Physical ranges of the parameters, the user's bounds, and the bounded estimate offered when one is left.
+
+R, L, K and Jt must be positive; ft and Cd must not be negative (an interval wholly below zero is
+impossible: a driving torque the model lacks, gravity, a sensor's sign). The user may add bounds, e.g.
+``Jt >= 4e-6`` (the rotor's own inertia). An estimate outside is flagged with the reason and never
+validated; the bounded least squares estimate (``scipy.optimize.lsq_linear`` on the same rows) is then
+offered, marked as bounded (it has no confidence interval: the bound, not the data, decides it).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.motion import PHYSICAL, MethodResult
+
+#: parameter -> (lower or None, upper or None)
+Bounds = Mapping[str, tuple[float | None, float | None]]
+STRICT = tuple(v.name for v in PHYSICAL if v.lower_strict)  # R, L, K, Jt: > 0
+NON_NEGATIVE = tuple(v.name for v in PHYSICAL if v.lower is not None and not v.lower_strict)  # ft, Cd: >= 0
+
+
+def parse_bounds(items: list[str], where: str = "--bounds") -> dict[str, tuple[float | None, float | None]]:
+    """``["Jt=1e-5:1", "ft=0:"]`` -> ``{"Jt": (1e-5, 1.0), "ft": (0.0, None)}`` (one clear error otherwise)."""
+    names = [v.name for v in PHYSICAL]
+    out = {}
+    for item in items:
+        name, sep, rng = item.partition("=")
+        lo, colon, hi = rng.partition(":")
+        name = name.strip()
+        if not sep or not colon or name not in names:
+            raise EstimatorInputError(f"{where} {item!r}: expected NAME=LOW:HIGH (either may be empty) with NAME one "
+                                      f"of {', '.join(names)}")
+        try:
+            b = tuple(float(x) if x.strip() else None for x in (lo, hi))
+        except ValueError:
+            raise EstimatorInputError(f"{where} {item!r}: LOW and HIGH must be numbers") from None
+        if any(x is not None and not np.isfinite(x) for x in b) or (None not in b and b[0] > b[1]):
+            raise EstimatorInputError(f"{where} {item!r}: expected finite LOW <= HIGH")
+        out[name] = b
+    return out
+
+
+def bounds_mapping(raw: object, where: str = "monitor.bounds") -> dict[str, tuple[float | None, float | None]]:
+    """A scenario's ``bounds:`` mapping, ``{Jt: "4e-6:", ft: [0, null]}``, as ``parse_bounds`` gives it."""
+    if not isinstance(raw, Mapping):
+        raise EstimatorInputError(f"{where}: expected a mapping NAME: 'LOW:HIGH' or [LOW, HIGH], got {raw!r}")
+    items = []
+    for name, rng in raw.items():
+        if isinstance(rng, (list, tuple)) and len(rng) == 2:
+            rng = ":".join("" if x is None else str(x) for x in rng)
+        if not isinstance(rng, str):
+            raise EstimatorInputError(f"{where}: {name}: expected 'LOW:HIGH' or [LOW, HIGH], got {rng!r}")
+        items.append(f"{name}={rng}")
+    return parse_bounds(items, where)
+
+
+def physical_flags(result: MethodResult | None, bounds: Bounds) -> dict[str, str]:
+    """Given parameters outside their physical range or the user's bounds -> the reason, with the numbers."""
+    flags: dict[str, str] = {}
+    if result is None:
+        return flags
+    for name, p in result.parameters.items():
+        lo, hi = bounds.get(name, (None, None))
+        if name in STRICT and not p.value > 0:
+            flags[name] = f"{name} = {p.value:.4g} is not positive: physically impossible"
+        elif name in NON_NEGATIVE and p.ci95[1] < 0:
+            flags[name] = (f"{name} = {p.value:.4g}, 95 % CI [{p.ci95[0]:.4g}, {p.ci95[1]:.4g}] wholly below 0: a "
+                           f"negative friction is impossible (a driving torque the model lacks?)")
+        elif lo is not None and p.value < lo:
+            flags[name] = f"{name} = {p.value:.4g} below the stated lower bound {lo:g}"
+        elif hi is not None and p.value > hi:
+            flags[name] = f"{name} = {p.value:.4g} above the stated upper bound {hi:g}"
+    return flags
+
+
+def _limits(name: str, bounds: Bounds) -> tuple[float, float]:
+    lo, hi = bounds.get(name, (None, None))
+    phys = 0.0 if name in STRICT or name in NON_NEGATIVE else -np.inf
+    return max(phys, -np.inf if lo is None else lo), np.inf if hi is None else hi
+
+
+def bounded_fit(p, known: Mapping[str, float], bounds: Bounds, names: list[str]) -> dict[str, float]:
+    """Bounded least squares of every regression of ``p`` (``Prepared``) within the physical ranges and ``bounds``.
+
+    A normalised equation (``theta = p / K``) takes its bounds divided by the bounded K. Returns the given
+    ``names`` only; {} when a bounded fit cannot be made (then nothing is offered).
+    """
+    from feeddrive.estimator.estimate import _signals_for
+
+    values: dict[str, float] = dict(known)
+    regs = sorted(p.regressions, key=lambda r: r.normaliser is not None)  # the one giving K first
+    for reg in regs:
+        scale_by = 1.0
+        if reg.normaliser:
+            scale_by = values.get(reg.normaliser, np.nan)
+            if not scale_by > 0:
+                return {}
+        y, Phi = reg.evaluate(_signals_for(p, reg))
+        rows = p.rows[reg.equation]
+        X, y = Phi[rows], y[rows]
+        col = np.sqrt(np.einsum("ij,ij->j", X, X))
+        col[col == 0] = 1.0
+        lim = np.array([_limits(n, bounds) for n in reg.names]).T / scale_by * col
+        if np.any(lim[0] > lim[1]):
+            return {}
+        fit = lsq_linear(X / col, y, bounds=(lim[0], lim[1]))
+        if not fit.success or not np.all(np.isfinite(fit.x)):
+            return {}
+        values.update({n: float(v) * scale_by for n, v in zip(reg.names, fit.x / col)})
+    return {n: values[n] for n in names if n in values}
