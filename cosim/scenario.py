@@ -369,7 +369,9 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         from feeddrive.fmu_build import builtin_fmu
 
         path = Path(builtin_fmu(backlash=p.fmu == "builtin-backlash")).resolve()
-        role_map = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} | dict(p.map)
+        # the built-in x is the table travel in the unit of its pitch: rad on a rotary axis, whatever it declares
+        role_map = {r: MapEntry(var=v, unit="rad" if r == "position" and s.axis.kind == "rotary" else None)
+                    for r, v in BUILTIN_MAP.items()} | dict(p.map)
     else:
         path = (s.base_dir / Path(p.fmu).expanduser()).resolve()
         role_map = dict(p.map)
