@@ -190,7 +190,7 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
         quantity(unit, base)
         a, b = _affine(unit, base, target)  # role = a * y + b
     except ValueError as exc:
-        raise UnitProblem(key, f"{whose}: {exc}; expected a unit convertible to {target} "
+        raise UnitProblem(key, f"{whose}, a unit pint does not know ({exc}); expected a unit convertible to {target} "
                                f"(state the variable's true unit with unit: '...')") from None
     except pint.errors.DimensionalityError:
         if given and quantity(unit, base).dimensionless:

@@ -118,7 +118,7 @@ def test_an_incompatible_declared_unit_is_one_line_exit_2(tmp_path, foreign_fmu,
     ({"var": "n_ist", "scale": 0.1}, "scale", r"scale 0\.1 contradicts"),
     ({"var": "n_ist", "offset": 1.0}, "offset", r"offset 1 contradicts"),
     ({"var": "n_ist", "unit": "V"}, "unit", r"'n_ist' is stated in V, role 'speed' needs rad/s: incompatible"),
-    ({"var": "n_ist", "unit": "blorps"}, "unit", r"unit 'blorps' is not a unit pint knows"),
+    ({"var": "n_ist", "unit": "blorps"}, "unit", r"'n_ist' is stated in blorps, a unit pint does not know"),
 ])
 def test_a_contradicting_scale_or_unit_is_refused(tmp_path, foreign_fmu, entry, key, pattern):
     with pytest.raises(ScenarioError, match=rf"plant\.map\.speed\.{key}: ForeignDrive\.fmu: {pattern}") as info:
