@@ -144,3 +144,59 @@ def test_info_prints_each_conversion(tmp_path, foreign_fmu, capsys):
                  "position [m] <- s_ist [mm] x 0.001", "current [A] <- I_ist [mA] x 0.001",
                  "load [N.m] -> M_last [kN.m] x 0.001", "voltage [V] <- U_ist [V] x 1", "map OK"):
         assert f"  {line}\n" in out, out
+
+
+NO_UNITS = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Real
+
+
+class Bare(Fmi2Slave):
+    """An ideal speed-controlled axis whose variables declare no unit (pythonfmu writes none)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.w_set = self.T = self.w = self.x = self.U = self.I = 0.0
+        for name in ("w_set", "T"):
+            self.register_variable(Real(name, causality=Fmi2Causality.input))
+        for name in ("w", "x", "U", "I"):
+            self.register_variable(Real(name, causality=Fmi2Causality.output))
+
+    def do_step(self, t, dt):
+        self.w = self.w_set
+        self.x += self.w_set / (2 * 3.141592653589793) * 0.02 * dt
+        self.U = 1.05 * self.w
+        self.I = self.T / 1.05
+        return True
+'''
+
+
+def test_a_variable_without_unit_is_a_stated_assumption(tmp_path, capsys):
+    import textwrap
+
+    from pythonfmu.builder import FmuBuilder
+
+    script = tmp_path / "bare.py"
+    script.write_text(textwrap.dedent(NO_UNITS))
+    fmu = FmuBuilder.build_FMU(script, dest=tmp_path)
+    d = data({"fmu": str(fmu), "map": {"speed_ref": {"var": "w_set"}, "load": {"var": "T"},
+                                      "voltage": {"var": "U"}, "current": {"var": "I", "scale": 2.0},
+                                      "speed": {"var": "w"}, "position": {"var": "x"}}})
+    d["stop_time"], d["nc"]["program"] = 0.3, [{"rapid": {"to": 0.01}}]
+    d.pop("monitor")
+    d["plant"].pop("parameters")
+    path = tmp_path / "bare.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    assert main(["info", str(fmu), "--map", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "  speed [rad/s] <- w [?]  unit not declared: taken as rad/s\n" in out
+    assert "  current [A] <- I [?] x 2  (unit not declared: scale 2 offset 0 as given)\n" in out
+    run = subprocess.run([sys.executable, "-m", "feeddrive.cosim", "run", str(path), "--out", str(tmp_path / "o"),
+                          "--no-progress"], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    notes = [line for line in run.stdout.splitlines() if line.startswith("plant.map:")]
+    assert notes == ["plant.map: speed_ref <- w_set: unit not declared: taken as rad/s",
+                     "plant.map: load <- T: unit not declared: taken as N.m",
+                     "plant.map: voltage <- U: unit not declared: taken as V",
+                     "plant.map: current <- I: unit not declared: scale 2 offset 0 as given",
+                     "plant.map: speed <- w: unit not declared: taken as rad/s",
+                     "plant.map: position <- x: unit not declared: taken as m"], run.stdout
