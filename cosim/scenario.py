@@ -233,7 +233,10 @@ def load_plant_map(path: str | Path) -> tuple[dict[str, MapEntry], Callable[[Key
         plant = PlantConfig.model_validate(raw)
     except ValidationError as exc:
         raise from_validation(exc, raw, str(path), lines, prefix=("plant",), model=PlantConfig) from None
-    defaults = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} if plant.fmu in BUILTIN_PLANTS else {}
+    axis = data.get("axis") if isinstance(data, dict) else None
+    rotary = isinstance(axis, dict) and axis.get("kind") == "rotary"  # the built-in x is then in rad
+    defaults = {r: MapEntry(var=v, unit="rad" if rotary and r == "position" else None)
+                for r, v in BUILTIN_MAP.items()} if plant.fmu in BUILTIN_PLANTS else {}
     return defaults | dict(plant.map), lambda key, message: located_error(str(path), lines, key, message)
 
 

@@ -89,7 +89,7 @@ class Conversion:
         text += f" x {self.scale:.5g}" + (f" {'+' if self.offset >= 0 else '-'} {abs(self.offset):.5g}"
                                           if self.offset else "")
         if self.source == "stated" and self.declared != self.unit:
-            text += f"  (unit stated in the scenario; the FMU declares {self.declared or 'none'})"
+            text += f"  (unit stated; the FMU declares {self.declared or 'none'})"
         if self.display_unit and self.display_unit != self.unit:
             text += f"  (displayUnit {self.display_unit})"
         if self.how == "given":
