@@ -367,8 +367,10 @@ def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int,
     ``stationary`` (p, p), the score covariance under a stationary equation error
     (:func:`stationary_score_covariance`), is a floor: a parameter whose batch-means variance falls below
     its stationary-error variance takes the latter, with ``nb - p`` degrees of freedom (its error
-    autocovariance rests on every block). Batch means alone put the 95 % interval of L around the truth
-    in 88 % of noise draws on a tool change, 2 in 3 of the misses with a variance from 4 of 35 blocks.
+    autocovariance rests on every block). Over 40 white-noise draws on examples/tool_change.yaml (the
+    sensors' default noise, 50 Hz filter), batch means alone gave L a standard error of 0.46 to 2.0 times
+    its Monte-Carlo value 5.05e-6 H; with the floor 0.96 to 2.0 (coverage of the 95 % interval 95 -> 100 %;
+    R and K unchanged). Issue 23's run had a half-width of 7.4e-6 H where 1.96 x 5.05e-6 = 9.9e-6.
     """
     S, nb = long_run_covariance(G, block)
     p = G.shape[1]
