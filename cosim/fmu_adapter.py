@@ -208,8 +208,8 @@ class FMUComponent(Component):
         self._u = (ctypes.c_double * self._nu)(*[float(variables[n].start or 0.0) for n in in_vars])
         self._yvr = (ctypes.c_uint * self._ny)(*[vr[n] for n in out_vars])
         self._y = (ctypes.c_double * self._ny)()
-        self._in_lin = [(k, roles[r].scale, roles[r].offset) for k, r in enumerate(self.input_names)]
-        self._out_lin = [(roles[r].scale, roles[r].offset) for r in out_roles] + [(1.0, 0.0)] * len(extras)
+        self._in_lin = [(k, *roles[r].linear()) for k, r in enumerate(self.input_names)]
+        self._out_lin = [roles[r].linear() for r in out_roles] + [(1.0, 0.0)] * len(extras)
         if all(s == 1 and o == 0 for _, s, o in self._in_lin):
             self.set_inputs = self._set_inputs_identity
         if all(s == 1 and o == 0 for s, o in self._out_lin):
@@ -328,7 +328,7 @@ class FMUComponent(Component):
     # -- Model Exchange: exact interval means ------------------------------------------------------------
     def _start_means(self, roles: Any) -> None:
         """``<role>_mean`` outputs: CVode integrates q' = y with the states, q reset at each step."""
-        lin = [(roles[r].scale, roles[r].offset) for r in self._mean_roles]
+        lin = [roles[r].linear() for r in self._mean_roles]
         self.output_names += tuple(f"{r}_mean" for r in self._mean_roles)
         self.output_units += tuple(ROLE_UNITS[r] for r in self._mean_roles)
         self._mean_lin = lin

@@ -378,13 +378,19 @@ def to_motor_side(rec: Recording, args: argparse.Namespace) -> Recording:
 SAMPLED = {"voltage": "u", "current": "i", "speed": "w"}
 
 
-def sampling_modes(args: argparse.Namespace) -> dict[str, str]:
-    """The ``--sampling`` options as quantity -> mode, refusing unknown quantities and modes."""
+def sampling_modes(args: argparse.Namespace, columns: dict[str, str] | None = None) -> dict[str, str]:
+    """The ``--sampling`` options as quantity -> mode, refusing unknown quantities and modes; for the
+    quantities it leaves out, the modes of their ``columns`` (quantity -> column) in the data's sidecar
+    signals.meta.json (``cosim.recorder.read_sampling_sidecar``), said on stderr."""
     modes = pairs(args.sampling, "--sampling")
     for q, mode in modes.items():
         if q not in SAMPLED or mode not in ("instant", "mean"):
             raise InputError(f"--sampling {q}={mode}: expected QUANTITY=MODE with QUANTITY one of "
                              f"{', '.join(SAMPLED)} and MODE instant or mean")
+    if columns:
+        from feeddrive.cosim.recorder import sidecar_modes
+
+        modes = sidecar_modes(args.data, {q: c for q, c in columns.items() if q not in modes}) | modes
     return modes
 
 

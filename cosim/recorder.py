@@ -1,7 +1,16 @@
-"""Signal recorder: a preallocated array filled in blocks of rows, written to signals.csv."""
+"""Signal recorder: a preallocated array filled in blocks of rows, written to signals.csv.
+
+Beside it, ``signals.meta.json`` says how each column was sampled (:class:`Sampling`), so that
+``cosim estimate`` and ``cosim monitor`` read a run's own signals.csv right by default::
+
+    {"format": "feeddrive-sampling/1", "step_s": 1e-4,
+     "columns": {"sensors.u": {"mode": "mean", "rate_hz": 10000.0, "window_s": 1e-4}, ...}}
+"""
 from __future__ import annotations
 
-from collections.abc import Sequence
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -81,3 +90,120 @@ class Recorder:
         table = np.column_stack([self.time, self.data[:self.n]])
         np.savetxt(path, table, delimiter=",", header=header, comments="", fmt="%.10g")
         return path
+
+
+SIDECAR_FORMAT = "feeddrive-sampling/1"
+MODES = ("instant", "mean", "lowpass")
+
+
+@dataclass(frozen=True)
+class Sampling:
+    """How one recorded column was sampled.
+
+    Attributes
+    ----------
+    mode : {"instant", "mean", "lowpass"}
+        The value at the time stamp; the mean over ``window_s`` before it; or the output of an
+        anti-aliasing low-pass (``order``, ``cutoff_hz``) sampled at the time stamp.
+    rate_hz : float
+        Samples per second of the column [Hz].
+    window_s : float or None
+        Length of the averaging window of a ``mean`` [s] (one sampling interval for an integrating ADC).
+    cutoff_hz, order : float or None, int or None
+        The low-pass of a ``lowpass`` channel [Hz], [1].
+    """
+
+    mode: str
+    rate_hz: float
+    window_s: float | None = None
+    cutoff_hz: float | None = None
+    order: int | None = None
+
+    def estimator_mode(self) -> str | None:
+        """``instant`` or ``mean`` as ``--sampling`` means them (a mean over exactly one sampling interval),
+        or None when the estimator has no model of this sampling (a low-pass, a longer window)."""
+        if self.mode == "instant":
+            return "instant"
+        if self.mode == "mean" and self.window_s is not None and abs(self.window_s * self.rate_hz - 1) < 1e-6:
+            return "mean"
+        return None
+
+
+def sidecar_path(csv: str | Path) -> Path:
+    """``signals.csv`` -> ``signals.meta.json`` (same folder)."""
+    csv = Path(csv)
+    return csv.with_name(csv.stem + ".meta.json")
+
+
+def write_sampling_sidecar(csv: str | Path, step: float, columns: Mapping[str, Sampling]) -> Path:
+    """Write the sampling of each column of ``csv`` into its sidecar (see the module docstring)."""
+    path = sidecar_path(csv)
+    data = {"format": SIDECAR_FORMAT, "step_s": step,
+            "columns": {k: {f: v for f, v in asdict(c).items() if v is not None} for k, c in columns.items()}}
+    path.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    return path
+
+
+def read_sampling_sidecar(csv: str | Path) -> dict[str, Sampling] | None:
+    """The sampling of each column of a recorded ``csv`` from its ``signals.meta.json``; None without one.
+
+    Raises
+    ------
+    ValueError
+        A sidecar that is not valid JSON of this format; the message names the file and what was expected.
+    """
+    path = sidecar_path(csv)
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if data.get("format") != SIDECAR_FORMAT:
+            raise ValueError(f"format {data.get('format')!r}")
+        out = {}
+        for name, c in data["columns"].items():
+            s = Sampling(**c)
+            if s.mode not in MODES or not float(s.rate_hz) > 0:
+                raise ValueError(f"column {name!r}: mode {s.mode!r}, rate_hz {s.rate_hz!r}")
+            out[name] = s
+        return out
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise ValueError(f"{path}: not a sampling sidecar ({exc}); expected {{\"format\": \"{SIDECAR_FORMAT}\", "
+                         "\"columns\": {name: {mode, rate_hz, ...}}}, or delete it") from None
+
+
+def sidecar_modes(csv: str | Path, columns: Mapping[str, str]) -> dict[str, str]:
+    """``quantity -> instant|mean`` for the estimator, from the sidecar of ``csv``; ``columns`` maps each
+    quantity (voltage, current, speed) to its ``--map`` column (``COLUMN`` or ``COLUMN*SCALE``). A column the
+    estimator cannot model (a low-pass, a longer window) keeps the default, with a note on stderr.
+
+    Raises
+    ------
+    InputError
+        An unreadable sidecar (the message names it).
+    """
+    import sys
+
+    from feeddrive.cosim.errors import InputError
+
+    try:
+        side = read_sampling_sidecar(csv)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    if side is None:
+        return {}
+    modes, said = {}, []
+    for quantity, column in columns.items():
+        s = side.get(column.split("*")[0].strip())
+        if s is None:
+            continue
+        mode = s.estimator_mode()
+        if mode is None:
+            detail = (f"an order-{s.order} low-pass at {s.cutoff_hz:g} Hz" if s.mode == "lowpass"
+                      else f"a mean over {s.window_s:g} s")
+            said.append(f"{quantity}={column} is {detail}, not modelled: taken as instant")
+            continue
+        modes[quantity] = mode
+        said.append(f"{quantity}={mode}")
+    if said:
+        print(f"sampling from {sidecar_path(csv).name}: {', '.join(said)} (--sampling overrides)", file=sys.stderr)
+    return modes

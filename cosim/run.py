@@ -5,6 +5,8 @@ Files in ``out_dir``::
     scenario.resolved.yaml   the scenario with every default filled, the FMU's absolute path and
                              sha256, the stop time and the complete connections (loadable again)
     signals.csv              time and every recorded signal, units in the header (partial on failure)
+    signals.meta.json        how each column was sampled (cosim.recorder.Sampling): read by default
+                             by ``cosim estimate`` and ``cosim monitor`` on this signals.csv
     report.json              run metadata, each component's report(), the monitor's motions
     report.html              the same as one self-contained page with every figure (cosim.report)
     plots/*.png              per high-speed motion: profiles and current residue (cosim.plots),
@@ -22,6 +24,7 @@ import os
 import platform
 import sys
 import time as _time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,9 +35,10 @@ import yaml
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.master import Master
+from feeddrive.cosim.recorder import Sampling, write_sampling_sidecar
 from feeddrive.cosim.scenario import Scenario, load_scenario
 
-OUTPUTS = ("signals.csv", "scenario.resolved.yaml", "report.json", "report.html")
+OUTPUTS = ("signals.csv", "signals.meta.json", "scenario.resolved.yaml", "report.json", "report.html")
 #: ``cosim run``'s history file when the scenario names none: beside the run's output directory, so
 #: that successive runs into ``runs/`` continue one history (``runs/history.sqlite``).
 DEFAULT_HISTORY = "history.sqlite"
@@ -124,6 +128,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         paths["resolved"].write_text(yaml.safe_dump(resolved, sort_keys=False), encoding="utf-8")
         report |= {"step_s": master.h, "stop_time_s": master.stop_time, "steps": master.n_steps}
         master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
+        write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names))
         recorder = master.run(progress=progress, signals_path=paths["signals"])
         report["components"] = master.reports()
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
@@ -154,6 +159,32 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
     _write_page(out_dir, report)
     return RunResult(out_dir, recorder.time, signals, dict(zip(recorder.names, recorder.units)), report, paths)
+
+
+def column_sampling(scenario: Scenario, names: Sequence[str]) -> dict[str, Sampling]:
+    """How each recorded column is sampled (signals.meta.json): the sensors' analogue channels as their
+    ``sampling`` says (a mean of one plant step is the instantaneous value), the encoder speed as the mean
+    over its window, the plant's ``<role>_mean`` outputs over the plant's step, everything else instant."""
+    h, m = scenario.step, scenario.plant.oversample
+    sensors = scenario.sensors
+    channels = {"Im1": sensors.current[0], "Im2": sensors.current[1], "u": sensors.voltage,
+                "u_ref": sensors.voltage_ref, "w_tach": sensors.tachometer}
+    out = {}
+    for name in names:
+        comp, _, port = name.partition(".")
+        chan = channels.get(port) if comp == "sensors" else None
+        if chan is not None and chan.sampling == "lowpass":
+            out[name] = Sampling("lowpass", 1 / h, cutoff_hz=chan.cutoff_hz or 0.25 / h, order=chan.order)
+        elif chan is not None and chan.sampling == "mean" and m > 1:
+            out[name] = Sampling("mean", 1 / h, window_s=h)
+        elif comp == "sensors" and port == "w_enc":
+            window = max(1, round(sensors.encoder.speed_window / h)) * h
+            out[name] = Sampling("mean", 1 / h, window_s=window)
+        elif comp == "plant" and port.endswith("_mean"):
+            out[name] = Sampling("mean", 1 / h, window_s=h / m)
+        else:
+            out[name] = Sampling("instant", 1 / h)
+    return out
 
 
 def _write_page(out_dir: Path, report: dict) -> None:

@@ -33,14 +33,14 @@ from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.fmu_inspect import check_archive, fmi_version, model_description, sha256
 from feeddrive.cosim.nc import SETTLING, NCConfig, drive_chain_nominal, plan_program
 from feeddrive.cosim.sensors import EVENT_FIELDS, SensorsConfig
+from feeddrive.cosim.unit_map import INPUT_ROLES as INPUT_ROLES
+from feeddrive.cosim.unit_map import OUTPUT_ROLES as OUTPUT_ROLES
+from feeddrive.cosim.unit_map import REQUIRED_ROLES as REQUIRED_ROLES
+from feeddrive.cosim.unit_map import ROLE_UNITS as ROLE_UNITS
+from feeddrive.cosim.unit_map import Conversion, check_map
 from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error, read_yaml
 
 Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
-INPUT_ROLES = ("speed_ref", "load")
-OUTPUT_ROLES = ("voltage", "voltage_ref", "current", "speed", "position")
-REQUIRED_ROLES = ("speed_ref", "voltage", "current", "speed", "position")
-ROLE_UNITS = {"speed_ref": "rad/s", "load": "N.m", "voltage": "V", "voltage_ref": "V", "current": "A",
-              "speed": "rad/s", "position": "m"}
 BUILTIN_MAP = {"speed_ref": "w_ref", "load": "Tl", "voltage": "u", "voltage_ref": "u_ref", "current": "i",
                "speed": "w", "position": "x"}
 STANDARD_COMPONENTS = ("nc", "plant", "sensors", "monitor")
@@ -53,18 +53,27 @@ class _Strict(BaseModel):
 
 
 class MapEntry(_Strict):
-    """One role <-> FMU variable conversion: ``role = scale * var + offset`` (or its inverse for inputs)."""
+    """One role <-> FMU variable conversion: ``role = scale * var + offset`` (or its inverse for inputs).
+
+    ``scale`` and ``offset`` follow from the variable's unit (``unit`` when stated here, else the FMU's
+    declaration) and the role's SI unit; given explicitly, they must agree with it (``cosim.unit_map``).
+    After loading, both are set."""
 
     var: str
-    scale: float = 1.0
-    offset: float = 0.0
+    unit: str | None = None
+    scale: float | None = None
+    offset: float | None = None
 
     @field_validator("scale")
     @classmethod
-    def _scale_nonzero(cls, v: float) -> float:
-        if v == 0 or not math.isfinite(v):
+    def _scale_nonzero(cls, v: float | None) -> float | None:
+        if v is not None and (v == 0 or not math.isfinite(v)):
             raise ValueError("scale must be finite and non-zero")
         return v
+
+    def linear(self) -> tuple[float, float]:
+        """``(scale, offset)``, 1 and 0 where unset."""
+        return (1.0 if self.scale is None else self.scale), (0.0 if self.offset is None else self.offset)
 
 
 #: ``plant.fmu`` values naming a built-in plant: the paper's model, and its variant with backlash in the
@@ -148,6 +157,12 @@ class Scenario(_Strict):
     _source: str = PrivateAttr("<dict>")
     _lines: dict = PrivateAttr(default_factory=dict)
     _base_dir: Path = PrivateAttr(default_factory=Path.cwd)
+    _conversions: dict = PrivateAttr(default_factory=dict)
+
+    @property
+    def unit_notes(self) -> list[str]:
+        """The plant map's stated unit assumptions (``unit not declared: taken as rad/s``), one per entry."""
+        return [c.note for c in self._conversions.values() if c.note]
 
     @property
     def source(self) -> str:
@@ -218,7 +233,10 @@ def load_plant_map(path: str | Path) -> tuple[dict[str, MapEntry], Callable[[Key
         plant = PlantConfig.model_validate(raw)
     except ValidationError as exc:
         raise from_validation(exc, raw, str(path), lines, prefix=("plant",), model=PlantConfig) from None
-    defaults = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} if plant.fmu in BUILTIN_PLANTS else {}
+    axis = data.get("axis") if isinstance(data, dict) else None
+    rotary = isinstance(axis, dict) and axis.get("kind") == "rotary"  # the built-in x is then in rad
+    defaults = {r: MapEntry(var=v, unit="rad" if rotary and r == "position" else None)
+                for r, v in BUILTIN_MAP.items()} if plant.fmu in BUILTIN_PLANTS else {}
     return defaults | dict(plant.map), lambda key, message: located_error(str(path), lines, key, message)
 
 
@@ -357,38 +375,15 @@ def _implied_sampling(data: dict) -> dict[str, str]:
 
 # -- the plant FMU -------------------------------------------------------------------------------
 
-def check_map(md: Any, role_map: Mapping[str, MapEntry], fmu_name: str) -> list[tuple[KeyPath, str]]:
-    """Problems of a role map against an FMU's model description, as ``(key path, message)`` pairs."""
-    variables = {v.name: v for v in md.modelVariables}
-    problems = []
-    missing = [r for r in REQUIRED_ROLES if r not in role_map]
-    if missing:
-        problems.append((("plant", "map"), f"roles {', '.join(missing)} are not mapped; expected entries "
-                         f"{{role: {{var: <FMU variable>}}}} for {', '.join(REQUIRED_ROLES)}"))
-    for role, entry in role_map.items():
-        v = variables.get(entry.var)
-        path = ("plant", "map", role, "var")
-        want = "input" if role in INPUT_ROLES else "output"
-        candidates = [n for n, x in variables.items() if x.causality == want and x.type == "Real"]
-        if v is None:
-            problems.append((path, f"FMU {fmu_name!r} has no variable {entry.var!r}; its Real {want}s are: "
-                             f"{', '.join(candidates) or 'none'}"))
-        elif v.type != "Real":
-            problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real"))
-        elif role in INPUT_ROLES and v.causality != "input":
-            problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an input"))
-        elif role not in INPUT_ROLES and v.causality not in ("output", "local"):
-            problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an output"))
-    return problems
-
-
 def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     p = s.plant
     if p.fmu in BUILTIN_PLANTS:
         from feeddrive.fmu_build import builtin_fmu
 
         path = Path(builtin_fmu(backlash=p.fmu == "builtin-backlash")).resolve()
-        role_map = {r: MapEntry(var=v) for r, v in BUILTIN_MAP.items()} | dict(p.map)
+        # the built-in x is the table travel in the unit of its pitch: rad on a rotary axis, whatever it declares
+        role_map = {r: MapEntry(var=v, unit="rad" if r == "position" and s.axis.kind == "rotary" else None)
+                    for r, v in BUILTIN_MAP.items()} | dict(p.map)
     else:
         path = (s.base_dir / Path(p.fmu).expanduser()).resolve()
         role_map = dict(p.map)
@@ -421,9 +416,13 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         check_archive(path, (md.coSimulation if p.interface == "cs" else md.modelExchange).modelIdentifier)
     except ValueError as exc:
         raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    problems = check_map(md, role_map, path.name)
+    conversions: dict[str, Conversion] = {}
+    problems = check_map(md, role_map, path.name, s.axis.kind, conversions)
     if problems:
         raise s.error(*problems[0])
+    role_map = {r: e.model_copy(update={"scale": conversions[r].scale, "offset": conversions[r].offset})
+                for r, e in role_map.items()}
+    s._conversions = conversions
     try:
         hold = p.hold(md)
     except ValueError as exc:

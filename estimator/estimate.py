@@ -33,6 +33,7 @@ from feeddrive.estimator.motion import (
     Prepared,
     check_result,
     parameter_covariance,
+    stationary_score_covariance,
 )
 from feeddrive.estimator.regression import Regression, derive_regression
 from feeddrive.estimator.simulation import MODEL, simulate
@@ -242,6 +243,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     n = min(len(y) for y, *_ in parts)
     G = np.zeros((n, p))
     res2 = out2 = 0.0
+    stationary = []  # (instruments, errors) with the unused rows zero, for the stationary-error floor
     for (y, _, _, r), W, X, yr in zip(parts, Ws, Xs, ys):
         e = yr - X @ theta_s
         g = np.zeros((len(y), p))
@@ -249,7 +251,12 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         G += g[:n]
         res2 += e @ e
         out2 += yr @ yr
-    cov, dof, nb = parameter_covariance(G, np.linalg.inv(A), block)
+        ef = np.zeros(len(y))
+        ef[r] = e
+        Wf = np.zeros((len(y), p))
+        Wf[r] = W
+        stationary.append((Wf, ef))
+    cov, dof, nb = parameter_covariance(G, np.linalg.inv(A), block, stationary_score_covariance(stationary, block))
     return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
                 float(np.sqrt(res2 / out2)), dof)
 

@@ -326,7 +326,51 @@ class Prepared:
     notes: dict[str, str] = field(default_factory=dict)
 
 
-def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray, int]:
+def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags: int) -> np.ndarray:
+    """Covariance of the summed score ``sum_t w_t e_t`` when the equation error is stationary.
+
+    Parameters
+    ----------
+    parts : list of (W (n, p), e (n,))
+        Instruments (or regressors) and equation errors of each independent sample set; rows left out of
+        the fit are zero in both.
+    lags : int
+        Largest lag of the error's autocovariance kept [samples] (the filter's memory, ``block``).
+
+    Returns
+    -------
+    ndarray, shape (p, p)
+        ``sum_parts W^T Gamma W`` with ``Gamma`` the Toeplitz matrix of the error's autocovariance, each
+        ``gamma(l)`` the mean of ``e_t e_(t+l)`` over every pair of used rows.
+
+    Notes
+    -----
+    Measurement noise through the identical filter is stationary, so its autocovariance can be estimated
+    from every sample of the motion, while the batch-means estimate of a parameter excited in a few places
+    (L: the current transients) rests on the few blocks that carry it and scatters by a factor of 3 from
+    one noise draw to the next. The regressor's own structure is known exactly here.
+    """
+    from scipy.signal import fftconvolve
+
+    p = parts[0][0].shape[1]
+    S = np.zeros((p, p))
+    for W, e in parts:
+        n = len(e)
+        m = min(lags, n - 1)
+        used = (e != 0).astype(float)
+        nfft = 1 << int(np.ceil(np.log2(2 * n)))
+        fe, fu = np.fft.rfft(e, nfft), np.fft.rfft(used, nfft)
+        num = np.fft.irfft(fe * np.conj(fe), nfft)[:m + 1]
+        pairs = np.rint(np.fft.irfft(fu * np.conj(fu), nfft)[:m + 1])
+        gamma = np.where(pairs > 0, num / np.maximum(pairs, 1.0), 0.0)
+        kernel = np.r_[gamma[:0:-1], gamma]  # gamma(-m .. m)
+        GW = fftconvolve(W, kernel[:, None], mode="same", axes=0) if n > m else W * gamma[0]
+        S += W.T @ GW
+    return 0.5 * (S + S.T)
+
+
+def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int,
+                         stationary: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Batch-means covariance of ``Ai @ sum(G)`` with each parameter's own degrees of freedom.
 
     Parameters
@@ -356,6 +400,14 @@ def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int) -> tuple[np.
     ``k / (k - 1)`` (instead of the all-blocks ``nb / (nb - p)`` when that is larger) and the t
     quantile has ``k - 1`` degrees of freedom (at most ``nb - p``). Checked by Monte Carlo in
     tests/estimator/test_parameter_covariance.py.
+
+    ``stationary`` (p, p), the score covariance under a stationary equation error
+    (:func:`stationary_score_covariance`), is a floor: a parameter whose batch-means variance falls below
+    its stationary-error variance takes the latter, with ``nb - p`` degrees of freedom (its error
+    autocovariance rests on every block). Over 40 white-noise draws on examples/tool_change.yaml (the
+    sensors' default noise, 50 Hz filter), batch means alone gave L a standard error of 0.46 to 2.0 times
+    its Monte-Carlo value 5.05e-6 H; with the floor 0.96 to 2.0 (coverage of the 95 % interval 95 -> 100 %;
+    R and K unchanged). Issue 23's run had a half-width of 7.4e-6 H where 1.96 x 5.05e-6 = 9.9e-6.
     """
     S, nb = long_run_covariance(G, block)
     p = G.shape[1]
@@ -367,7 +419,14 @@ def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int) -> tuple[np.
     # one block (a short record) leaves k = 1: its k / (k - 1) is capped rather than divided by zero
     k = np.clip(k, 1.0 + 1.0 / max(nb, 2), max(nb, 2))
     scale = np.sqrt(np.maximum(k / (k - 1) * max(nb - p, 1) / max(nb, 1), 1.0))
-    return cov * np.outer(scale, scale), np.clip(k - 1, 1.0, max(nb - p, 1)), nb
+    cov, dof = cov * np.outer(scale, scale), np.clip(k - 1, 1.0, max(nb - p, 1))
+    if stationary is not None:
+        floor = np.diag(Ai @ stationary @ Ai.T) * (len(G) / max(len(G) - p, 1))
+        var = np.diag(cov)
+        low = floor > var
+        lift = np.sqrt(np.where(low, floor / np.maximum(var, np.finfo(float).tiny), 1.0))
+        cov, dof = cov * np.outer(lift, lift), np.where(low, max(nb - p, 1), dof)
+    return cov, dof, nb
 
 
 def long_run_covariance(G: np.ndarray, block: int) -> tuple[np.ndarray, int]:

@@ -105,7 +105,7 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
     options = EstimationOptions(method=args.method, filter=FilterSpec(filter_cutoff(args, rec.h)), known=known,
                                 offset=args.offset, speed_threshold=args.speed_threshold,
                                 speed_unit="m/s" if side == "table" else "rad/s")
-    modes = sampling_modes(args)
+    modes = sampling_modes(args, {q: roles[q] for q in SAMPLED if q in roles})
     delays = {SAMPLED[q]: SAMPLING_DELAY[m] * rec.h for q, m in modes.items() if SAMPLING_DELAY[m]}
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     speed = sig.get("w")

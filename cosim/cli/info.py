@@ -48,20 +48,29 @@ def main(args: argparse.Namespace) -> int:
     if args.map is None:
         return 0
     role_map, error = load_plant_map(args.map)
-    variables = {v.name: v for v in md.modelVariables}
-    print(f"map of {args.map} (role [SI unit] <- FMU variable [unit]: value = scale * x + offset)")
+    conversions: dict = {}
+    problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions)
+    print(f"map of {args.map} (role [SI unit] <- FMU variable [unit] x scale + offset; -> for the FMU's inputs)")
     for role, e in role_map.items():
-        v = variables.get(e.var)
-        arrow = "->" if role in INPUT_ROLES else "<-"
-        unit = f" [{v.unit or ''}]" if v is not None else " (missing)"
-        print(f"  {role} [{ROLE_UNITS[role]}] {arrow} {e.var}{unit}  scale {e.scale:g} offset {e.offset:g}")
-    problems = check_map(md, role_map, path.name)
+        if role in conversions:
+            print(f"  {conversions[role].describe()}")
+        else:
+            print(f"  {role} [{ROLE_UNITS[role]}] {'->' if role in INPUT_ROLES else '<-'} {e.var}  (not converted: see below)")
     if problems:
         first: ScenarioError = error(*problems[0])
         more = f" (and {len(problems) - 1} more problem{'s' * (len(problems) > 2)})" if len(problems) > 1 else ""
         raise ScenarioError(f"{first}{more}")
     print("  map OK")
     return 0
+
+
+def _axis_kind(scenario: Path) -> str:
+    """``axis.kind`` of a scenario file (the position role of a rotary axis is in rad), default linear."""
+    from feeddrive.cosim.yaml_source import read_yaml
+
+    data, _ = read_yaml(scenario)
+    axis = data.get("axis") if isinstance(data, dict) else None
+    return axis.get("kind", "linear") if isinstance(axis, dict) else "linear"
 
 
 def _exported(path: Path) -> dict | None:

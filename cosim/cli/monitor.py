@@ -63,7 +63,8 @@ def main(args: argparse.Namespace) -> int:
         missing.append("speed or position")
     if missing:
         raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
-    modes = sampling_modes(args)
+    columns = {"voltage": role_map.get("voltage"), "current": role_map.get("current1"), "speed": role_map.get("speed")}
+    modes = sampling_modes(args, {q: c for q, c in columns.items() if c})
     rec = to_motor_side(load_recording(args.data, role_map, args.sample_time, args.delimiter, args.decimal), args)
     if rec.side == "table":  # the monitor's model is the motor's: u = R i + L di/dt + K w, w in rad/s
         raise InputError(f"{args.data}: the position/speed columns are on the table side ({rec.units}); the "

@@ -39,6 +39,8 @@ def main(args: argparse.Namespace) -> int:
     handler.setFormatter(logging.Formatter("cosim run: %(name)s: %(levelname)s: %(message)s"))
     logging.basicConfig(level=logging.WARNING, handlers=[handler])
     scenario = load_scenario(args.scenario)
+    for note in scenario.unit_notes:  # a unit taken on trust is said, once
+        print(f"plant.map: {note}")
     out = args.out or _fresh_run_dir(Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}")
     # in a supervised child process: an FMU that crashes or hangs is reported in one line (exit 1)
     result = run_supervised(scenario, out, progress=not args.no_progress, overwrite=args.overwrite,

@@ -263,7 +263,9 @@ def test_model_exchange_sensors_sample_the_exact_interval_mean(feeddrive_fmu):
     data.pop("monitor")
     data |= {"step": 1e-3, "stop_time": 0.1}
     data["plant"] = {"fmu": "builtin", "interface": "me", "oversample": 4, "input_hold": "zoh",
-                     "parameters": {"bypass": 1.0, "Cd": 0.0}, "map": {"speed_ref": {"var": "u_in"}}}
+                     "parameters": {"bypass": 1.0, "Cd": 0.0},
+                     # the NC's command drives the voltage on purpose: 1 V per rad/s, stated (u_in is in V)
+                     "map": {"speed_ref": {"var": "u_in", "unit": "1", "scale": 1.0}}}
     data["nc"]["program"] = [{"rapid": {"to": 0.01}}]
     data["sensors"] = {"seed": 0, "current": [QUIET, QUIET], "voltage": QUIET, "voltage_ref": QUIET,
                        "tachometer": QUIET}
