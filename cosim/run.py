@@ -111,7 +111,11 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "status": "running", "versions": _versions()}
     if default_history is not None:
-        scenario = with_history(scenario, Path(default_history).resolve()) or scenario
+        db = Path(default_history).resolve()
+        updated = with_history(scenario, db) or scenario
+        if updated is not scenario:  # the default history is used: its folder (runs/) is made on first use
+            db.parent.mkdir(parents=True, exist_ok=True)
+        scenario = updated
     master = Master.from_scenario(scenario)
     wall = _time.perf_counter()
     try:
