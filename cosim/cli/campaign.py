@@ -10,8 +10,6 @@ import argparse
 import sys
 from pathlib import Path
 
-from feeddrive.cosim.campaign import load_campaign, run_campaign
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("campaign", type=Path, help="campaign YAML file")
@@ -27,6 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from feeddrive.cosim.campaign import load_campaign, run_campaign
+
     campaign = load_campaign(args.campaign)
     out = args.out or Path("campaigns", campaign.name)
     result = run_campaign(campaign, out, workers=args.workers, scheduler=args.scheduler,
