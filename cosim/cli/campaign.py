@@ -26,11 +26,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from feeddrive.cosim.campaign import load_campaign, run_campaign
+    from feeddrive.cosim.progress import enabled
 
     campaign = load_campaign(args.campaign)
     out = args.out or Path("campaigns", campaign.name)
     result = run_campaign(campaign, out, workers=args.workers, scheduler=args.scheduler,
-                          progress=not args.no_progress and sys.stderr.isatty(), overwrite=args.overwrite,
+                          progress=enabled(not args.no_progress), overwrite=args.overwrite,
                           retry_failed=args.retry_failed, plots=not args.no_plots,
                           timeout=args.timeout)
     print(result.aggregates.table())

@@ -38,7 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"the monitor's SQLite history (default: the scenario's monitor.db, else {DEFAULT_DB} "
                              "in the current directory, whatever --out is)")
     parser.add_argument("--overwrite", action="store_true", help="replace the files of a non-empty output directory")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="no progress bar (there is none either when stderr is not a terminal or under CI)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -46,6 +47,7 @@ def main(args: argparse.Namespace) -> int:
     handler.addFilter(_ReportedElsewhere())
     handler.setFormatter(logging.Formatter("cosim run: %(name)s: %(levelname)s: %(message)s"))
     logging.basicConfig(level=logging.WARNING, handlers=[handler])
+    from feeddrive.cosim.progress import enabled
     from feeddrive.cosim.run import with_history
     from feeddrive.cosim.scenario import load_scenario
     from feeddrive.cosim.supervise import run_supervised
@@ -59,7 +61,7 @@ def main(args: argparse.Namespace) -> int:
             raise InputError(f"--db {args.db}: the scenario's monitor is a user class; its history is its own")
     out = args.out or _fresh_run_dir(Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}")
     # in a supervised child process: an FMU that crashes or hangs is reported in one line (exit 1)
-    result = run_supervised(scenario, out, progress=not args.no_progress, overwrite=args.overwrite,
+    result = run_supervised(scenario, out, progress=enabled(not args.no_progress), overwrite=args.overwrite,
                             default_history=Path(DEFAULT_DB))
     print(summary(result))
     return 0
