@@ -116,7 +116,7 @@ def test_cli_builds_and_refuses_to_overwrite(tmp_path, capsys):
     assert cosim_main(["build-fmu", "--out", str(out)]) == 2
     assert "file exists (use --overwrite to replace it)" in capsys.readouterr().err
     assert out.stat().st_mtime_ns == stamp
-    assert cosim_main(["build-fmu", "--out", str(out), "--force"]) == 0
+    assert cosim_main(["build-fmu", "--out", str(out), "--overwrite"]) == 0
     assert validate_fmu(str(out)) == []
 
 
