@@ -80,3 +80,25 @@ def test_top_level_help_is_for_users(capsys):
     for example in ("cosim run examples/tool_change.yaml", "cosim info vendor.fmu --map examples/vendor_fmu.yaml",
                     "cosim monitor rec.csv", "cosim history --axis X"):
         assert example in text
+
+
+def test_progress_only_on_a_terminal_and_not_under_ci(monkeypatch):
+    """Progress bars (FMU build, run, design, campaigns) go to a terminal only: never into a pipe, a log
+    or a CI job's output."""
+    from feeddrive.cosim.progress import enabled
+
+    class Terminal:
+        def __init__(self, tty: bool) -> None:
+            self.tty = tty
+
+        def isatty(self) -> bool:
+            return self.tty
+
+    monkeypatch.delenv("CI", raising=False)
+    monkeypatch.setattr(sys, "stderr", Terminal(True))
+    assert enabled() and not enabled(False)
+    monkeypatch.setenv("CI", "true")
+    assert not enabled()
+    monkeypatch.delenv("CI")
+    monkeypatch.setattr(sys, "stderr", Terminal(False))
+    assert not enabled()
