@@ -203,7 +203,8 @@ class MonitorPipeline:
         {name: {"value", "std"}} or None}``: what the alarm bands of the trend plots are drawn from.
         """
         return _drift_reference(self.baseline(), self.diagnosis_options, list(self.nominal)) | {
-            "alpha": self.diagnosis_options.alpha, "baseline_motions": self.config.baseline_motions,
+            "alpha": self.diagnosis_options.alpha, "baseline_mode": self.config.baseline,
+            "baseline_motions": self.config.baseline_motions,
             "baseline_learnt": len(self.baseline_sets)}
 
     def process(self, signals: Mapping[str, np.ndarray | None], h: float, start: float, motion: int,

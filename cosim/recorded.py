@@ -294,6 +294,23 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
 
 # -- command-line plumbing shared by ``cosim estimate`` and ``cosim monitor`` --------------------------
 
+#: ``--delimiter`` and ``--decimal`` by name (a bare ``,`` or ``;`` reads badly in help and in shells);
+#: the characters themselves are accepted too
+DELIMITER_NAMES = {"comma": ",", "semicolon": ";", "tab": "tab", ",": ",", ";": ";", "\\t": "tab"}
+DECIMAL_NAMES = {"point": ".", "comma": ",", ".": ".", ",": ","}
+
+
+def _named(names: Mapping[str, str], option: str):  # noqa: ANN202 - an argparse type
+    """An argparse ``type`` mapping a name (or the character itself) to the character."""
+    def convert(text: str) -> str:
+        try:
+            return names[text.strip().lower()]
+        except KeyError:
+            expected = ", ".join(n for n in names if n.isalpha())
+            raise argparse.ArgumentTypeError(f"{text!r}: expected one of {expected}") from None
+    convert.__name__ = option
+    return convert
+
 
 def pairs(items: list[str], what: str) -> dict[str, str]:
     """``["a=b", ...]`` from repeated ``NAME=VALUE`` options; ``what`` names the option in errors."""
@@ -325,10 +342,12 @@ def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str
                              "[unit] in the header); several per --map, or repeat --map")
     parser.add_argument("--sample-time", type=float, default=None, metavar="H",
                         help="sampling period [s] (needed without a time column)")
-    parser.add_argument("--delimiter", default=None, choices=(",", ";", "tab"),
+    parser.add_argument("--delimiter", default=None, type=_named(DELIMITER_NAMES, "--delimiter"),
+                        metavar="{comma,semicolon,tab}",
                         help="column separator (default: detected from the header)")
-    parser.add_argument("--decimal", default=None, choices=(".", ","),
-                        help="decimal mark (default: detected; ',' with ';' or tab separators)")
+    parser.add_argument("--decimal", default=None, type=_named(DECIMAL_NAMES, "--decimal"),
+                        metavar="{point,comma}",
+                        help="decimal mark (default: detected; comma with semicolon or tab separators)")
     parser.add_argument("--segment", choices=MODES, default="auto",
                         help="motions from the NC state or the speed profile (auto), the NC state (nc) "
                              "or the whole record (none)")

@@ -13,8 +13,8 @@ Files in ``out_dir``::
                              and the figures of components that draw their own (the monitor)
 
 The monitor's history (SQLite) is ``monitor.db`` of the scenario; without it, ``cosim run`` uses
-``history.sqlite`` beside ``out_dir`` (``runs/history.sqlite`` for its default output directories) and
-other callers of ``run_scenario`` keep it in memory unless they pass ``default_history``.
+``runs/history.sqlite`` in the current directory (whatever the output directory) and other callers of
+``run_scenario`` keep it in memory unless they pass ``default_history``.
 """
 from __future__ import annotations
 
@@ -39,9 +39,6 @@ from feeddrive.cosim.recorder import Sampling, write_sampling_sidecar
 from feeddrive.cosim.scenario import Scenario, load_scenario
 
 OUTPUTS = ("signals.csv", "signals.meta.json", "scenario.resolved.yaml", "report.json", "report.html")
-#: ``cosim run``'s history file when the scenario names none: beside the run's output directory, so
-#: that successive runs into ``runs/`` continue one history (``runs/history.sqlite``).
-DEFAULT_HISTORY = "history.sqlite"
 
 
 class OutputExistsError(InputError):
@@ -93,7 +90,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         Draw plots/*.png.
     default_history : path or None
         History file of a default monitor whose scenario names no ``monitor.db``; None keeps that
-        history in memory (nothing persists). ``cosim run`` passes ``history.sqlite`` beside ``out_dir``.
+        history in memory (nothing persists). ``cosim run`` passes ``runs/history.sqlite``.
 
     Returns
     -------
@@ -118,7 +115,11 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "status": "running", "versions": _versions()}
     if default_history is not None:
-        scenario = _with_default_history(scenario, Path(default_history).resolve())
+        db = Path(default_history).resolve()
+        updated = with_history(scenario, db) or scenario
+        if updated is not scenario:  # the default history is used: its folder (runs/) is made on first use
+            db.parent.mkdir(parents=True, exist_ok=True)
+        scenario = updated
     master = Master.from_scenario(scenario)
     wall = _time.perf_counter()
     try:
@@ -218,11 +219,14 @@ def report_header(scenario: Scenario) -> dict[str, Any]:
                       "interface": scenario.plant.interface}}
 
 
-def _with_default_history(scenario: Scenario, db: Path) -> Scenario:
-    """The scenario with the default monitor's history file set to ``db`` when it names none."""
+def with_history(scenario: Scenario, db: Path, replace: bool = False) -> Scenario | None:
+    """The scenario with the built-in monitor's history file set to ``db``: when it names none, or
+    always with ``replace`` (``cosim run --db``). None: the monitor is a user class (no ``db`` to set)."""
     spec = scenario.monitor
     config = getattr(spec, "config", None)
-    if config is None or not hasattr(config, "db") or config.db is not None:
+    if config is None or not hasattr(config, "db"):
+        return None
+    if config.db is not None and not replace:
         return scenario
     return scenario.model_copy(update={"monitor": spec.model_copy(
         update={"config": config.model_copy(update={"db": str(db)})})})

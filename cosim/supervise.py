@@ -114,6 +114,12 @@ def supervise(target: Callable[..., Any], *args: Any, timeout: float | None = No
     read_fd, write_fd = os.pipe()
     for stream in (sys.stdout, sys.stderr):
         stream.flush()
+    # tqdm's write lock (a multiprocessing semaphore, made with the first bar) made here, not in the child:
+    # a child that makes it registers it with the resource tracker and leaves by os._exit without
+    # unregistering, and a campaign's worker then ended with "resource_tracker: ... leaked semaphore objects"
+    from tqdm import tqdm
+
+    tqdm.get_lock()
     # objects existing now are left out of the garbage collector's passes in the child: without this its
     # first collection touches every object, and copying those pages costs more than the fork itself
     gc.freeze()

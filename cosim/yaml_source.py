@@ -29,6 +29,12 @@ MAX_NODES = 100_000
 MAX_DEPTH = 100
 
 
+def _char_at(text: str, line: int, column: int) -> str:
+    """The character at a 0-based line and column of ``text`` ('' past its end)."""
+    lines = text.splitlines()
+    return lines[line][column:column + 1] if 0 <= line < len(lines) else ""
+
+
 def read_yaml(path: Path, kind: str = "scenario", error: type[ValueError] = ScenarioError
               ) -> tuple[Any, dict[KeyPath, int]]:
     """The data of a YAML file and its key path -> line map.
@@ -69,6 +75,10 @@ def read_yaml(path: Path, kind: str = "scenario", error: type[ValueError] = Scen
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark else str(path)
         problem = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        if mark is not None and _char_at(text, mark.line, mark.column) == "\t":
+            # PyYAML's "found character that cannot start any token" (its C loader does not say which)
+            raise error(f"{where}: a tab character (column {mark.column + 1}): YAML indents with spaces; "
+                        "replace the tab by spaces") from None
         raise error(f"{where}: invalid YAML: {problem}") from None
     except error:
         raise

@@ -100,7 +100,12 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
             regressions.append(reg)
             overrides[eq.name] = over
     if not regressions:
-        raise EstimatorInputError(f"no model equation can be used with the signals {sorted(raw)}")
+        raise EstimatorInputError(
+            f"no model equation can be used with the signals {sorted(raw)}: the electrical equation "
+            "(u = L di/dt + R i + K w) needs voltage, current and speed; the mechanical one (K i = Jt dw/dt + "
+            "ft w + Cd sign(w)) needs current or torque, and speed. A speed is derived from the position when no "
+            "speed is given (map position=COLUMN); map a current (current=COLUMN) or a torque or force "
+            "(torque=COLUMN) too")
     rows, refused, notes = {}, {}, {}
     speed = np.abs(sig["w"])
     peak = float(speed.max())

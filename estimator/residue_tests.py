@@ -10,8 +10,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import statsmodels.api as sm
 from scipy import linalg, stats
+
+# statsmodels' own modules, not statsmodels.api (which loads its datasets, formulas and pandas' whole API:
+# seconds at every `cosim run`)
+from statsmodels.regression.linear_model import GLSAR, OLS
 from statsmodels.stats.diagnostic import acorr_ljungbox
 from statsmodels.tsa.ar_model import ar_select_order
 
@@ -226,10 +229,10 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
             sel = ar_select_order(r0, maxlag=MAX_AR, ic="bic", trend="n")
             ar_order = max(sel.ar_lags) if sel.ar_lags else 0
     if ar_order == 0 and segment_covariance is not None:
-        fit = sm.OLS(y, design).fit()
+        fit = OLS(y, design).fit()
         whiten = np.asarray
     else:
-        fit = sm.GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
+        fit = GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
         whiten = fit.model.whiten
     q = T.shape[1]
     restriction = np.zeros((q, design.shape[1]))

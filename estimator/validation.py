@@ -48,8 +48,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-import statsmodels.api as sm
 from scipy import signal, stats
+from statsmodels.regression.linear_model import OLS  # not statsmodels.api: seconds of imports
 
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
@@ -361,7 +361,7 @@ def isolate(x1f: np.ndarray, x2f: np.ndarray, reference: np.ndarray, names: tupl
     span = float(np.max(np.abs(ref)))
     fits = []
     for name, x in zip(names, (x1f, x2f)):
-        res = sm.OLS(x[sl], X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
+        res = OLS(x[sl], X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
         (a, b), ((alo, ahi), (blo, bhi)) = res.params, res.conf_int(0.05)  # reported: 95 % intervals
         # decided at the level of every other test (alpha), not at the reported intervals' 5 %
         (tlo_a, thi_a), (tlo_b, thi_b) = res.conf_int(options.alpha)

@@ -6,6 +6,7 @@ import hashlib
 import os
 import shlex
 import subprocess
+import sys
 import tempfile
 import zipfile
 from pathlib import Path
@@ -37,13 +38,31 @@ def _compile(sources: Sources, workdir: Path) -> Path:
     c_files = sorted(name for name in sources.files if name.endswith(".c"))
     command = [*cc, *CFLAGS, f"-I{FMI_HEADERS}", f"-I{workdir}", "-o", str(library), *c_files, "-lm"]
     try:
-        done = subprocess.run(command, cwd=workdir, capture_output=True, text=True)
+        done = _run_with_progress(command, workdir, f"compiling {sources.model_name}.fmu ({cc[0]})")
     except OSError as exc:
         raise CompilerError(cc[0], command, f"error: cannot run {cc[0]!r}: {exc.strerror}") from None
     if done.returncode != 0:
         output = (done.stderr + done.stdout).strip() or f"error: exited with status {done.returncode}, no output"
         raise CompilerError(cc[0], command, output)
     return library
+
+
+def _run_with_progress(command: list[str], cwd: Path, what: str) -> subprocess.CompletedProcess:
+    """``subprocess.run`` with the elapsed time on stderr while it runs (the first build of the plant takes
+    10 to 60 s); only on a terminal and not under CI (``$CI``), so logs and pipes stay clean."""
+    if not sys.stderr.isatty() or os.environ.get("CI"):
+        return subprocess.run(command, cwd=cwd, capture_output=True, text=True)
+    from tqdm import tqdm
+
+    with subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc, \
+            tqdm(desc=what, bar_format="{desc}: {elapsed}", leave=False) as bar:
+        while True:
+            try:
+                out, err = proc.communicate(timeout=0.5)
+                break
+            except subprocess.TimeoutExpired:
+                bar.refresh()
+    return subprocess.CompletedProcess(command, proc.returncode, out, err)
 
 
 def _pack(sources: Sources, library: Path, out: Path) -> None:

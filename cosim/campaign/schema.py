@@ -231,6 +231,10 @@ def load_campaign(path: str | os.PathLike) -> Campaign:
         raise CampaignError(f"{path}: expected a mapping at the top level")
     if "root" in data:
         raise CampaignError(f"{path}:{_line_map(text)[('root',)]}: root: unknown key")
+    if "base" not in data and {"plant", "nc"} & set(data):  # `cosim campaign` given a scenario file
+        raise CampaignError(f"{path}: this is a scenario, not a campaign file: a campaign needs base: (a scenario "
+                            "file or mapping) and sweep:, draw: or repetitions: (see examples/campaign_wear.yaml); "
+                            f"run a scenario with cosim run {path}")
     try:
         campaign = Campaign.model_validate({**data, "root": str(path.resolve().parent)})
     except ValidationError as exc:

@@ -5,6 +5,9 @@ Each subcommand lives in its own module, which exposes
 * ``add_arguments(parser: argparse.ArgumentParser) -> None``
 * ``main(args: argparse.Namespace) -> int`` (the exit status)
 
+Only the chosen subcommand's module is imported (and it imports numpy, scipy, fmpy... inside its
+``main``), so ``cosim --help`` and ``cosim --version`` answer at once.
+
 Exit status: 0 success, 2 bad input (one line on stderr, no traceback), 1 simulation or build
 failure (one line on stderr).
 """
@@ -32,6 +35,32 @@ COMMANDS: dict[str, tuple[str, str]] = {
                       "write the scenario as an OSP system (FMUs, OspSystemStructure.xml, events, SSP)"),
 }
 
+USAGE = """\
+Model-based monitoring of NC machine-tool feed drives: estimate R, L, K, Jt, ft, Cd once per
+high-speed motion, validate the redundant measurements, check the model, diagnose drifts, keep
+a history per axis.
+
+Three jobs:
+  1. co-simulate a feed drive (built-in plant FMU + NC + sensors + monitor):
+       cosim run examples/tool_change.yaml
+  2. your own plant: a vendor's FMI 2.0 FMU mapped in the scenario:
+       cosim info vendor.fmu --map examples/vendor_fmu.yaml
+       cosim run examples/vendor_fmu.yaml
+  3. recorded data from a real machine (CSV):
+       cosim estimate rec.csv --map time=t current=i voltage=u speed=w
+       cosim monitor rec.csv --map time=t current=i voltage=u speed=w --axis X
+"""
+
+EPILOG = """\
+then:
+  cosim history --axis X             the axis's stored motions, parameters with 95 % intervals
+  cosim history --axis X --plot      their trends (history_X.png)
+  cosim COMMAND --help               the options of one command
+
+exit status: 0 success, 2 bad input (one line naming file, key and what was expected),
+1 simulation or build failure (one line)
+"""
+
 
 def _input_errors() -> tuple[type[BaseException], ...]:
     from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
@@ -46,26 +75,35 @@ def _failure_errors() -> tuple[type[BaseException], ...]:
     return (SimulationError, FMUBuildError)
 
 
-def build_parser() -> tuple[argparse.ArgumentParser, dict[str, object]]:
-    parser = argparse.ArgumentParser(prog="cosim", description=__doc__.splitlines()[0])
+def chosen_command(argv: list[str]) -> str | None:
+    """The subcommand named in ``argv``: its first word that is not an option (the top level has
+    only ``-h`` and ``--version``, which take no value)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(argv: list[str] | None = None) -> tuple[argparse.ArgumentParser, dict[str, object]]:
+    """The parser, with the options of the subcommand chosen in ``argv`` only (None: of every one).
+
+    Returns the parser and the imported subcommand modules by name."""
+    parser = argparse.ArgumentParser(prog="cosim", description=USAGE, epilog=EPILOG,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"cosim {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
+    chosen = None if argv is None else chosen_command(argv)
     modules: dict[str, object] = {}
     for name, (module_name, help_text) in COMMANDS.items():
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name != module_name:
-                raise
-            continue  # subcommand not built yet
         p = sub.add_parser(name, help=help_text, description=help_text)
+        if argv is not None and name != chosen:
+            continue  # its module is imported only when it is chosen
+        module = importlib.import_module(module_name)
         module.add_arguments(p)
         modules[name] = module
     return parser, modules
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser, modules = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser, modules = build_parser(argv)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()

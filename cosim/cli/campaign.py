@@ -10,8 +10,6 @@ import argparse
 import sys
 from pathlib import Path
 
-from feeddrive.cosim.campaign import load_campaign, run_campaign
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("campaign", type=Path, help="campaign YAML file")
@@ -27,10 +25,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from feeddrive.cosim.campaign import load_campaign, run_campaign
+    from feeddrive.cosim.progress import enabled
+
     campaign = load_campaign(args.campaign)
     out = args.out or Path("campaigns", campaign.name)
     result = run_campaign(campaign, out, workers=args.workers, scheduler=args.scheduler,
-                          progress=not args.no_progress and sys.stderr.isatty(), overwrite=args.overwrite,
+                          progress=enabled(not args.no_progress), overwrite=args.overwrite,
                           retry_failed=args.retry_failed, plots=not args.no_plots,
                           timeout=args.timeout)
     print(result.aggregates.table())

@@ -32,6 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(the measured spread needs two)")
     parser.add_argument("--workers", type=int, default=1, help="worker processes of the --verify campaign")
     parser.add_argument("--out", type=Path, help="out dir of the --verify campaign (default campaigns/design-<name>)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def reference(nc, item: int, accel: float, h: float, tail: float = 0.1) -> np.ndarray:
@@ -91,8 +92,22 @@ def main(args: argparse.Namespace) -> int:
 
     # the design simulates the built-in model: a vendor plant's own parameter names are not used
     params = {k: v for k, v in scenario.plant.parameters.items() if k in MODEL.nominal()}
-    best, candidates = design_acceleration(lambda a: reference(scenario.nc, item, a, scenario.step), accels,
-                                           scenario.step, noise, params=params)
+    from tqdm import tqdm
+
+    from feeddrive.cosim.progress import enabled
+
+    # each candidate is a closed-loop simulation and its regressions (~5 s each): one bar step per slope
+    with tqdm(total=len(accels), desc="design", unit="slope", disable=not enabled(not args.no_progress)) as bar:
+        def ref(a: float) -> np.ndarray:  # called at the start of each candidate: the previous one is done
+            if started:
+                bar.update()
+            started.append(a)
+            bar.set_postfix_str(f"accel {a:g} m/s^2")
+            return reference(scenario.nc, item, a, scenario.step)
+
+        started: list[float] = []
+        best, candidates = design_acceleration(ref, accels, scenario.step, noise, params=params)
+        bar.update()
     print(f"{scenario.name}: nc.program[{item}].{kind}, default accel {move.accel} m/s^2; noise u {noise['u']} V, "
           f"i {noise['i']} A, w {noise['w']} rad/s")
     print(f"{'accel':>6} {'time s':>7} " + " ".join(f"{p + ' %':>8}" for p in PHYSICAL) + f" {'J':>9} {'peak A':>7}")
@@ -109,6 +124,7 @@ def main(args: argparse.Namespace) -> int:
 def verify(args, scenario, item: int, kind: str, default: float, best: float, noise, params) -> None:
     """Small campaign: N runs at each slope; measured relative std of LS and IV against the prediction."""
     from feeddrive.cosim.campaign import Campaign, run_campaign
+    from feeddrive.cosim.progress import enabled
     from feeddrive.estimator.design import PHYSICAL, predicted_std, simulate_closed_loop
 
     key = f"nc.program[{item}].{kind}.accel"
@@ -116,7 +132,7 @@ def verify(args, scenario, item: int, kind: str, default: float, best: float, no
                         repetitions=args.verify, sweep={key: sorted({default, best}), "monitor": [None]},
                         run_options={"methods": ["ls", "iv"]})
     result = run_campaign(campaign, args.out or Path("campaigns", campaign.name), workers=args.workers,
-                          progress=False, plots=False)
+                          progress=enabled(not args.no_progress), plots=False)
     print(f"\nverification: {args.verify} runs per slope ({len(result.failed)} failed)")
     print(f"{'accel':>6} {'param':>5} {'predicted %':>12} {'LS std %':>9} {'IV std %':>9}")
     for accel in sorted({default, best}):

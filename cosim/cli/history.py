@@ -11,11 +11,10 @@ import math
 from pathlib import Path
 
 from feeddrive.cosim.errors import InputError
-from feeddrive.estimator.history import History
 
-#: history file used by ``cosim monitor`` and ``cosim history`` when --db is not given
-#: Where ``cosim run`` keeps the history by default (``history.sqlite`` beside its ``runs/<name>-<time>``
-#: output directories), so ``cosim history`` and ``cosim monitor`` find the same file.
+#: The history file of ``cosim run``, ``cosim monitor`` and ``cosim history`` when neither --db nor the
+#: scenario's ``monitor.db`` names one: relative to the current directory, whatever --out is, so the
+#: three commands find the same file. Each axis has its own history in it (the key is the axis name).
 DEFAULT_DB = "runs/history.sqlite"
 NAMES = ("R", "L", "K", "Jt", "ft", "Cd")
 
@@ -32,6 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from feeddrive.estimator.history import History
+
     db = Path(args.db)
     if not db.is_file():  # reading must not create an empty database
         raise InputError(f"history database {db} does not exist")
@@ -42,14 +43,19 @@ def main(args: argparse.Namespace) -> int:
     if args.axis and not motions[args.axis]:
         raise InputError(f"history database {db}: no motion for axis {args.axis!r} (axes in the file: "
                          f"{', '.join(held) or 'none'})")
+    if args.plot and len(axes) > 1:
+        raise InputError("--plot PNG names one file: choose an axis with --axis")
+    if args.json:
+        print(json.dumps({"db": str(db), "axes": motions}, indent=2))
+    else:
+        for axis in axes:
+            print(format_table(axis, motions[axis]))
     if args.plot is not None:
         from feeddrive.cosim.monitor_plots import plot_trends
 
-        if args.plot and len(axes) > 1:
-            raise InputError("--plot PNG names one file: choose an axis with --axis")
         for axis in axes:
             path = Path(args.plot or f"history_{axis}.png")
-            if path.exists() and not args.overwrite:
+            if path.exists() and not args.overwrite:  # the table is printed all the same
                 raise InputError(f"plot file {path} exists; use --overwrite to replace it")
             plot_trends(motions[axis], path, f"axis {axis}", thresholds(db, axis, motions[axis]))
             print(f"wrote {path}")
@@ -63,11 +69,6 @@ def main(args: argparse.Namespace) -> int:
             raise InputError(f"--html {html}: the file exists; use --overwrite to replace it")
         write_history_page(html, axes[0], motions[axes[0]], thresholds(db, axes[0], motions[axes[0]]), str(db))
         print(f"wrote {html}")
-    if args.json:
-        print(json.dumps({"db": str(db), "axes": motions}, indent=2))
-    else:
-        for axis in axes:
-            print(format_table(axis, motions[axis]))
     return 0
 
 
@@ -75,6 +76,7 @@ def thresholds(db: Path, axis: str, motions: list[dict]) -> dict:
     """The alarm band's thresholds for a history page: those of the newest diagnosed motion (what the
     monitor used), else the monitor's defaults; the healthy baseline as the monitor reads it from ``db``."""
     from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
+    from feeddrive.estimator.history import History
 
     config = MonitorConfig(axis=axis)
     with History(db) as history:
@@ -88,12 +90,14 @@ def thresholds(db: Path, axis: str, motions: list[dict]) -> dict:
 
 
 def format_table(axis: str, motions: list[dict]) -> str:
-    """One line per motion: time, validation, each parameter as value +- half its 95 % CI, faults, diagnosis."""
+    """One line per motion: its number on the axis (counted across runs), the run it came from and its
+    motion number there, time, validation, each parameter as value +- half its 95 % CI, faults, diagnosis."""
     units = {n: p["unit"] for m in motions for n, p in m.get("parameters", {}).items() if "unit" in p}
-    head = f"{'id':>4} {'motion':>6} {'time (UTC)':19} {'valid':5} " + " ".join(
-        f"{n + (' [' + units[n] + ']' if n in units else ''):>17}" for n in NAMES)
-    lines = [f"axis {axis}: {len(motions)} motion(s)", head + "  sensor faults / diagnosis"]
-    for m in motions:
+    head = f"{'motion':>6} {'run:motion':24} {'time (UTC)':19} {'valid':5} " + " ".join(
+        f"{n + (' [' + units[n] + ']' if n in units else '') + ' ±95%':>17}" for n in NAMES)
+    lines = [f"axis {axis}: {len(motions)} motion(s); parameters as estimate ± half-width of the 95 % "
+             "confidence interval", head + "  sensor faults / diagnosis"]
+    for number, m in enumerate(motions, 1):
         when = _dt.datetime.fromtimestamp(m["time"], _dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
         cells = []
         for n in NAMES:
@@ -108,6 +112,7 @@ def format_table(axis: str, motions: list[dict]) -> str:
         extra += [d["fault"] for d in m.get("diagnosis", [])]
         if m.get("error"):
             extra.append(m["error"])
-        lines.append(f"{m['id']:>4} {str(m.get('motion', '')):>6} {when:19} {'yes' if m['validated'] else 'no':5} "
+        run = f"{(m.get('scenario') or '?')[:20]}:{m.get('motion', '')}"
+        lines.append(f"{number:>6} {run:24} {when:19} {'yes' if m['validated'] else 'no':5} "
                      + " ".join(cells) + "  " + "; ".join(extra))
     return "\n".join(lines)

@@ -5,10 +5,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from feeddrive.cosim.errors import InputError, ScenarioError
-from feeddrive.cosim.scenario import INPUT_ROLES, ROLE_UNITS, check_map, fmi_version, load_plant_map, model_description
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -18,6 +18,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from feeddrive.cosim.scenario import (
+        INPUT_ROLES,
+        ROLE_UNITS,
+        check_map,
+        fmi_version,
+        load_plant_map,
+        model_description,
+    )
+
     if args.fmu == "builtin":
         from feeddrive.fmu_build import builtin_fmu
 
@@ -39,14 +48,19 @@ def main(args: argparse.Namespace) -> int:
     if exported is not None:
         print(f"  feeddrive {exported['kind']} of scenario {exported.get('scenario', '?')}, step_size "
               f"{exported['step']:g} s (resources/component.json); needs Python with feeddrive-monitor installed")
-    rows = [("name", "type", "causality", "variability", "unit", "start")]
-    rows += [(v.name, v.type, v.causality, v.variability, v.unit or "", "" if v.start is None else str(v.start))
-             for v in md.modelVariables]
+    rows = [("name", "type", "causality", "variability", "unit", "start", "description")]
+    rows += [(v.name, v.type, v.causality, v.variability, v.unit or "", "" if v.start is None else str(v.start),
+              " ".join((v.description or "").split())) for v in md.modelVariables]
     widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
     for r in rows:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
+    missing = _missing_binary(path, md)
+    if missing:  # the variables are worth reading all the same (to write a map); running it is not possible
+        print(f"cosim info: warning: {path}: {missing}; cosim run refuses it (exit 2)", file=sys.stderr)
     if args.map is None:
         return 0
+    if missing:
+        raise InputError(f"{path}: {missing}")
     role_map, error = load_plant_map(args.map)
     conversions: dict = {}
     problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions)
@@ -71,6 +85,21 @@ def _axis_kind(scenario: Path) -> str:
     data, _ = read_yaml(scenario)
     axis = data.get("axis") if isinstance(data, dict) else None
     return axis.get("kind", "linear") if isinstance(axis, dict) else "linear"
+
+
+def _missing_binary(path: Path, md) -> str | None:  # noqa: ANN001 - fmpy's ModelDescription
+    """Why the FMU cannot run here (no binary for this platform, naming those it has), or None."""
+    from feeddrive.cosim.fmu_inspect import check_archive
+
+    for kind in (md.coSimulation, md.modelExchange):
+        if kind is None:
+            continue
+        try:
+            check_archive(path, kind.modelIdentifier)
+            return None
+        except ValueError as exc:
+            problem = str(exc)
+    return problem
 
 
 def _exported(path: Path) -> dict | None:

@@ -110,7 +110,11 @@ def main(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"axis": args.axis, "db": args.db, "motions": results}, default=_jsonable))
     else:
+        from feeddrive.cosim.cli.run import history_line
+
         print(table(results))
+        print(history_line({"axis": args.axis, "db": str(Path(args.db).resolve()),
+                            "diagnosis_thresholds": thresholds}).strip())
     return 0
 
 

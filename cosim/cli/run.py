@@ -1,7 +1,12 @@
-"""``cosim run SCENARIO.yaml [--out DIR] [--overwrite] [--no-progress]``: one co-simulation run.
+"""``cosim run SCENARIO.yaml [--out DIR] [--db PATH] [--overwrite] [--no-progress]``: one co-simulation run.
 
 Writes signals.csv, scenario.resolved.yaml, report.json and plots/ into the output directory
-(default ``runs/<name>-<YYYYmmdd-HHMMSS>``) and prints a short summary.
+(default ``runs/<name>-<YYYYmmdd-HHMMSS>``) and prints a short summary, with the monitor's history
+file and axis and the state of its healthy baseline.
+
+The history does not depend on ``--out``: ``--db``, else the scenario's ``monitor.db``, else
+``runs/history.sqlite`` in the current directory (``DEFAULT_DB``, which ``cosim history`` and
+``cosim monitor`` read too). Its key is the scenario's axis.
 Exit status: 0 success, 2 bad input, 1 simulation failure (see cosim/cli.py), including an FMU that
 crashes or hangs: the run is a supervised child process (cosim/supervise.py).
 """
@@ -10,12 +15,12 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import logging
+import os
 import sys
 from pathlib import Path
 
-from feeddrive.cosim.run import DEFAULT_HISTORY
-from feeddrive.cosim.scenario import load_scenario
-from feeddrive.cosim.supervise import run_supervised
+from feeddrive.cosim.cli.history import DEFAULT_DB
+from feeddrive.cosim.errors import InputError
 
 
 class _ReportedElsewhere(logging.Filter):
@@ -29,8 +34,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenario", type=Path, help="scenario YAML file")
     parser.add_argument("--out", type=Path, default=None,
                         help="output directory (default: runs/<name>-<YYYYmmdd-HHMMSS>)")
+    parser.add_argument("--db", type=Path, default=None, metavar="PATH",
+                        help=f"the monitor's SQLite history (default: the scenario's monitor.db, else {DEFAULT_DB} "
+                             "in the current directory, whatever --out is)")
     parser.add_argument("--overwrite", action="store_true", help="replace the files of a non-empty output directory")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="no progress bar (there is none either when stderr is not a terminal or under CI)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -38,15 +47,52 @@ def main(args: argparse.Namespace) -> int:
     handler.addFilter(_ReportedElsewhere())
     handler.setFormatter(logging.Formatter("cosim run: %(name)s: %(levelname)s: %(message)s"))
     logging.basicConfig(level=logging.WARNING, handlers=[handler])
+    from feeddrive.cosim.progress import enabled
+    from feeddrive.cosim.run import with_history
+    from feeddrive.cosim.scenario import load_scenario
+    from feeddrive.cosim.supervise import run_supervised
+
     scenario = load_scenario(args.scenario)
     for note in scenario.unit_notes:  # a unit taken on trust is said, once
         print(f"plant.map: {note}")
+    if args.db is not None:
+        if scenario.monitor is None:
+            raise InputError(f"--db {args.db}: the scenario {args.scenario} has no monitor (monitor: section)")
+        scenario = with_history(scenario, args.db.expanduser().resolve(), replace=True)
+        if scenario is None:
+            raise InputError(f"--db {args.db}: the scenario's monitor is a user class; its history is its own")
     out = args.out or _fresh_run_dir(Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}")
     # in a supervised child process: an FMU that crashes or hangs is reported in one line (exit 1)
-    result = run_supervised(scenario, out, progress=not args.no_progress, overwrite=args.overwrite,
-                            default_history=Path(out).parent / DEFAULT_HISTORY)
+    result = run_supervised(scenario, out, progress=enabled(not args.no_progress), overwrite=args.overwrite,
+                            default_history=Path(DEFAULT_DB))
     print(summary(result))
     return 0
+
+
+def history_line(monitor: dict) -> str | None:
+    """Where the monitor's history is, for which axis, and what its healthy baseline is now.
+
+    ``monitor`` is the monitor's entry of report.json ``components`` (None or not the built-in
+    monitor: no line)."""
+    if not isinstance(monitor, dict) or "axis" not in monitor:
+        return None
+    db = monitor.get("db")
+    if not db or db == ":memory:":
+        where = "in memory (nothing kept after the run)"
+    else:
+        rel = os.path.relpath(db)
+        where = db if rel.startswith("..") else rel
+    text = f"  history: {where}, axis {monitor['axis']}"
+    t = monitor.get("diagnosis_thresholds") or {}
+    if t.get("baseline_mode") == "nominal":
+        return text + "; healthy baseline: the nominal parameters (monitor.baseline: nominal)"
+    n, k = t.get("baseline_motions"), t.get("baseline_learnt")
+    if n is None or k is None:
+        return text
+    if k < n:
+        return text + (f"; learning the healthy baseline: {k} of {n} motions (until then, drift is judged "
+                       "against the healthy motions so far)")
+    return text + f"; healthy baseline: {n} motions"
 
 
 def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
@@ -72,6 +118,9 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
                 lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
             if m.get("error"):
                 lines.append(f"    {m['error']}")
+    line = history_line((r.get("components") or {}).get("monitor"))
+    if line:
+        lines.append(line)
     lines.append(f"  files: signals.csv, scenario.resolved.yaml, report.json, report.html, {len(result.paths['plots'])} plots")
     return "\n".join(lines)
 

@@ -110,6 +110,28 @@ def _component_classes(kind: str) -> tuple[type, type]:
     raise ValueError(f"component kind {kind!r}: expected one of nc, sensors, monitor")
 
 
+#: units of the components' real parameters (FMI 2.0 gives only Real variables a unit); a key ending in
+#: ``_s`` is in seconds and one ending in ``_hz`` in hertz (``parameter_unit``)
+CONFIG_UNITS = {
+    # nc
+    "start": "s", "kv": "1/s", "pitch": "m", "belt_ratio": "1", "accel": "m/s2",
+    # monitor: levels, fractions and relative tolerances are dimensionless
+    "speed_fraction": "1", "alpha": "1", "gain_tol": "1", "offset_tol": "1", "mismatch_alpha": "1",
+    "min_relative_drift": "1",
+}
+
+
+def parameter_unit(name: str) -> str | None:
+    """The unit of a component's real parameter ``name`` (None: not known)."""
+    if name in CONFIG_UNITS:
+        return CONFIG_UNITS[name]
+    if name.endswith("_hz"):
+        return "Hz"
+    if name.endswith("_s"):
+        return "s"
+    return None
+
+
 def scalar_fields(model: type) -> dict[str, type]:
     """The config model's top-level keys that are one scalar (float, int, bool, str, a str Literal or an
     optional str): they become FMU parameters. Nested sections (the NC program, the sensor channels) stay
@@ -163,10 +185,13 @@ class ComponentSlave(Fmi2Slave):
             value = self.section.get(name)
             self._params[name] = "" if value is None and typ is str else value
             var = {float: Real, int: Integer, bool: Boolean, str: String}[typ]
-            self._add(var(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
-                          description=(self.model.model_fields[name].description or f"{self.kind}.{name}")[:200],
-                          getter=lambda n=name: self._params[n],
-                          setter=lambda v, n=name: self._params.__setitem__(n, v)))
+            unit = parameter_unit(name) if typ is float else None
+            description = (self.model.model_fields[name].description or f"{self.kind}.{name}")[:200]
+            extra = {"unit": unit} if unit else {}
+            self._add((UnitReal if unit else var)(
+                name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed, description=description,
+                getter=lambda n=name: self._params[n], setter=lambda v, n=name: self._params.__setitem__(n, v),
+                **extra))
 
     def _add(self, var: Any) -> None:
         if getattr(var, "unit", None):

@@ -83,7 +83,9 @@ def run_drift(out: Path, motions: int = 500, oil_change: int | None = 300, overw
     from feeddrive.cosim.scenario import scenario_from_dict
 
     out.mkdir(parents=True, exist_ok=True)
-    db = out / "history.db"
+    # absolute: a relative monitor.db is read against the scenario's folder (examples/drift_500/), not
+    # against the current directory where OUT was created
+    db = (out / "history.db").resolve()
     if overwrite:
         for f in [db, db.with_name("history.db-wal"), db.with_name("history.db-shm"), out / "drift.json"]:
             f.unlink(missing_ok=True)

@@ -47,7 +47,20 @@ def write_csv(path: Path, data: dict[str, np.ndarray], *, mm: bool = False, sep:
     return path
 
 
-if __name__ == "__main__":  # python tests/cosim/linear_axis.py rec.csv [--mm]: the recording for the README
-    import sys
+def main(argv: list[str] | None = None) -> int:
+    """``python tests/cosim/linear_axis.py rec.csv [--mm] [--overwrite]``: the recording for the README."""
+    import argparse
 
-    print(write_csv(Path(sys.argv[1]), linear_axis(), mm="--mm" in sys.argv))
+    parser = argparse.ArgumentParser(description="Write the linear-axis test recording (25 s at 1 kHz) as CSV.")
+    parser.add_argument("csv", type=Path, help="CSV file to write")
+    parser.add_argument("--mm", action="store_true", help="position in mm (unit in the header)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    args = parser.parse_args(argv)
+    if args.csv.exists() and not args.overwrite:
+        parser.error(f"{args.csv} exists; use --overwrite to replace it")
+    print(write_csv(args.csv, linear_axis(), mm=args.mm))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

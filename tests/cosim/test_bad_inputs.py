@@ -36,7 +36,7 @@ SCENARIOS = {  # id: (file content (str or bytes), expected text in the line; {f
     "top-level-list": ("- name: t\n", "{f}"),
     "empty": ("", "{f}"),
     "syntax": ("name: t\nplant: {fmu: builtin\n", "{f}:3: invalid YAML"),
-    "tab-indent": ("name: t\nplant:\n\tfmu: builtin\n", "{f}:3: invalid YAML"),
+    "tab-indent": ("name: t\nplant:\n\tfmu: builtin\n", "{f}:3: a tab character (column 1): YAML indents with spaces"),
     "two-documents": (GOOD + "---\nname: u\n", "{f}:8: invalid YAML: but found another document"),
     "unhashable-key": ("name: t\n? [a, b]\n: 1\n", "{f}:2: invalid YAML: found unhashable key"),
     "unknown-key": (GOOD + "stepp: 1\n", "{f}:8: stepp: unknown key 'stepp'"),

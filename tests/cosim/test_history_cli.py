@@ -36,7 +36,8 @@ def db(tmp_path):
 def test_table(db, capsys):
     assert main(["history", "--db", str(db), "--axis", "X"]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[0] == "axis X: 3 motion(s)"
+    assert out[0] == ("axis X: 3 motion(s); parameters as estimate ± half-width of the 95 % confidence interval")
+    assert out[1].split()[:3] == ["motion", "run:motion", "time"] and "R ±95%" in out[1]
     first, second, third = out[2:]
     assert "2023-11-14 22:13:20" in first and " yes " in first and "0.6 ±0.0012" in first
     assert " no " in second and "Im2:gain" in second
@@ -56,8 +57,11 @@ def test_plot_and_no_silent_overwrite(db, tmp_path, capsys):
     assert main(["history", "--db", str(db), "--axis", "X", "--plot", str(png)]) == 0
     image = matplotlib.image.imread(png)
     assert image.shape[0] > 500 and image.shape[1] > 800
+    capsys.readouterr()
     assert main(["history", "--db", str(db), "--axis", "X", "--plot", str(png)]) == 2
-    assert "exists; use --overwrite" in capsys.readouterr().err
+    out, err = capsys.readouterr()
+    assert "exists; use --overwrite" in err
+    assert out.startswith("axis X: 3 motion(s)") and len(out.splitlines()) == 5  # the table all the same
     assert main(["history", "--db", str(db), "--axis", "X", "--plot", str(png), "--overwrite"]) == 0
 
 
@@ -68,3 +72,15 @@ def test_errors_are_one_line(db, tmp_path, capsys):
     assert not (tmp_path / "none.sqlite").exists()
     assert main(["history", "--db", str(db), "--axis", "Z"]) == 2
     assert "no motion for axis 'Z'" in capsys.readouterr().err
+
+
+def test_motions_are_numbered_per_axis_across_runs(tmp_path, capsys):
+    """Two runs of one motion each on axis X: motions 1 and 2 of the axis (each run's own number is 1)."""
+    path = tmp_path / "h.sqlite"
+    with History(path) as h:
+        h.record("X", motion(1), time=1.7e9, scenario="tool-change")
+        h.record("Y", motion(1), time=1.7e9, scenario="other-axis")
+        h.record("X", motion(1), time=1.7e9 + 60, scenario="worn-axis")
+    assert main(["history", "--db", str(path), "--axis", "X"]) == 0
+    rows = capsys.readouterr().out.splitlines()[2:]
+    assert [r.split()[:2] for r in rows] == [["1", "tool-change:1"], ["2", "worn-axis:1"]]

@@ -10,6 +10,7 @@ import yaml
 
 from feeddrive.cosim.cli import main
 from feeddrive.cosim.scenario import load_scenario
+from feeddrive.estimator.history import History
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -97,7 +98,8 @@ def test_info_lists_variables_and_checks_a_map(tmp_path, feeddrive_fmu, capsys):
     assert main(["info", "builtin"]) == 0
     lines = capsys.readouterr().out.splitlines()
     row = next(ln.split() for ln in lines if ln.split()[:1] == ["Cd"])
-    assert row == ["Cd", "Real", "parameter", "tunable", "N.m", "1.2"]
+    assert row[:6] == ["Cd", "Real", "parameter", "tunable", "N.m", "1.2"]
+    assert " ".join(row[6:]) == "total dry (Coulomb) friction torque"  # the description column
     assert main(["info", "builtin", "--map", str(EXAMPLES / "tool_change.yaml")]) == 0
     assert "map OK" in capsys.readouterr().out
     assert main(["info", str(feeddrive_fmu), "--map", str(EXAMPLES / "vendor_fmu.yaml")]) == 2
@@ -108,18 +110,26 @@ def test_info_lists_variables_and_checks_a_map(tmp_path, feeddrive_fmu, capsys):
 
 
 @pytest.mark.slow
-def test_successive_runs_continue_one_history_beside_the_out_dirs(tmp_path, feeddrive_fmu, monkeypatch, capsys):
-    """Without monitor.db, `cosim run` keeps the history in runs/history.sqlite: the 2nd run's motion is
-    checked against the 1st run's validated parameters, and `cosim history` finds both by default."""
+def test_successive_runs_continue_one_history_whatever_the_out_dir(tmp_path, feeddrive_fmu, monkeypatch, capsys):
+    """Without monitor.db, `cosim run` keeps the history in ./runs/history.sqlite, also with --out elsewhere
+    (on main, --out elsewhere/run2 silently switched to elsewhere/history.sqlite): the 2nd run's motion is
+    checked against the 1st run's validated parameters, and `cosim history` finds both by default.
+    ``--db`` puts a run's motions into another file, and only there."""
     monkeypatch.chdir(tmp_path)
-    for _ in range(2):
-        assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress"]) == 0
-    first, second = sorted((tmp_path / "runs").glob("tool-change-*"), key=lambda d: d.stat().st_mtime_ns)
+    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress"]) == 0
+    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "elsewhere/run2"]) == 0
+    first = next((tmp_path / "runs").glob("tool-change-*"))
+    second = tmp_path / "elsewhere" / "run2"
     references = [json.loads((d / "report.json").read_text())["motions"][0]["reference"] for d in (first, second)]
     assert references == ["nominal", "last validated"]
+    assert not (tmp_path / "elsewhere" / "history.sqlite").exists()
     capsys.readouterr()
     assert main(["history"]) == 0
     assert capsys.readouterr().out.startswith("axis X: 2 motion(s)")
+    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "run3", "--db", "other.sqlite"]) == 0
+    assert "  history: other.sqlite, axis X; learning the healthy baseline: 1 of 3" in capsys.readouterr().out
+    with History("other.sqlite") as other, History("runs/history.sqlite") as default:
+        assert len(other.motions("X")) == 1 and len(default.motions("X")) == 2
 
 
 @pytest.mark.slow

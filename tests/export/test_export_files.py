@@ -38,6 +38,14 @@ def test_ports_units_and_parameters_come_from_the_components_and_the_scenario(he
     assert (md["nc"]["speed_ref"].causality, md["nc"]["speed_ref"].unit) == ("output", "rad/s")
     assert (md["nc"]["position"].causality, md["nc"]["position"].unit) == ("input", "m")
     assert md["nc"]["kv"].causality == "parameter" and float(md["nc"]["kv"].start) == 30.0
+    # every real parameter carries its unit (on main the monitor's filter_cutoff_hz, window_s, ... had none)
+    assert (md["nc"]["kv"].unit, md["nc"]["pitch"].unit, md["nc"]["accel"].unit) == ("1/s", "m", "m/s2")
+    assert {n: md["monitor"][n].unit for n in ("filter_cutoff_hz", "window_s", "budget_s", "max_age_s", "alpha",
+                                               "gain_tol", "min_relative_drift")} == {
+        "filter_cutoff_hz": "Hz", "window_s": "s", "budget_s": "s", "max_age_s": "s", "alpha": "1",
+        "gain_tol": "1", "min_relative_drift": "1"}
+    assert not [v.name for v in md["monitor"].values() if v.type == "Real" and v.causality == "parameter"
+                and not v.unit]
     assert (md["sensors"]["Im1"].unit, md["sensors"]["theta_enc"].unit) == ("A", "rad")
     assert int(md["sensors"]["seed"].start) == 1  # the scenario's seed
     assert md["sensors"]["Im1.gain"].variability == "tunable"

@@ -114,9 +114,9 @@ def test_cli_builds_and_refuses_to_overwrite(tmp_path, capsys):
     assert lines[1].startswith("FeedDrive: FMI 2.0 Co-Simulation + Model Exchange, 6 states, 3 inputs, 7 outputs")
     stamp = out.stat().st_mtime_ns
     assert cosim_main(["build-fmu", "--out", str(out)]) == 2
-    assert "file exists (use --force to overwrite)" in capsys.readouterr().err
+    assert "file exists (use --overwrite to replace it)" in capsys.readouterr().err
     assert out.stat().st_mtime_ns == stamp
-    assert cosim_main(["build-fmu", "--out", str(out), "--force"]) == 0
+    assert cosim_main(["build-fmu", "--out", str(out), "--overwrite"]) == 0
     assert validate_fmu(str(out)) == []
 
 

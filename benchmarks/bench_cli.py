@@ -1,0 +1,70 @@
+"""Wall time of the command line as a user meets it, against the simulation's own time (issue 23).
+
+* ``cosim --version`` and ``cosim --help``: a fresh interpreter each time (best of ``--repeat``);
+  target under 0.3 s (the dispatcher imports a subcommand's module only when it is chosen).
+* The README's main command, ``cosim run examples/tool_change.yaml``, in a fresh temporary directory
+  (its own runs/ and history): the command's wall time against the simulation with the monitor in the
+  loop (report.json ``wall_time_s``: ``Master.run``, which includes the monitor's processing of each
+  motion; ``processing_s`` of the motions is printed too); target ratio <= 2. The rest is start-up
+  (imports, scenario and FMU check), the supervised child, report.json/report.html and the plots.
+
+    python benchmarks/bench_cli.py [--repeat 3] [--scenario examples/tool_change.yaml]
+
+Times depend on the machine's load: compare the ratios, measured in the same run.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def wall(command: list[str], cwd: Path | None = None) -> tuple[float, subprocess.CompletedProcess]:
+    """Seconds of wall time of ``command`` (a fresh process) and its result."""
+    env = os.environ | {"OPENBLAS_NUM_THREADS": "1"}
+    t0 = time.perf_counter()
+    proc = subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env)
+    elapsed = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(command)}: exit {proc.returncode}: {proc.stderr.strip()[-500:]}")
+    return elapsed, proc
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3, help="repetitions (best is reported)")
+    parser.add_argument("--scenario", type=Path, default=ROOT / "examples" / "tool_change.yaml")
+    args = parser.parse_args(argv)
+    cosim = [sys.executable, "-m", "feeddrive.cosim"]
+
+    for option in ("--version", "--help"):
+        best = min(wall([*cosim, option])[0] for _ in range(args.repeat))
+        print(f"cosim {option:9s} {best:6.3f} s   (target < 0.3 s) {'ok' if best < 0.3 else 'OVER'}")
+
+    # the FMU is built (and cached) before the first timed run: the first hour's build is a one-off
+    wall([*cosim, "info", "builtin"])
+    rows = []
+    for _ in range(args.repeat):
+        with tempfile.TemporaryDirectory(prefix="bench_cli_") as tmp:
+            elapsed, _proc = wall([*cosim, "run", str(args.scenario.resolve()), "--no-progress", "--out", "run"],
+                                  cwd=Path(tmp))
+            report = json.loads((Path(tmp) / "run" / "report.json").read_text())
+        simulation = report["wall_time_s"]
+        monitor = sum(m.get("processing_s") or 0.0 for m in report.get("motions") or [])
+        rows.append((elapsed / simulation, elapsed, simulation, monitor))
+    ratio, elapsed, simulation, monitor = min(rows)
+    print(f"cosim run {args.scenario.name}: {elapsed:.2f} s wall; simulation with the monitor in the loop "
+          f"{simulation:.2f} s (of which monitor {monitor:.2f} s); rest {elapsed - simulation:.2f} s")
+    print(f"ratio wall / (simulation + monitoring) = {ratio:.2f}   (target <= 2) {'ok' if ratio <= 2 else 'OVER'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,100 @@
+"""The README's shown outputs are what the commands print (issue 23: its figures had drifted).
+
+Every fenced block of README.md whose first line starts with ``$ `` is a session: each ``$ COMMAND`` line
+is run (a shell, in a fresh directory holding a copy of examples/ and the test data generator), and for
+a ``$ cosim ...`` command the lines after it, up to the next ``$`` line or the block's end, must equal
+what it prints (other commands prepare its input: their exit status is checked), line by line,
+with numbers within a tolerance, wall times (``simulated in X s``) free, and the time stamp of a run
+directory (``runs/<name>-<YYYYmmdd-HHMMSS>`` or ``runs/<name>-...``) free.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+README = ROOT / "README.md"
+#: relative tolerance of a shown number, and the absolute one for numbers near zero
+REL, ABS = 0.02, 2e-5
+NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+RUN_DIR = re.compile(r"runs/([\w.-]+?)-(?:\d{8}-\d{6}(?:-\d+)?|\.\.\.)")
+WALL = re.compile(r"simulated in \S+ s")
+
+
+def sessions(text: str) -> list[tuple[int, list[tuple[str, list[str]]]]]:
+    """``[(line number, [(command, expected lines), ...]), ...]`` of the README's ``$`` blocks."""
+    out = []
+    lines = text.splitlines()
+    k = 0
+    while k < len(lines):
+        if lines[k].startswith("```") and k + 1 < len(lines) and lines[k + 1].startswith("$ "):
+            start, k = k + 2, k + 1
+            steps: list[tuple[str, list[str]]] = []
+            while not lines[k].startswith("```"):
+                if lines[k].startswith("$ "):
+                    steps.append((lines[k][2:], []))
+                else:
+                    steps[-1][1].append(lines[k])
+                k += 1
+            out.append((start, steps))
+        k += 1
+    return out
+
+
+def normalise(line: str) -> str:
+    """Run-directory stamps and wall times masked, runs of spaces (column alignment) as one."""
+    return " ".join(WALL.sub("simulated in <wall> s", RUN_DIR.sub(r"runs/\1-<time>", line)).split())
+
+
+def same_line(expected: str, actual: str) -> bool:
+    """Equal text around the numbers, and each number within REL (or ABS near zero)."""
+    e, a = normalise(expected), normalise(actual)
+    if NUMBER.sub("#", e) != NUMBER.sub("#", a):
+        return False
+    for x, y in zip(NUMBER.findall(e), NUMBER.findall(a)):
+        if not math.isclose(float(x), float(y), rel_tol=REL, abs_tol=ABS):
+            return False
+    return True
+
+
+def test_the_parser_and_the_comparison():
+    text = "x\n```\n$ cosim a\nfoo 1.00 s\n$ cosim b\n```\n```\nnot a session\n```\n"
+    assert sessions(text) == [(3, [("cosim a", ["foo 1.00 s"]), ("cosim b", [])])]
+    assert same_line("R=0.6 L=0.003998 in runs/tool-change-20261123-013811",
+                     "R=0.6001 L=0.004001 in runs/tool-change-20261124-172502-2")
+    assert same_line("-> runs/vendor-axis-10mm-...", "-> runs/vendor-axis-10mm-20261124-172502")
+    assert same_line("3.988 s simulated in 1.65 s (39879 steps)", "3.988 s simulated in 12.4 s (39879 steps)")
+    assert not same_line("Cd=1.201", "Cd=1.25")  # 4 % off
+    assert not same_line("motion 1: validated", "motion 1: not validated")
+    assert same_line("position: 0.000001 m", "position: 0.000000 m")
+    assert same_line("  ft        199.82 N.s/m", "  ft       199.841 N.s/m")  # columns as wide as the digits
+
+
+STEPS = sessions(README.read_text(encoding="utf-8"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("line", "steps"), STEPS, ids=[f"README line {n}" for n, _ in STEPS])
+def test_readme_session_prints_what_it_shows(line, steps, tmp_path, feeddrive_fmu):
+    shutil.copytree(ROOT / "examples", tmp_path / "examples", ignore=shutil.ignore_patterns("*.fmu", "runs"))
+    (tmp_path / "tests" / "cosim").mkdir(parents=True)
+    shutil.copy(ROOT / "tests" / "cosim" / "linear_axis.py", tmp_path / "tests" / "cosim")
+    env = os.environ | {"PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+                        "OPENBLAS_NUM_THREADS": "1", "CI": "1"}
+    for command, expected in steps:
+        proc = subprocess.run(command, shell=True, cwd=tmp_path, capture_output=True, text=True, env=env, timeout=900)
+        assert proc.returncode == 0, f"README line {line}: {command}: exit {proc.returncode}\n{proc.stderr[-2000:]}"
+        if not command.startswith("cosim "):
+            continue
+        actual = proc.stdout.splitlines()
+        mismatch = [(e, a) for e, a in zip(expected, actual) if not same_line(e, a)]
+        assert not mismatch and len(actual) == len(expected), (
+            f"README line {line}: `{command}` printed\n" + "\n".join(actual) + "\n\nthe README shows\n"
+            + "\n".join(expected))
