@@ -30,11 +30,12 @@ from feeddrive.cosim.recorded import (
     SAMPLED,
     add_recording_arguments,
     filter_cutoff,
-    load_recording,
     mapped_roles,
+    motions,
     pairs,
+    read_recording,
+    recording_json,
     sampling_modes,
-    to_motor_side,
 )
 from feeddrive.estimator import (
     EstimationOptions,
@@ -45,7 +46,6 @@ from feeddrive.estimator import (
     estimate_motion,
 )
 from feeddrive.estimator.motion import SAMPLING_DELAY
-from feeddrive.estimator.segmentation import segment
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
          "state": None}
@@ -66,7 +66,7 @@ def main(args: argparse.Namespace) -> int:
             known[name] = float(value)
         except ValueError:
             raise InputError(f"--known {name}={value!r}: expected a number") from None
-    rec = to_motor_side(load_recording(args.data, roles, args.sample_time, args.delimiter, args.decimal), args)
+    rec = read_recording(args, roles)
     side = rec.side or "motor"
     units = parameter_units(side, "linear" if side == "table" else "rotary")
     options = EstimationOptions(method=args.method, filter=FilterSpec(filter_cutoff(args, rec.h)), known=known,
@@ -78,13 +78,13 @@ def main(args: argparse.Namespace) -> int:
     speed = sig.get("w")
     if speed is None and "position" in sig:
         speed = np.gradient(sig["position"], rec.h)
-    segments = segment(args.segment, rec.n, rec.h, speed, rec.signals.get("state"))
+    segments = motions(args, rec, speed, rec.signals.get("state"))
     if not segments:
         raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
     results = []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
-        data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, delays=delays, **part)
+        data = MotionData(rec.h, t0=rec.time(seg.start), delays=delays, **part)
         try:
             results.append(estimate_motion(data, options))
         except (NotEnoughExcitation, EstimatorInputError) as exc:  # e.g. a rapid block too short to filter
@@ -99,7 +99,7 @@ def main(args: argparse.Namespace) -> int:
         for seg in segments:
             for name, p in seg["parameters"].items():
                 p["unit"] = units[name]
-        print(json.dumps({"side": side, "segments": segments}))
+        print(json.dumps({"side": side, **recording_json(rec), "segments": segments}))
     else:
         print(table(results, units))
     return 0
