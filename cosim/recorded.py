@@ -247,7 +247,9 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
         at = f"row {i + 3}" if isinstance(source, CsvSource) else f"sample {i + 1}"
         raise DataError(f"{path}: {what} {label!r} is not strictly increasing at {at}")
     clock = None
-    if time_sig.absolute or time[0] > ABSOLUTE_AFTER:  # calendar time stamps: keep the date, count from 0
+    if time_sig.absolute:  # calendar time stamps: keep the date, count from 0
+        clock, time = time_sig.origin + float(time[0]), time - time[0]
+    elif time[0] > ABSOLUTE_AFTER:  # seconds since 1970 as numbers
         clock, time = float(time[0]), time - time[0]
     timing = measure(time)
     h = timing.h

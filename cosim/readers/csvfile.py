@@ -81,15 +81,13 @@ def read_text(path: Path, what: str, max_bytes: int | None = None) -> str:
                         f"expected a UTF-8 {what} file") from None
 
 
-def iso_seconds(cell: str) -> float | None:
-    """Seconds since 1970-01-01 UTC of an ISO 8601 time stamp (naive ones taken as UTC), else None."""
+def iso_time(cell: str) -> _dt.datetime | None:
+    """An ISO 8601 time stamp (naive ones taken as UTC), else None."""
     try:
         t = _dt.datetime.fromisoformat(cell.strip().replace("Z", "+00:00"))
     except ValueError:
         return None
-    if t.tzinfo is None:
-        t = t.replace(tzinfo=_dt.timezone.utc)
-    return t.timestamp()
+    return t if t.tzinfo is not None else t.replace(tzinfo=_dt.timezone.utc)
 
 
 class CsvSource(Source):
@@ -128,17 +126,16 @@ class CsvSource(Source):
     def column(self, k: int, role: str = "") -> Signal:
         """Column ``k`` as numbers; a time column of ISO time stamps as seconds since 1970 (absolute)."""
         values = np.empty(len(self.rows))
-        absolute = False
-        if role == "time" and self.rows and iso_seconds(self._cell(0, k)) is not None:
-            absolute = True
+        origin = iso_time(self._cell(0, k)) if role == "time" and self.rows else None
+        absolute = origin is not None
         for r in range(len(self.rows)):
             cell = self._cell(r, k)
             try:
                 if absolute:
-                    t = iso_seconds(cell)
+                    t = iso_time(cell)
                     if t is None:
                         raise ValueError
-                    values[r] = t
+                    values[r] = (t - origin).total_seconds()  # exact to the microsecond
                 else:
                     values[r] = self._number(cell)
             except ValueError:
@@ -146,7 +143,8 @@ class CsvSource(Source):
                 raise DataError(f"{self.path}: column {self.header[k]!r} row {r + 2}: {cell!r} is not {kind}"
                                 f"{' (decimal comma? use --decimal ,)' if ',' in cell and not absolute else ''}"
                                 f"{' (a truncated last line?)' if r == len(self.rows) - 1 else ''}") from None
-        return Signal(self.header[k], values, "s" if absolute else (unit_text(self.header[k]) or ""), absolute)
+        return Signal(self.header[k], values, "s" if absolute else (unit_text(self.header[k]) or ""), absolute,
+                      origin.timestamp() if absolute else 0.0)
 
     def resolve(self, expr: str, role: str) -> Signal:
         k = self.index.get(expr.strip(), self.index.get(bare(expr)))

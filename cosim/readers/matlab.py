@@ -118,6 +118,15 @@ class MatSource(Source):
     def variables(self) -> list[Variable]:
         return tree_variables(self.tree, self.notes)
 
+    def names(self) -> str:
+        """The top-level variables (structs marked), for error messages; cosim info lists the fields."""
+        def one(name: str, value: object) -> str:
+            if isinstance(value, dict):
+                return f"{name} (struct)"
+            shape = np.shape(value)
+            return f"{name} {shape}" if len(shape) > 1 else name
+        return ", ".join(one(k, v) for k, v in self.tree.items())
+
     def resolve(self, expr: str, role: str) -> Signal:
         value, label = resolve_tree(self.tree, expr, role, self.path, self.names())
         return Signal(label, as_signal(value, label, f"{self.path}: role {role}"))

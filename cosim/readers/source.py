@@ -51,13 +51,15 @@ class Signal:
     """A resolved role: ``values`` shape (n,), float, as stored (no unit conversion yet).
 
     ``label`` names it in messages; ``unit`` is its declared unit (``""`` when none); ``absolute`` is true
-    for time stamps that are calendar times (seconds since 1970-01-01 UTC).
+    for time stamps that are calendar times: ``values`` are then seconds after ``origin`` [s since
+    1970-01-01 UTC] (counted from the first stamp, so that float64 keeps sub-microsecond steps).
     """
 
     label: str
     values: np.ndarray
     unit: str = ""
     absolute: bool = False
+    origin: float = 0.0
 
 
 class Source:
@@ -171,8 +173,8 @@ def as_signal(value: object, label: str, where: str) -> np.ndarray:
         raise DataError(f"{where}: {label!r} is a struct; name one of its fields ({', '.join(value)})")
     arr = np.asarray(value)
     if arr.dtype == object or arr.dtype.kind not in "biuf":
-        raise DataError(f"{where}: {label!r} holds {arr.dtype.name if arr.dtype != object else 'cells/structs'}, "
-                        "expected numbers")
+        kind = "cells/structs" if arr.dtype == object else ("text" if arr.dtype.kind in "US" else arr.dtype.name)
+        raise DataError(f"{where}: {label!r} holds {kind}, expected numbers")
     if arr.ndim > 1 and sum(s > 1 for s in arr.shape) <= 1:
         arr = arr.reshape(-1)
     if arr.ndim != 1:
@@ -198,13 +200,14 @@ def tree_variables(tree: dict, notes: dict[str, str], prefix: str = "") -> list[
 class TableSource(Source):
     """Named columns of one length, already numeric (Parquet, text logs).
 
-    ``columns``: name -> values shape (n,); ``units``: name -> declared unit; ``absolute``: the names of
-    calendar-time columns (seconds since 1970). A role names a column with or without its bracketed unit.
+    ``columns``: name -> values shape (n,); ``units``: name -> declared unit; ``absolute``: calendar-time column
+    name -> its origin [s since 1970] (the column holds seconds after it). A role names a column with or without its bracketed unit.
     """
 
     def __init__(self, path: Path, kind: str, columns: dict[str, np.ndarray], units: dict[str, str],
-                 absolute: frozenset[str] = frozenset(), skipped: dict[str, str] | None = None) -> None:
-        self.path, self.kind, self.columns, self.units, self.absolute = path, kind, columns, units, absolute
+                 absolute: dict[str, float] | None = None, skipped: dict[str, str] | None = None) -> None:
+        self.path, self.kind, self.columns, self.units = path, kind, columns, units
+        self.absolute = absolute or {}
         self.skipped = skipped or {}
         self.index: dict[str, str] = {}
         for name in columns:
@@ -218,7 +221,7 @@ class TableSource(Source):
             raise DataError(f"{self.path}: column {expr!r} (role {role}) not found{why}; columns are "
                             f"{list(self.columns)}")
         return Signal(name, np.asarray(self.columns[name], dtype=float), self.units.get(name, ""),
-                      name in self.absolute)
+                      name in self.absolute, self.absolute.get(name, 0.0))
 
     def variables(self) -> list[Variable]:
         out = [Variable(k, v.shape, "datetime" if k in self.absolute else v.dtype.name, self.units.get(k, ""))

@@ -24,33 +24,45 @@ _NUMBERED = re.compile(r"^[%#]+\s*((?:\d+\s+)+)(.*)$")
 _NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
-def _names(k: list[int], text: str) -> tuple[list[str], str]:
-    """Names of the columns ``k`` from a comment's text, and its bracketed unit (``""`` when none)."""
-    unit_m = re.search(r"\[([^\]]*)\]", text)
-    unit = unit_m.group(1).strip() if unit_m else ""
-    text = re.sub(r"\s*\[[^\]]*\]", "", text)
-    if ":" in text:
-        desc = text.split(":", 1)[0]
-    else:  # 'time 0.000 sec': the name before the value, the word after it is a unit
-        words = text.split()
+def _names(k: list[int], text: str) -> list[tuple[str, str]]:
+    """``(name, unit)`` of the columns ``k`` from a comment's text (unit ``""`` when none).
+
+    A bracketed unit belongs to its own item when every item has one (``voltage [V], current [A]``),
+    else to all (``Motor voltage [V] left, right``).
+    """
+    def unit_of(part: str) -> str:
+        m = re.search(r"\[([^\]]*)\]", part)
+        return m.group(1).strip() if m else ""
+
+    def strip(part: str) -> str:
+        return re.sub(r"\s*\[[^\]]*\]", "", part).strip()
+
+    if ":" not in text:
+        words = strip(text).split()
         cut = next((j for j, w in enumerate(words) if _NUMBER.match(w.strip("(),"))), len(words))
-        if len(k) == 1:
-            if not unit and cut + 1 < len(words) + 1 and cut < len(words) - 1:
-                unit = words[cut + 1]
-            desc = " ".join(words[:cut])
-        else:  # '(mission 0), state 2, thread 1, line 0': the last len(k) items, values dropped
-            items = [" ".join(w for w in it.split() if not _NUMBER.match(w.strip("()"))).strip("() ")
-                     for it in text.split(",")]
-            items = [it for it in items if it]
-            return (items[-len(k):] if len(items) >= len(k) else [f"{text.strip()} {j + 1}" for j in range(len(k))]), unit
-    items = [it.strip() for it in desc.split(",")]
+        if len(k) == 1:  # 'time 0.000 sec': the name before the value, the word after it is its unit
+            unit = unit_of(text) or (words[cut + 1] if cut + 1 < len(words) else "")
+            return [(" ".join(words[:cut]), unit)]
+        # '(mission 0), state 2, thread 1, line 0': the last len(k) items, their values dropped
+        items = [" ".join(w for w in it.split() if not _NUMBER.match(w.strip("()"))).strip("() ")
+                 for it in strip(text).split(",")]
+        items = [it for it in items if it]
+        if len(items) >= len(k):
+            return [(it, unit_of(text)) for it in items[-len(k):]]
+        return [(f"{strip(text)} {j + 1}", unit_of(text)) for j in range(len(k))]
+    desc = text.split(":", 1)[0]
+    parts = desc.split(",")
+    own = len(parts) == len(k) and all(unit_of(p) for p in parts)
+    units = [unit_of(p) for p in parts] if own else [unit_of(desc)] * len(k)
+    items = [strip(p) for p in parts]
     if len(k) == 1:
-        return [desc.strip()], unit
-    if len(items) == len(k) and items[0].split():  # 'Motor voltage left, right'
+        return [(strip(desc), units[0])]
+    if len(items) == len(k) and items[0].split():  # 'Motor voltage left, right' -> 'Motor voltage right'
         words = items[0].split()
         prefix = " ".join(words[:-1])
-        return [f"{prefix} {words[-1]}".strip()] + [f"{prefix} {it}".strip() for it in items[1:]], unit
-    return [f"{desc.strip()} {j + 1}" for j in range(len(k))], unit
+        names = [items[0]] + [f"{prefix} {it}".strip() for it in items[1:]]
+        return list(zip(names, units))
+    return [(f"{strip(desc)} {j + 1}", units[0]) for j in range(len(k))]
 
 
 def read_text_log(path: Path, max_bytes: int | None = None) -> TableSource:
@@ -88,10 +100,9 @@ def read_text_log(path: Path, max_bytes: int | None = None) -> TableSource:
         k = [int(x) for x in m.group(1).split()]
         if not all(1 <= j <= n_col for j in k):
             continue
-        found, unit = _names(k, m.group(2))
-        for j, name in zip(k, found):
-            names.setdefault(j, name)
-            units[j] = unit
+        for j, (name, unit) in zip(k, _names(k, m.group(2))):
+            if j not in names:
+                names[j], units[j] = name, unit
     columns, unit_of = {}, {}
     for j in range(1, n_col + 1):
         name = names.get(j, f"col{j}")

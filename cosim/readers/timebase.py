@@ -47,8 +47,8 @@ class Timing:
 
     def describe(self) -> str:
         """``2501 samples, median step 4 ms (250 Hz), jitter 0.01 %, 3 gaps (largest 0.024 s at t = 1.2 s)``."""
-        text = (f"{self.n} samples, median step {self.h:.6g} s ({1 / self.h:.6g} Hz), jitter "
-                f"{100 * self.jitter:.3g} %")
+        jitter = f"{100 * self.jitter:.2g} %" if self.jitter >= 1e-6 else "below 0.0001 %"
+        text = f"{self.n} samples, median step {self.h:.6g} s ({1 / self.h:.6g} Hz), jitter {jitter}"
         big = self.largest()
         if big is None:
             return text + ", no gaps"
