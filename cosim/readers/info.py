@@ -18,7 +18,7 @@ def find_time(source: Source, variables: list[Variable]) -> tuple[str, np.ndarra
     candidates = [v.name for v in variables if len(v.shape) == 1 and v.dtype not in ("text", "struct", "-")
                   and (_TIME_NAME.search(re.sub(r"\s*\[[^\]]*\]$", "", v.name)) or v.dtype == "datetime")]
     candidates += [f"{v.name}[:,0]" for v in variables if len(v.shape) == 2 and v.shape[0] > 2
-                   and v.dtype not in ("text", "struct", "-", "cells/structs")]
+                   and v.dtype not in ("text", "struct", "-", "cells", "struct array")]
     for name in candidates:
         try:
             sig = source.resolve(name, "time")

@@ -145,6 +145,9 @@ def resolve_tree(tree: dict, expr: str, role: str, path: Path, listing: str) -> 
         if field is not None:
             if isinstance(value, np.ndarray) and value.dtype == object and value.size == 1:
                 value = value.reshape(-1)[0]  # a 1 x 1 struct array
+            if isinstance(value, np.ndarray) and value.dtype == object and value.size > 1:
+                raise DataError(f"{where}: {done!r} is a struct array of shape {value.shape}; index it first, "
+                                f"e.g. {done}[0].{field}")
             if not isinstance(value, dict):
                 raise DataError(f"{where}: {done!r} is not a struct (no field {field!r})")
             if field not in value:
@@ -173,7 +176,7 @@ def as_signal(value: object, label: str, where: str) -> np.ndarray:
         raise DataError(f"{where}: {label!r} is a struct; name one of its fields ({', '.join(value)})")
     arr = np.asarray(value)
     if arr.dtype == object or arr.dtype.kind not in "biuf":
-        kind = "cells/structs" if arr.dtype == object else ("text" if arr.dtype.kind in "US" else arr.dtype.name)
+        kind = "cells or a struct array (index it: NAME[k].FIELD)" if arr.dtype == object else ("text" if arr.dtype.kind in "US" else arr.dtype.name)
         raise DataError(f"{where}: {label!r} holds {kind}, expected numbers")
     if arr.ndim > 1 and sum(s > 1 for s in arr.shape) <= 1:
         arr = arr.reshape(-1)
@@ -192,7 +195,11 @@ def tree_variables(tree: dict, notes: dict[str, str], prefix: str = "") -> list[
             out += tree_variables(value, notes, full + ".")
             continue
         arr = np.asarray(value)
-        dtype = "text" if arr.dtype.kind in "US" else ("cells/structs" if arr.dtype == object else arr.dtype.name)
+        if arr.dtype == object and arr.size and all(isinstance(x, dict) for x in arr.flat):
+            fields = ", ".join(next(iter(arr.flat)))
+            out.append(Variable(full, tuple(arr.shape), "struct array", note=f"{full}[k].FIELD, fields: {fields}"))
+            continue
+        dtype = "text" if arr.dtype.kind in "US" else ("cells" if arr.dtype == object else arr.dtype.name)
         out.append(Variable(full, tuple(arr.shape), dtype, note=notes.get(full, "")))
     return out
 

@@ -167,3 +167,21 @@ def test_without_calendar_time_the_start_is_the_file_time_and_says_so(data, tmp_
     clock, source = start_clock(rec)
     assert clock == pytest.approx(1.7e9 - data["t"][-1], abs=1e-6)
     assert source.startswith(f"file modification time of {path} (taken as the end of the recording")
+
+
+def test_a_struct_array_is_indexed_then_its_field_named(data, tmp_path, capsys):
+    """MATLAB ``rec(2).u`` is ``rec[1].u`` (0-based, as every index in a role map)."""
+    import scipy.io
+
+    n = 2000
+    runs = np.array([{"t": data["t"][:n], "u": data["u"][:n]}, {"t": data["t"][:n], "u": -data["u"][:n]}],
+                    dtype=object)
+    path = tmp_path / "runs.mat"
+    scipy.io.savemat(path, {"rec": runs})
+    rec = load_recording(path, {"time": "rec[1].t", "voltage": "rec[1].u"})
+    np.testing.assert_array_equal(rec.signals["voltage"], -data["u"][:n])
+    assert main(["info", str(path)]) == 0
+    row = next(" ".join(line.split()) for line in capsys.readouterr().out.splitlines() if line.split()[:1] == ["rec"])
+    assert row == "rec 2 struct array rec[k].FIELD, fields: t, u"
+    with pytest.raises(DataError, match=r"role voltage: 'rec' is a struct array of shape \(2,\); index it first, e\.g\. rec\[0\]\.u"):
+        load_recording(path, {"time": "rec[0].t", "voltage": "rec.u"})
