@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from feeddrive.cosim.errors import DataError, InputError
-from feeddrive.cosim.readers.timebase import TIME_JITTER, Timing, measure
-from feeddrive.cosim.readers.timebase import resample as resample_grid
+from feeddrive.cosim.readers.timebase import TIME_JITTER, Timing, measure, mend
 
 __all__ = ["TIME_JITTER", "Recording", "load_recording", "si_factor", "split_scale"]
 
@@ -272,40 +271,10 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
 def _mended(rec: Recording, label: str, time: np.ndarray, timing: Timing, resample: float | None,
             split_gaps: bool) -> Recording:
     """A non-uniform record resampled (gaps up to ``resample`` s) and/or split at its other gaps."""
-    path, h = rec.path, rec.h
-    cut = [g for g in timing.gaps if resample is None or g[2] > resample]
-    if cut and not split_gaps:
-        k, t, length = max(cut, key=lambda g: g[2])
-        raise DataError(f"{path}: {label} has a gap of {length:.6g} s at t = {t:.6g} s (after sample {k}), "
-                        f"over --resample {resample:g} s; raise MAXGAP or add --split-gaps")
-    bounds = [0] + [k + 1 for k, _, _ in cut] + [len(time)]
-    parts, pieces, dropped, n = [], [], 0, 0
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        if b - a < 2:
-            dropped += 1
-            continue
-        t, part = time[a:b], {r: x[a:b] for r, x in rec.signals.items()}
-        if resample is not None:
-            t, part = resample_grid(t, part, h, hold=frozenset({"state"}))
-        elif measure(t).jitter > TIME_JITTER:
-            raise DataError(f"{path}: {label} jitters by {100 * measure(t).jitter:.3g} % of its step between "
-                            f"t = {t[0] - time[0]:.6g} and {t[-1] - time[0]:.6g} s; add --resample MAXGAP to "
-                            "put it on the nominal grid")
-        pieces.append((n, float(t[0])))
-        parts.append(part)
-        n += len(t)
-    if not parts:
-        raise DataError(f"{path}: {label}: no two consecutive samples between the gaps; nothing to estimate")
-    signals = {r: np.concatenate([p[r] for p in parts]) for r in rec.signals}
-    actions = []
-    if resample is not None:
-        actions.append(f"resampled onto the {h:.6g} s grid by linear interpolation (gaps up to {resample:g} s)")
-    if split_gaps:
-        actions.append(f"split at {len(cut)} gap{'s' * (len(cut) != 1)} into {len(pieces)} records"
-                       + (f" ({dropped} single samples dropped)" if dropped else ""))
-    timing_info = rec.timing | {"action": "; ".join(actions), "records": len(pieces)}
-    return replace(rec, t0=pieces[0][1], signals=signals, timing=timing_info,
-                   pieces=tuple(pieces) if len(pieces) > 1 else ())
+    signals, pieces, action = mend(f"{rec.path}: {label}", time, rec.signals, timing, rec.h, resample, split_gaps,
+                                   hold=frozenset({"state"}))
+    return replace(rec, t0=pieces[0][1], signals=signals, timing=rec.timing | {"action": action,
+                   "records": len(pieces)}, pieces=tuple(pieces) if len(pieces) > 1 else ())
 
 
 # -- command-line plumbing shared by ``cosim estimate`` and ``cosim monitor`` --------------------------

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from feeddrive.cosim.errors import DataError
+
 #: Largest relative deviation of a time step from the median step of a uniform record.
 TIME_JITTER = 0.01
 #: A step longer than this many median steps is a gap.
@@ -73,7 +75,7 @@ def measure(t: np.ndarray) -> Timing:
     return Timing(len(t), h, jitter, gaps)
 
 
-def resample(t: np.ndarray, signals: dict[str, np.ndarray], h: float, hold: frozenset[str] = frozenset(),
+def resample_grid(t: np.ndarray, signals: dict[str, np.ndarray], h: float, hold: frozenset[str] = frozenset(),
              ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Signals on the grid ``t[0] + k h`` by linear interpolation (``hold``: previous value, for states)."""
     n = int(np.floor((t[-1] - t[0]) / h * (1 + 1e-12))) + 1
@@ -86,3 +88,43 @@ def resample(t: np.ndarray, signals: dict[str, np.ndarray], h: float, hold: froz
         else:
             out[name] = np.interp(grid, t, x)
     return grid, out
+
+
+def mend(where: str, time: np.ndarray, signals: dict[str, np.ndarray], timing: Timing, h: float,
+         resample: float | None, split_gaps: bool, hold: frozenset[str] = frozenset(),
+         ) -> tuple[dict[str, np.ndarray], list[tuple[int, float]], str]:
+    """A non-uniform record resampled onto the ``h`` grid (gaps up to ``resample`` s) and/or split at its
+    other gaps (``split_gaps``).
+
+    Returns the signals (the records one after the other), ``(first sample, its time)`` of each record and
+    what was done, in words. ``where`` (file and time column) starts every error message.
+    """
+    cut = [g for g in timing.gaps if resample is None or g[2] > resample]
+    if cut and not split_gaps:
+        k, t, length = max(cut, key=lambda g: g[2])
+        raise DataError(f"{where} has a gap of {length:.6g} s at t = {t:.6g} s (after sample {k}), "
+                        f"over --resample {resample:g} s; raise MAXGAP or add --split-gaps")
+    bounds = [0] + [k + 1 for k, _, _ in cut] + [len(time)]
+    parts, pieces, dropped, n = [], [], 0, 0
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        if b - a < 2:  # a lone sample between two gaps has no step
+            dropped += 1
+            continue
+        t, part = time[a:b], {r: x[a:b] for r, x in signals.items()}
+        if resample is not None:
+            t, part = resample_grid(t, part, h, hold)
+        elif (jitter := measure(t).jitter) > TIME_JITTER:
+            raise DataError(f"{where} jitters by {100 * jitter:.3g} % of its step between t = {t[0] - time[0]:.6g} "
+                            f"and {t[-1] - time[0]:.6g} s; add --resample MAXGAP to put it on the nominal grid")
+        pieces.append((n, float(t[0])))
+        parts.append(part)
+        n += len(t)
+    if not parts:
+        raise DataError(f"{where}: no two consecutive samples between the gaps; nothing to estimate")
+    actions = []
+    if resample is not None:
+        actions.append(f"resampled onto the {h:.6g} s grid by linear interpolation (gaps up to {resample:g} s)")
+    if split_gaps:
+        actions.append(f"split at {len(cut)} gap{'s' * (len(cut) != 1)} into {len(pieces)} records"
+                       + (f" ({dropped} single samples dropped)" if dropped else ""))
+    return {r: np.concatenate([p[r] for p in parts]) for r in signals}, pieces, "; ".join(actions)
