@@ -27,13 +27,20 @@ def _format(path: Path) -> str:
     if suffix in (".parquet", ".pq"):
         return "parquet"
     with path.open("rb") as f:
-        head = f.read(512)
+        head = f.read(4096)
     if head.startswith(b"MATLAB") or head.startswith(b"\x89HDF"):
         return "mat"
     if head.startswith(b"PAR1"):
         return "parquet"
     if head.lstrip()[:1] in (b"%", b"#"):
         return "textlog"
+    if suffix in (".txt", ".log", ".dat"):  # whitespace-separated numbers without a header are a log too
+        first = head.lstrip().split(b"\n", 1)[0].split()
+        try:
+            [float(x) for x in first]
+        except ValueError:
+            return "csv"
+        return "textlog" if len(first) > 0 else "csv"
     return "csv"
 
 

@@ -76,7 +76,7 @@ class Source:
 
     def locate(self, signal: Signal, r: int) -> str:
         """Where sample ``r`` of ``signal`` is in the file, for messages."""
-        return f"{signal.label!r} sample {r}: {signal.values[r]!r}"
+        return f"{signal.label!r} sample {r}: {float(signal.values[r])!r}"
 
     def names(self) -> str:
         """The variables as a short list for error messages."""
@@ -164,7 +164,10 @@ def resolve_tree(tree: dict, expr: str, role: str, path: Path, listing: str) -> 
                 if isinstance(k, int) and not -arr.shape[axis] <= k < arr.shape[axis]:
                     raise DataError(f"{where}: {expr!r}: index {k} out of range for {done!r} of shape "
                                     f"{arr.shape} (0-based)")
-            value = arr[idx]
+            try:
+                value = arr[idx]
+            except (IndexError, ValueError) as exc:  # e.g. a zero slice step
+                raise DataError(f"{where}: {expr!r}: {exc}") from None
         done = expr[:step.end()].strip()
         pos = step.end()
     return value, done
@@ -180,8 +183,11 @@ def as_signal(value: object, label: str, where: str) -> np.ndarray:
         raise DataError(f"{where}: {label!r} holds {kind}, expected numbers")
     if arr.ndim > 1 and sum(s > 1 for s in arr.shape) <= 1:
         arr = arr.reshape(-1)
+    if arr.ndim == 0:
+        raise DataError(f"{where}: {label!r} is a single value; expected a signal (one value per sample)")
     if arr.ndim != 1:
-        raise DataError(f"{where}: {label!r} has shape {arr.shape}; expected one column, e.g. {label}[:,0]")
+        example = f"{label}[:,0]" if arr.ndim == 2 and "[" not in label else "NAME[:,k] with one index per dimension"
+        raise DataError(f"{where}: {label!r} has shape {arr.shape}; expected one column, e.g. {example}")
     return arr.astype(float)
 
 

@@ -185,3 +185,41 @@ def test_a_struct_array_is_indexed_then_its_field_named(data, tmp_path, capsys):
     assert row == "rec 2 struct array rec[k].FIELD, fields: t, u"
     with pytest.raises(DataError, match=r"role voltage: 'rec' is a struct array of shape \(2,\); index it first, e\.g\. rec\[0\]\.u"):
         load_recording(path, {"time": "rec[0].t", "voltage": "rec.u"})
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("g.mat", b"garbage\x00\x01", "not a readable MATLAB file"),
+    ("h.mat", b"MATLAB 5.0 MAT-file, garbage", "not a readable MATLAB file"),
+    ("e.mat", b"", "not a readable MATLAB file"),
+    ("p.parquet", b"PAR1 garbage", "not a readable Parquet file"),
+    ("c.txt", b"% only\n% comments\n", "no data lines (only comments or empty)"),
+    ("n.txt", b"0 1\n0.1 nan\n" + b"".join(b"%d 1\n" % k for k in range(2, 20)), "'col2' sample 1: nan is not a finite"),
+])
+@pytest.mark.parametrize("command", ["info", "estimate"])
+def test_an_unreadable_file_of_each_format_is_one_line(tmp_path, capsys, name, content, message, command):
+    path = tmp_path / name
+    path.write_bytes(content)
+    argv = [command, str(path)] + (["--map", "time=col1", "voltage=col2"] if command == "estimate" else [])
+    code = main(argv)
+    err = capsys.readouterr().err
+    if name == "n.txt" and command == "info":  # listing a NaN is fine; estimating from it is not
+        assert code == 0
+        return
+    assert code == 2 and err.count("\n") == 1 and message in err and str(path) in err, err
+
+
+@pytest.mark.parametrize("expr, message", [
+    ("a3", r"'a3' has shape \(30, 2, 2\); expected one column"),
+    ("b[0]", r"'b\[0\]' is a single value; expected a signal"),
+    ("b[::0]", r"'b\[::0\]': slice step cannot be zero"),
+    ("c", r"'c' holds complex128, expected numbers"),
+    ("cell", r"'cell' holds cells or a struct array"),
+])
+def test_matrices_of_the_wrong_kind_are_named(tmp_path, expr, message):
+    import scipy.io
+
+    path = tmp_path / "z.mat"
+    scipy.io.savemat(path, {"c": np.ones(30) + 1j, "a3": np.ones((30, 2, 2)), "b": np.ones(30, bool),
+                            "cell": np.array([np.ones(3), "x"], dtype=object)})
+    with pytest.raises(DataError, match=rf"z\.mat: role voltage: {message}"):
+        load_recording(path, {"voltage": expr}, 0.1)
