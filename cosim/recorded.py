@@ -87,6 +87,13 @@ class Recording:
         starts = [k for k, _ in self.pieces] or [0]
         return list(zip(starts, starts[1:] + [self.n]))
 
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        """d``x``/dt by central differences within each record (never across a gap), shape (n,)."""
+        out = np.empty(len(x))
+        for a, b in self.bounds():
+            out[a:b] = np.gradient(x[a:b], self.h) if b - a > 1 else 0.0
+        return out
+
     def time(self, k: int) -> float:
         """Time of sample ``k`` [s] (the records of a split recording keep their own start times)."""
         for start, t in reversed(self.pieces):

@@ -22,8 +22,6 @@ import argparse
 import json
 import sys
 
-import numpy as np
-
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.recorded import (
@@ -77,7 +75,7 @@ def main(args: argparse.Namespace) -> int:
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     speed = sig.get("w")
     if speed is None and "position" in sig:
-        speed = np.gradient(sig["position"], rec.h)
+        speed = rec.gradient(sig["position"])
     segments = motions(args, rec, speed, rec.signals.get("state"))
     if not segments:
         raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")

@@ -25,8 +25,6 @@ import json
 import os
 from pathlib import Path
 
-import numpy as np
-
 from feeddrive.cosim.cli.history import DEFAULT_DB
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
@@ -74,7 +72,7 @@ def main(args: argparse.Namespace) -> int:
                          "monitor needs the motor side: give --pitch (and --ratio) to convert them")
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     if "position" in rec.signals:
-        w_enc = np.gradient(rec.signals["position"], rec.h)
+        w_enc = rec.gradient(rec.signals["position"])  # within each record of a split recording
         sig["w_enc" if "w_tach" in sig else "w_tach"] = w_enc
     segments = record_motions(args, rec, sig["w_tach"], rec.signals.get("state"))
     if not segments:

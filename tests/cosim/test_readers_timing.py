@@ -8,6 +8,7 @@ without being asked, and what was done is said (stderr) and kept (JSON ``timing`
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import json
 import math
 import sys
@@ -189,3 +190,28 @@ def test_monitor_with_pitch_sees_no_false_tachometer_gain(linear, capsys):
     assert not [f for f in motion["sensor_faults"] if f["sensor"] in ("w_tach", "w_enc")], motion["sensor_faults"]
     assert report["time_source"].startswith(f"file modification time of {linear}")
     assert report["timing"]["rate_hz"] == pytest.approx(2000.0)
+
+
+def test_monitor_dates_the_motions_from_start_time_and_says_so(linear, tmp_path, capsys):
+    from feeddrive.estimator.history import History
+
+    db = tmp_path / "h.sqlite"
+    code, out, err = run(capsys, "monitor", linear, "--map", "time=time", "voltage=u", "current1=i", "speed=w",
+                         "position=x", "--pitch", PITCH, "--db", db, "--start-time", "2026-03-01T10:00:00Z")
+    assert code == 0, err
+    assert out.startswith("time: --start-time 2026-03-01T10:00:00Z\n")
+    start = dt.datetime(2026, 3, 1, 10, tzinfo=dt.timezone.utc).timestamp()
+    with History(str(db)) as history:
+        (motion,) = history.motions("X")
+    assert motion["time"] == pytest.approx(start + motion["end"], abs=1e-6)  # the clock at the motion's end
+
+
+def test_speed_from_position_is_differentiated_within_each_record(data, tmp_path):
+    """No spike where a gap joins two records: d/dt stays within each record."""
+    d = damaged(dict(data, w=np.cumsum(data["w"]) * 5e-4), np.arange(2000, 2200))  # at 70 rad/s: 7 rad lost
+    path = rd.write_csv(tmp_path / "r.csv", d, header="time [s],u [V],i [A],theta [rad]")
+    rec = load_recording(path, {"time": "time", "position": "theta"}, split_gaps=True)
+    w = rec.gradient(rec.signals["position"])
+    assert np.max(np.abs(w)) < 1.2 * np.max(np.abs(data["w"]))
+    whole = np.gradient(rec.signals["position"], rec.h)  # across the gap: the 0.1 s of travel in one step
+    assert np.max(np.abs(whole)) > 50 * np.max(np.abs(data["w"]))
