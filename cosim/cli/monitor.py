@@ -11,7 +11,8 @@ Each high-speed motion (``--segment``: the NC state when mapped, else the speed 
 validation, estimation, model validation and diagnosis, and is stored in the history (``--db``) of
 ``--axis``, continuing from what the history already holds. Machine time of a motion: from
 ``--start-time``, or the time column's calendar time stamps, else the file's modification time taken as the
-end of the recording (``recorded.start_clock``; said on stderr and in the JSON's ``time_source``).
+end of the recording (``recorded.start_clock``; said in the console's ``time:`` line and the JSON's
+``time_source``).
 
 ``--out DIR`` writes ``report.json`` (the motions' results, the diagnosis thresholds, versions),
 ``plots/`` (the figures of the last ``keep_traces`` = 5 motions, as in a run, and the trends) and
