@@ -223,3 +223,21 @@ def test_matrices_of_the_wrong_kind_are_named(tmp_path, expr, message):
                             "cell": np.array([np.ones(3), "x"], dtype=object)})
     with pytest.raises(DataError, match=rf"z\.mat: role voltage: {message}"):
         load_recording(path, {"voltage": expr}, 0.1)
+
+
+def test_iso_time_stamps_in_a_csv_give_the_step_and_the_calendar_time(data, tmp_path, capsys):
+    start = dt.datetime(2026, 3, 1, 10, 0, tzinfo=dt.timezone.utc)
+    stamps = [(start + dt.timedelta(microseconds=round(t * 1e6))).isoformat() for t in data["t"][:400].tolist()]
+    path = tmp_path / "iso.csv"
+    path.write_text("time,u [V]\n" + "".join(f"{s},{u!r}\n" for s, u in zip(stamps, data["u"][:400].tolist())),
+                    encoding="utf-8")
+    rec = load_recording(path, {"time": "time", "voltage": "u"})
+    assert rec.h == pytest.approx(5e-4, rel=1e-9) and rec.clock == pytest.approx(start.timestamp(), abs=1e-6)
+    assert rec.t0 == 0.0 and start_clock(rec)[0] == pytest.approx(start.timestamp(), abs=1e-6)
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "time: time (calendar time stamps): 400 samples, median step 0.0005 s (2000 Hz)" in out
+    bad = tmp_path / "bad.csv"
+    bad.write_text(path.read_text(encoding="utf-8").replace(stamps[7], "soon"), encoding="utf-8")
+    with pytest.raises(DataError, match=r"column 'time' row 9: 'soon' is not an ISO 8601 time stamp"):
+        load_recording(bad, {"time": "time", "voltage": "u"})
