@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from feeddrive.cosim.errors import DataError, InputError
-from feeddrive.cosim.readers.timebase import TIME_JITTER, Timing, measure, mend
+from feeddrive.cosim.readers.timebase import TIME_JITTER, Timing, jitter_text, measure, mend
 
 __all__ = ["TIME_JITTER", "Recording", "load_recording", "si_factor", "split_scale"]
 
@@ -410,7 +410,7 @@ def read_recording(args: argparse.Namespace, role_map: Mapping[str, str]) -> Rec
     t = rec.timing
     if t.get("action", "none") != "none":  # never resampled or split silently (the JSON has it too)
         print(f"cosim: {rec.path}: time from {t['source']}: {t['samples']} samples, median step "
-              f"{t['median_step_s']:.6g} s, jitter {100 * t['jitter']:.3g} %, {t['gaps']} gaps; {t['action']}",
+              f"{t['median_step_s']:.6g} s, jitter {jitter_text(t['jitter'])}, {t['gaps']} gaps; {t['action']}",
               file=sys.stderr)
     return rec
 

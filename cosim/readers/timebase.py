@@ -49,8 +49,7 @@ class Timing:
 
     def describe(self) -> str:
         """``2501 samples, median step 4 ms (250 Hz), jitter 0.01 %, 3 gaps (largest 0.024 s at t = 1.2 s)``."""
-        jitter = f"{100 * self.jitter:.2g} %" if self.jitter >= 1e-6 else "below 0.0001 %"
-        text = f"{self.n} samples, median step {self.h:.6g} s ({1 / self.h:.6g} Hz), jitter {jitter}"
+        text = f"{self.n} samples, median step {self.h:.6g} s ({1 / self.h:.6g} Hz), jitter {jitter_text(self.jitter)}"
         big = self.largest()
         if big is None:
             return text + ", no gaps"
@@ -62,6 +61,11 @@ class Timing:
         return {"samples": self.n, "median_step_s": self.h, "rate_hz": 1 / self.h, "jitter": self.jitter,
                 "gaps": len(self.gaps), "largest_gap_s": big[2] if big else 0.0,
                 "largest_gap_at_s": big[1] if big else None}
+
+
+def jitter_text(jitter: float) -> str:
+    """``0.42 %``, or ``below 0.0001 %`` for the rounding of decimal time stamps."""
+    return f"{100 * jitter:.2g} %" if jitter >= 1e-6 else "below 0.0001 %"
 
 
 def measure(t: np.ndarray) -> Timing:
