@@ -1,15 +1,17 @@
-"""Recorded data: a CSV file and a role map -> uniformly sampled signals.
+"""Recorded data: a recording (CSV, MATLAB, Parquet, text log) and a role map -> uniformly sampled signals.
 
-A role map says which column plays which role, e.g. ``{"time": "time", "voltage": "u [V]",
-"current": "Im2", "speed": "w_tach"}``. Column headers may carry a unit in brackets
-(``i [A]``); a column is found with or without it.
+A role map says which column or variable plays which role, e.g. ``{"time": "time", "voltage": "u [V]",
+"current": "Im2", "speed": "w_tach"}`` or, in a MATLAB file, ``{"torque": "rec.act_torque_abs_nm[:,0]"}``.
+The readers (:mod:`feeddrive.cosim.readers`) turn the file into signals with their declared units; here
+they are converted to SI, the time base is checked (jitter and gaps measured, resampled or split only
+when asked) and the command-line plumbing shared by ``cosim estimate`` and ``cosim monitor`` lives.
 """
 from __future__ import annotations
 
 import argparse
-import csv
-import io
+import datetime as _dt
 import re
+import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
@@ -18,13 +20,16 @@ from pathlib import Path
 import numpy as np
 
 from feeddrive.cosim.errors import DataError, InputError
+from feeddrive.cosim.readers.timebase import TIME_JITTER, Timing, jitter_text, measure, mend
+
+__all__ = ["TIME_JITTER", "Recording", "load_recording", "si_factor", "split_scale"]
 
 #: Fewest samples a recording must have.
 MIN_SAMPLES = 10
-#: Largest CSV file read [bytes] (the rows are held in memory as text, ~10 times the file's size).
+#: Largest CSV or text-log file read [bytes] (the rows are held in memory as text, ~10 times the file's size).
 MAX_BYTES = 512 << 20
-#: Largest relative deviation of a time step from the median step.
-TIME_JITTER = 0.01
+#: Time stamps above this many seconds are calendar times (seconds since 1970: after 1973-03-03).
+ABSOLUTE_AFTER = 1e8
 
 
 @dataclass(frozen=True)
@@ -41,10 +46,19 @@ class Recording:
     signals : dict of str to ndarray
         Role -> values in SI (the ``time`` role excluded).
     columns : dict of str to str
-        Role -> the column header it came from.
+        Role -> the column header or variable expression it came from.
     units : dict of str to str
         Role -> the SI unit of its values (``m`` or ``rad`` for a position, ...), or ``""`` when the
         column gave no unit (values taken as they are).
+    timing : dict
+        The time base as measured (``samples``, ``median_step_s``, ``rate_hz``, ``jitter``, ``gaps``,
+        ``largest_gap_s``, ``largest_gap_at_s``), where it came from (``source``) and what was done to it
+        (``action``: ``none``, resampled, split).
+    clock : float or None
+        Calendar time of the first sample [s since 1970-01-01 UTC] when the time column holds calendar
+        time stamps.
+    pieces : tuple of (int, float)
+        ``(first sample, its time [s])`` of each record after ``--split-gaps`` (empty: one record).
     """
 
     path: Path
@@ -53,6 +67,9 @@ class Recording:
     signals: dict[str, np.ndarray]
     columns: dict[str, str]
     units: dict[str, str] = field(default_factory=dict)
+    timing: dict = field(default_factory=dict)
+    clock: float | None = None
+    pieces: tuple[tuple[int, float], ...] = ()
 
     @property
     def n(self) -> int:
@@ -61,9 +78,28 @@ class Recording:
     @property
     def side(self) -> str | None:
         """``table`` when a position, speed or torque column is a length, speed in m/s or force; ``motor``
-        when one is an angle, rad/s or N.m; None when the columns say nothing."""
+        when one is an angle, rad/s or N.m; None when the columns say nothing (or both)."""
         sides = {SI_SIDE[u] for r, u in self.units.items() if u in SI_SIDE}
         return sides.pop() if len(sides) == 1 else None
+
+    def bounds(self) -> list[tuple[int, int]]:
+        """``(start, stop)`` sample ranges of the records (one unless split at gaps)."""
+        starts = [k for k, _ in self.pieces] or [0]
+        return list(zip(starts, starts[1:] + [self.n]))
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        """d``x``/dt by central differences within each record (never across a gap), shape (n,)."""
+        out = np.empty(len(x))
+        for a, b in self.bounds():
+            out[a:b] = np.gradient(x[a:b], self.h) if b - a > 1 else 0.0
+        return out
+
+    def time(self, k: int) -> float:
+        """Time of sample ``k`` [s] (the records of a split recording keep their own start times)."""
+        for start, t in reversed(self.pieces):
+            if k >= start:
+                return t + (k - start) * self.h
+        return self.t0 + k * self.h
 
 
 #: SI unit each role is converted to, in order of preference; a unit that converts to a later entry of
@@ -74,18 +110,6 @@ SI_UNITS = {"time": ("s",), "voltage": ("V",), "voltage_ref": ("V",), "current":
 SI_SIDE = {"rad/s": "motor", "rad": "motor", "N*m": "motor", "m/s": "table", "m": "table", "N": "table"}
 #: Largest magnitude accepted: the estimator squares and sums the samples, 1e300 would overflow
 MAX_ABS = 1e100
-DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\\t": "\t", "\t": "\t"}
-
-
-def _bare(header: str) -> str:
-    """Header without a trailing unit: ``"i [A]"`` -> ``"i"``."""
-    return re.sub(r"\s*[\[(][^\])]*[\])]\s*$", "", header.strip())
-
-
-def _unit_text(header: str) -> str | None:
-    """The unit in a header's trailing brackets (``"pos [mm]"`` -> ``"mm"``), or None."""
-    m = re.search(r"[\[(]([^\])]*)[\])]\s*$", header.strip())
-    return m.group(1).strip() if m else None
 
 
 @lru_cache(maxsize=1)
@@ -122,40 +146,6 @@ def si_factor(unit: str, role: str, where: str) -> tuple[float, str]:
                     f"{' or '.join(targets)})")
 
 
-def _dialect(text: str, delimiter: str | None, decimal: str | None, path: Path) -> tuple[str, str]:
-    """The separator and decimal mark: given, or detected from the header and the first rows.
-
-    A header that splits into more fields on ``;`` or tab than on ``,`` uses that separator (European
-    spreadsheet exports use ``;`` with a decimal comma); the decimal mark is a comma when the
-    separator is not and the first rows hold numbers like ``1,5``.
-    """
-    if delimiter is not None:
-        if delimiter not in DELIMITERS:
-            raise DataError(f"{path}: --delimiter {delimiter!r}; expected one of ',', ';', 'tab'")
-        delimiter = DELIMITERS[delimiter]
-    head = text.splitlines()[:20]
-
-    def fields(line: str, sep: str) -> list[str]:
-        try:
-            return next(csv.reader([line], delimiter=sep), [])
-        except csv.Error:  # a NUL byte or an oversized field: the full read names its line
-            return []
-
-    if delimiter is None:
-        header = head[0] if head else ""
-        counts = {d: len(fields(header, d)) for d in (",", ";", "\t")}
-        delimiter = max(counts, key=lambda d: (counts[d], d == ","))
-    if decimal is None:
-        sample = [c.strip() for line in head[1:] for c in fields(line, delimiter)]
-        comma = any(re.fullmatch(r"[-+]?\d*,\d+([eE][-+]?\d+)?", c) for c in sample)
-        decimal = "," if comma and delimiter != "," else "."
-    if decimal not in (".", ","):
-        raise DataError(f"{path}: --decimal {decimal!r}; expected '.' or ','")
-    if decimal == delimiter:
-        raise DataError(f"{path}: the decimal mark and the separator are both {decimal!r}; expected different ones")
-    return delimiter, decimal
-
-
 def split_scale(column: str) -> tuple[str, float | None]:
     """``"x*0.001"`` -> ``("x", 0.001)``: an explicit scale (overrides the header's unit); else ``(column, None)``."""
     name, sep, factor = column.rpartition("*")
@@ -171,23 +161,30 @@ def split_scale(column: str) -> tuple[str, float | None]:
 
 
 def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: float | None = None,
-                   delimiter: str | None = None, decimal: str | None = None) -> Recording:
-    """Read a CSV recording, converting every mapped column to SI.
+                   delimiter: str | None = None, decimal: str | None = None, *, resample: float | None = None,
+                   split_gaps: bool = False) -> Recording:
+    """Read a recording (CSV, MATLAB, Parquet, text log: :func:`feeddrive.cosim.readers.open_source`),
+    converting every mapped signal to SI.
 
     Parameters
     ----------
     path : str or Path
-        CSV file with one header row; UTF-8 with or without a byte-order mark; separated by ``,``,
-        ``;`` or tabs; decimal point or comma (both detected unless given).
     role_map : mapping of str to str
-        Role -> column header (with or without its unit), optionally ``COLUMN*SCALE``: the values times
-        SCALE are taken as SI, whatever unit the header states. Without a scale, a unit in the header
-        (``pos [mm]``, ``n [rpm]``, ``I [mA]``) is converted to SI with pint. The ``time`` role is optional
-        when ``sample_time`` is given.
+        Role -> column header (with or without its unit) or, in a MATLAB file, a variable expression
+        (``rec.act_torque_abs_nm[:,0]``, ``data[:,3]``); optionally ``...*SCALE``: the values times SCALE are
+        taken as SI, whatever unit the header states. Without a scale, a unit in the header (``pos [mm]``,
+        ``n [rpm]``, ``I [mA]``) is converted to SI with pint. The ``time`` role is optional when
+        ``sample_time`` is given.
     sample_time : float, optional
         Sampling period [s]; with a time column as well, the column must agree with it.
     delimiter : {",", ";", "tab"}, optional
     decimal : {".", ","}, optional
+        CSV dialect (detected when not given).
+    resample : float, optional
+        Largest gap [s] bridged by linear interpolation onto the nominal grid (the median step) when the
+        time column is not uniform; a longer gap is refused (or split at, with ``split_gaps``).
+    split_gaps : bool
+        Take the stretches between gaps as separate records (``Recording.pieces``).
 
     Returns
     -------
@@ -196,100 +193,95 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     Raises
     ------
     cosim.errors.DataError
-        Missing file or column, not UTF-8, unknown unit, non-numeric, NaN, infinite or overflowing value
-        (> 1e100), non-monotonic or non-uniform time, too few samples; the message names the file, the
-        column and the row.
+        Missing file, column or variable, unknown unit, non-numeric, NaN, infinite or overflowing value
+        (> 1e100), non-monotonic time, non-uniform time without ``resample``/``split_gaps``, too few samples;
+        the message names the file, the column or variable and the row or sample.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: no such file")
+    from feeddrive.cosim.readers import open_source
+    from feeddrive.cosim.readers.csvfile import CsvSource
+
     if sample_time is not None and not sample_time > 0:
         raise DataError(f"{path}: sample time must be > 0 s, got {sample_time}")
-    size = path.stat().st_size
-    if size > MAX_BYTES:
-        raise DataError(f"{path}: {size} bytes; expected a CSV file of at most {MAX_BYTES} bytes "
-                        "(split the recording)")
-    raw = path.read_bytes()
-    try:  # utf-8-sig: a byte-order mark (spreadsheet exports) must not end up in the first header
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[:exc.start].count(b"\n") + 1
-        raise DataError(f"{path}: line {line}: byte 0x{exc.object[exc.start]:02x} is not UTF-8; "
-                        "expected a UTF-8 CSV file") from None
-    sep, dec = _dialect(text, delimiter, decimal, path)
-    reader = csv.reader(io.StringIO(text, newline=""), delimiter=sep)
-    try:
-        rows = list(reader)
-    except csv.Error as exc:  # a NUL byte, a field over the csv module's limit
-        raise DataError(f"{path}: line {reader.line_num}: {exc}; expected a CSV text file") from None
-    while rows and not any(c.strip() for c in rows[-1]):
-        rows.pop()  # trailing empty lines
-    if not rows:
-        raise DataError(f"{path}: empty file, expected a header row")
-    header = [h.strip() for h in rows[0]]
-    index = {}
-    for k, h in enumerate(header):
-        index.setdefault(h, k)
-        index.setdefault(_bare(h), k)
-    columns, signals, units = {}, {}, {}
+    if resample is not None and not resample > 0:
+        raise InputError(f"--resample {resample}: expected the largest gap to bridge, in seconds (> 0)")
+    source = open_source(path, delimiter, decimal, MAX_BYTES)
+    path, what = source.path, "column" if not hasattr(source, "tree") else "variable"
+    columns, signals, units, lengths, time_sig = {}, {}, {}, {}, None
     for role, spec in role_map.items():
         column, scale = split_scale(spec)
-        k = index.get(column.strip(), index.get(_bare(column)))
-        if k is None:
-            raise DataError(f"{path}: column {column!r} (role {role}) not found; columns are {header} "
-                            f"(separator {sep!r}; set it with --delimiter)")
-        where = f"{path}: column {header[k]!r} (role {role})"
-        unit = _unit_text(header[k]) or ""
-        factor, si = si_factor(unit, role, where) if scale is None else (scale, "")
-        if scale is not None and unit:
+        sig = source.resolve(column, role)
+        where = f"{path}: {what} {sig.label!r} (role {role})"
+        factor, si = si_factor(sig.unit, role, where) if scale is None else (scale, "")
+        if scale is not None and sig.unit:
             try:  # the header still says which side the data are on
-                si = si_factor(unit, role, where)[1]
+                si = si_factor(sig.unit, role, where)[1]
             except DataError:
                 si = ""
-        values = np.empty(len(rows) - 1)
-        for r, row in enumerate(rows[1:]):
-            cell = row[k].strip() if k < len(row) else ""
-            try:
-                values[r] = float(cell.replace(",", ".") if dec == "," else cell)
-            except ValueError:
-                raise DataError(f"{path}: column {header[k]!r} row {r + 2}: {cell!r} is not a number"
-                                f"{' (decimal comma? use --decimal ,)' if ',' in cell else ''}") from None
         with np.errstate(over="ignore", invalid="ignore"):
-            values *= factor
+            values = sig.values * factor
         bad = np.flatnonzero(~(np.abs(values) <= MAX_ABS))  # NaN fails the comparison too
         if bad.size:
             r = int(bad[0])
-            cell = rows[r + 1][k].strip()
-            raise DataError(f"{path}: column {header[k]!r} row {r + 2}: {cell!r} is "
-                            f"{'not a finite number' if not np.isfinite(float(cell.replace(',', '.'))) else 'out of range'}"
+            raise DataError(f"{path}: {source.locate(sig, r)} is "
+                            f"{'not a finite number' if not np.isfinite(sig.values[r]) else 'out of range'}"
                             f"; expected a finite value of magnitude <= {MAX_ABS:.0e} (SI)")
-        columns[role], signals[role], units[role] = header[k], values, si
-    n = len(rows) - 1
+        columns[role], signals[role], units[role], lengths[role] = sig.label, values, si, len(values)
+        time_sig = sig if role == "time" else time_sig
+    if len(set(lengths.values())) > 1:
+        sizes = ", ".join(f"{r} {columns[r]!r}: {k}" for r, k in lengths.items())
+        raise DataError(f"{path}: the mapped signals differ in length ({sizes}); expected one length")
+    n = next(iter(lengths.values()), 0)
     if n < MIN_SAMPLES:
         raise DataError(f"{path}: {n} samples, need at least {MIN_SAMPLES}")
     time = signals.pop("time", None)
-    if time is None:
-        if sample_time is None:
-            raise DataError(f"{path}: no time column (role time) and no sample time given")
-        h, t0 = float(sample_time), 0.0
-    else:
-        dt = np.diff(time)
-        if np.any(dt <= 0):
-            r = int(np.flatnonzero(dt <= 0)[0]) + 3
-            raise DataError(f"{path}: column {columns['time']!r} is not strictly increasing at row {r}")
-        h, t0 = float(np.median(dt)), float(time[0])
-        if np.max(np.abs(dt - h)) > TIME_JITTER * h:
-            raise DataError(f"{path}: column {columns['time']!r} is not uniformly sampled "
-                            f"(steps from {dt.min():.6g} to {dt.max():.6g} s)")
-        if sample_time is not None:
-            if abs(h - sample_time) > TIME_JITTER * sample_time:
-                raise DataError(f"{path}: column {columns['time']!r} has steps of {h:.6g} s, "
-                                f"the given sample time is {sample_time:.6g} s")
-            h = float(sample_time)
+    columns = {k: v for k, v in columns.items() if k != "time"}
+    units = {k: v for k, v in units.items() if k != "time"}
     if not signals:
         raise DataError(f"{path}: the role map names no signal besides time")
-    return Recording(path, h, t0, signals, {k: v for k, v in columns.items() if k != "time"},
-                     {k: v for k, v in units.items() if k != "time"})
+    if time is None:
+        if sample_time is None:
+            raise DataError(f"{path}: no time column (role time) and no sample time given; map one "
+                            "(--map time=COLUMN) or give the sampling: --rate HZ or --dt SECONDS")
+        timing = {"source": "--rate/--dt", "samples": n, "median_step_s": float(sample_time),
+                  "rate_hz": 1 / sample_time, "jitter": 0.0, "gaps": 0, "largest_gap_s": 0.0,
+                  "largest_gap_at_s": None, "action": "none"}
+        return Recording(path, float(sample_time), 0.0, signals, columns, units, timing=timing)
+    label = time_sig.label
+    dt = np.diff(time)
+    if np.any(dt <= 0):
+        i = int(np.flatnonzero(dt <= 0)[0])
+        at = f"row {i + 3}" if isinstance(source, CsvSource) else f"sample {i + 1}"
+        raise DataError(f"{path}: {what} {label!r} is not strictly increasing at {at}")
+    clock = None
+    if time_sig.absolute:  # calendar time stamps: keep the date, count from 0
+        clock, time = time_sig.origin + float(time[0]), time - time[0]
+    elif time[0] > ABSOLUTE_AFTER:  # seconds since 1970 as numbers
+        clock, time = float(time[0]), time - time[0]
+    timing = measure(time)
+    h = timing.h
+    if sample_time is not None:
+        if abs(h - sample_time) > TIME_JITTER * sample_time:
+            raise DataError(f"{path}: {what} {label!r} has steps of {h:.6g} s, "
+                            f"the given sample time is {sample_time:.6g} s")
+        h = float(sample_time)
+    info = timing.to_dict() | {"source": f"{what} {label!r}", "action": "none"}
+    if timing.uniform:
+        return Recording(path, h, float(time[0]), signals, columns, units, timing=info, clock=clock)
+    if resample is None and not split_gaps:
+        raise DataError(f"{path}: {what} {label!r} is not uniformly sampled ({timing.describe()}); "
+                        f"use --resample MAXGAP (linear interpolation onto the {h:.6g} s grid, refusing gaps over "
+                        "MAXGAP s) or --split-gaps (the stretches between gaps as separate records)")
+    return _mended(Recording(path, h, float(time[0]), signals, columns, units, timing=info, clock=clock),
+                   f"{what} {label!r}", time, timing, resample, split_gaps)
+
+
+def _mended(rec: Recording, label: str, time: np.ndarray, timing: Timing, resample: float | None,
+            split_gaps: bool) -> Recording:
+    """A non-uniform record resampled (gaps up to ``resample`` s) and/or split at its other gaps."""
+    signals, pieces, action = mend(f"{rec.path}: {label}", time, rec.signals, timing, rec.h, resample, split_gaps,
+                                   hold=frozenset({"state"}))
+    return replace(rec, t0=pieces[0][1], signals=signals, timing=rec.timing | {"action": action,
+                   "records": len(pieces)}, pieces=tuple(pieces) if len(pieces) > 1 else ())
 
 
 # -- command-line plumbing shared by ``cosim estimate`` and ``cosim monitor`` --------------------------
@@ -336,12 +328,26 @@ def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str
     if several:  # cosim estimate: repeated recordings of one machine, or a quoted glob pattern
         parser.add_argument("data", nargs="+", help="recording(s) of one machine, or a quoted glob pattern ('run*.csv')")
     else:
-        parser.add_argument("data", help="CSV file with a header row (',', ';' or tab separated, UTF-8)")
+        parser.add_argument("data", help="recording: CSV with a header row, MATLAB .mat (v4-v7.3), Parquet, or a "
+                            "whitespace-separated text log with %% or # comment lines (cosim info DATA lists what it holds)")
     parser.add_argument("--map", action="extend", nargs="+", default=[], metavar="ROLE=COLUMN",
-                        help=f"column of a role ({', '.join(roles)}), optionally COLUMN*SCALE to SI (overrides a "
-                             "[unit] in the header); several per --map, or repeat --map")
-    parser.add_argument("--sample-time", type=float, default=None, metavar="H",
+                        help=f"column or variable of a role ({', '.join(roles)}): a header, or in a MATLAB file "
+                             "NAME.FIELD[ROWS,COLS] (0-based, e.g. rec.act_torque_abs_nm[:,0]); optionally "
+                             "COLUMN*SCALE to SI (overrides a [unit] in the header); several per --map, or repeat --map")
+    timing = parser.add_mutually_exclusive_group()
+    timing.add_argument("--sample-time", "--dt", dest="sample_time", type=float, default=None, metavar="H",
                         help="sampling period [s] (needed without a time column)")
+    timing.add_argument("--rate", type=float, default=None, metavar="HZ",
+                        help="sample rate [Hz] (needed without a time column; the alternative to --dt)")
+    parser.add_argument("--resample", type=float, default=None, metavar="MAXGAP",
+                        help="a time column with jitter or dropped samples: interpolate linearly onto the nominal "
+                             "grid (its median step), refusing a gap longer than MAXGAP [s]")
+    parser.add_argument("--split-gaps", action="store_true",
+                        help="a time column with gaps: take the stretches between gaps as separate records "
+                             "(with --resample: only the gaps longer than MAXGAP)")
+    parser.add_argument("--start-time", default=None, metavar="ISO",
+                        help="calendar time of the first sample, e.g. 2024-03-01T10:00:00+01:00 (default: the "
+                             "time column when it holds calendar time stamps, else the file's modification time)")
     parser.add_argument("--delimiter", default=None, type=_named(DELIMITER_NAMES, "--delimiter"),
                         metavar="{comma,semicolon,tab}",
                         help="column separator (default: detected from the header)")
@@ -378,29 +384,111 @@ def filter_cutoff(args: argparse.Namespace, h: float) -> float:
 
 
 def to_motor_side(rec: Recording, args: argparse.Namespace) -> Recording:
-    """With ``--pitch``: a table-side recording (m, m/s, N) converted to the motor side (rad, rad/s, N.m)."""
-    if args.pitch is None:
+    """Every position, speed and torque on one side; with ``--pitch``, the table-side ones moved to the motor side.
+
+    A column declared in a motor-side unit (rad, rad/s, rpm, N.m) is never scaled by the pitch; one
+    without a unit takes the side the declared columns agree on (the table side when none declares
+    one, as ``--pitch`` says). Without ``--pitch``, columns on both sides are refused, naming them.
+    """
+    sided = {r: SI_SIDE[u] for r, u in rec.units.items() if u in SI_SIDE}
+    declared = set(sided.values())
+    pitch = getattr(args, "pitch", None)
+    if pitch is None:
+        if len(declared) > 1:
+            table = [f"{rec.columns[r]!r} (role {r}, {rec.units[r]})" for r, s in sided.items() if s == "table"]
+            motor = [f"{rec.columns[r]!r} (role {r}, {rec.units[r]})" for r, s in sided.items() if s == "motor"]
+            raise InputError(f"{rec.path}: {', '.join(table)} on the table side but {', '.join(motor)} on the motor "
+                             "side; give --pitch (and --ratio) to convert the table-side ones, or map one side only")
         return rec
-    if not (args.pitch > 0 and args.ratio > 0):
-        raise InputError(f"--pitch {args.pitch} --ratio {args.ratio}: expected positive numbers")
-    if rec.side == "motor":
+    if not (pitch > 0 and args.ratio > 0):
+        raise InputError(f"--pitch {pitch} --ratio {args.ratio}: expected positive numbers")
+    if declared == {"motor"}:
         raise InputError(f"{rec.path}: --pitch converts table-side columns (m, m/s, N), but the columns are on the "
                          f"motor side ({rec.units})")
-    k = 2 * np.pi * args.ratio / args.pitch  # motor rad per m of table travel
+    mechanical = ("position", "speed", "torque")
+    for r in mechanical:
+        if r in rec.signals and r not in sided and declared == {"table", "motor"}:
+            raise InputError(f"{rec.path}: column {rec.columns[r]!r} (role {r}) states no unit, and the others are "
+                             "on both sides; give its unit in the header or a scale (--map ROLE=COLUMN*SCALE)")
+    k = 2 * np.pi * args.ratio / pitch  # motor rad per m of table travel
     factors = {"position": k, "speed": k, "torque": 1 / k}
     units = {"position": "rad", "speed": "rad/s", "torque": "N*m"}
-    signals = {r: v * factors.get(r, 1.0) for r, v in rec.signals.items()}
-    return replace(rec, signals=signals, units=rec.units | {r: units[r] for r in rec.units if r in units})
+    convert = [r for r in mechanical if r in rec.signals and sided.get(r, "table") == "table"]
+    signals = {r: v * factors[r] if r in convert else v for r, v in rec.signals.items()}
+    return replace(rec, signals=signals, units=rec.units | {r: units[r] for r in convert if r in rec.units})
+
+
+def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: str | None = None) -> Recording:
+    """The recording ``path`` (default ``args.data``) with the shared options applied; a resampled or split
+    record is said so on stderr (and in the JSON's ``timing``)."""
+    sample_time = args.sample_time
+    if getattr(args, "rate", None) is not None:
+        if not args.rate > 0:
+            raise InputError(f"--rate {args.rate}: expected a sample rate in Hz (> 0)")
+        sample_time = 1.0 / args.rate
+    rec = load_recording(args.data if path is None else path, role_map, sample_time, args.delimiter, args.decimal,
+                         resample=getattr(args, "resample", None), split_gaps=getattr(args, "split_gaps", False))
+    rec = to_motor_side(rec, args)
+    t = rec.timing
+    if t.get("action", "none") != "none":  # never resampled or split silently (the JSON has it too)
+        print(f"cosim: {rec.path}: time from {t['source']}: {t['samples']} samples, median step "
+              f"{t['median_step_s']:.6g} s, jitter {jitter_text(t['jitter'])}, {t['gaps']} gaps; {t['action']}",
+              file=sys.stderr)
+    return rec
+
+
+def motions(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None,
+            state: np.ndarray | None) -> list:
+    """``--segment``'s motions of each record (a split recording's motions never cross a gap)."""
+    from feeddrive.estimator.segmentation import Segment, segment
+
+    out = []
+    for a, b in rec.bounds():
+        part = segment(args.segment, b - a, rec.h, None if speed is None else speed[a:b],
+                       None if state is None else state[a:b])
+        out += [Segment(s.start + a, s.stop + a) for s in part]
+    return out
+
+
+def start_clock(rec: Recording, start_time: str | None = None) -> tuple[float, str]:
+    """Calendar time of the recording's first sample [s since 1970 UTC] and where it came from.
+
+    In order: ``--start-time`` (ISO 8601; without a zone, UTC), the time column's calendar time stamps,
+    else the file's modification time taken as the end of the recording (said so).
+    """
+    if start_time is not None:
+        try:
+            t = _dt.datetime.fromisoformat(start_time.strip().replace("Z", "+00:00"))
+        except ValueError:
+            raise InputError(f"--start-time {start_time!r}: expected an ISO 8601 time such as "
+                             "2024-03-01T10:00:00+01:00") from None
+        t = t if t.tzinfo else t.replace(tzinfo=_dt.timezone.utc)
+        return t.timestamp(), f"--start-time {start_time}"
+    if rec.clock is not None:
+        return rec.clock, f"time stamps of {rec.timing.get('source', 'the time column')} in {rec.path}"
+    end = rec.time(rec.n - 1) - rec.t0
+    return (rec.path.stat().st_mtime - end,
+            f"file modification time of {rec.path} (taken as the end of the recording; set --start-time ISO)")
+
+
+def recording_json(rec: Recording, clock_source: str | None = None) -> dict:
+    """The recording's keys for ``--json`` and report.json: ``timing`` (and ``time_source``)."""
+    out = {"timing": rec.timing}
+    if clock_source is not None:
+        out["time_source"] = clock_source
+    return out
 
 
 #: quantities ``--sampling`` accepts and their estimator signal
 SAMPLED = {"voltage": "u", "current": "i", "speed": "w"}
 
 
-def sampling_modes(args: argparse.Namespace, columns: dict[str, str] | None = None) -> dict[str, str]:
+def sampling_modes(args: argparse.Namespace, columns: dict[str, str] | None = None,
+                   path: str | None = None) -> dict[str, str]:
     """The ``--sampling`` options as quantity -> mode, refusing unknown quantities and modes; for the
     quantities it leaves out, the modes of their ``columns`` (quantity -> column) in the data's sidecar
-    signals.meta.json (``cosim.recorder.read_sampling_sidecar``), said on stderr."""
+    signals.meta.json (``cosim.recorder.read_sampling_sidecar``) beside ``path`` (default ``args.data``),
+    said on stderr."""
     modes = pairs(args.sampling, "--sampling")
     for q, mode in modes.items():
         if q not in SAMPLED or mode not in ("instant", "mean"):
@@ -409,7 +497,7 @@ def sampling_modes(args: argparse.Namespace, columns: dict[str, str] | None = No
     if columns:
         from feeddrive.cosim.recorder import sidecar_modes
 
-        modes = sidecar_modes(args.data, {q: c for q, c in columns.items() if q not in modes}) | modes
+        modes = sidecar_modes(args.data if path is None else path, {q: c for q, c in columns.items() if q not in modes}) | modes
     return modes
 
 

@@ -24,9 +24,9 @@ from feeddrive.cosim.errors import InputError, SimulationError
 COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("feeddrive.cosim.cli.run", "run a co-simulation scenario (plant FMU + NC + sensors + monitor)"),
     "build-fmu": ("feeddrive.cosim.cli.build", "build the built-in feed-drive plant FMU"),
-    "info": ("feeddrive.cosim.cli.info", "list an FMU's variables and check a scenario's mapping against them"),
-    "estimate": ("feeddrive.cosim.cli.estimate", "estimate R, L, K, Jt, ft, Cd from a recorded CSV"),
-    "monitor": ("feeddrive.cosim.cli.monitor", "run the monitor (validation, estimation, diagnosis) on a recorded CSV"),
+    "info": ("feeddrive.cosim.cli.info", "list an FMU's variables (and check a scenario's mapping), or what a recording holds"),
+    "estimate": ("feeddrive.cosim.cli.estimate", "estimate R, L, K, Jt, ft, Cd from a recording (CSV, MATLAB, Parquet, text log)"),
+    "monitor": ("feeddrive.cosim.cli.monitor", "run the monitor (validation, estimation, diagnosis) on a recording"),
     "history": ("feeddrive.cosim.cli.history", "print and plot the parameter history of an axis"),
     "campaign": ("feeddrive.cosim.cli.campaign", "run a Monte Carlo / sweep campaign of scenarios"),
     "design": ("feeddrive.cosim.cli.design", "choose the rapid-move acceleration that minimises parameter variance"),

@@ -35,19 +35,18 @@ import sys
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.recorded import (
     SAMPLED,
     add_recording_arguments,
     filter_cutoff,
-    load_recording,
     mapped_roles,
+    motions,
     pairs,
+    read_recording,
+    recording_json,
     sampling_modes,
-    to_motor_side,
 )
 from feeddrive.estimator import (
     EstimationOptions,
@@ -60,7 +59,6 @@ from feeddrive.estimator.motion import SAMPLING_DELAY
 from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.estimator.physical import parse_bounds
 from feeddrive.estimator.pooling import pool
-from feeddrive.estimator.segmentation import segment
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
          "state": None}
@@ -95,29 +93,30 @@ def data_files(patterns: list[str]) -> list[str]:
     return files
 
 
-def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict) -> tuple[str, list]:
+def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict) -> tuple[str, list, dict]:
     """Load one recording (``cosim.recorded.load_recording``: any reader that returns a ``Recording`` plugs in
-    here), cut it into motions and estimate each; returns (side, estimates). Motions of which nothing can be
-    estimated are reported on stderr and left out; none left is an ``InputError``."""
+    here), cut it into motions and estimate each; returns (side, estimates, the recording's JSON keys).
+    Motions of which nothing can be estimated are reported on stderr and left out; none left is an
+    ``InputError``."""
     roles = mapped_roles(args, ROLES)
-    rec = to_motor_side(load_recording(path, roles, args.sample_time, args.delimiter, args.decimal), args)
+    rec = read_recording(args, roles, path)
     side = rec.side or "motor"
     options = EstimationOptions(method=args.method, filter=FilterSpec(filter_cutoff(args, rec.h)), known=known,
                                 offset=args.offset, speed_threshold=args.speed_threshold,
                                 speed_unit="m/s" if side == "table" else "rad/s")
-    modes = sampling_modes(args, {q: roles[q] for q in SAMPLED if q in roles})
+    modes = sampling_modes(args, {q: roles[q] for q in SAMPLED if q in roles}, path)
     delays = {SAMPLED[q]: SAMPLING_DELAY[m] * rec.h for q, m in modes.items() if SAMPLING_DELAY[m]}
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     speed = sig.get("w")
     if speed is None and "position" in sig:
-        speed = np.gradient(sig["position"], rec.h)
-    segments = segment(args.segment, rec.n, rec.h, speed, rec.signals.get("state"))
+        speed = rec.gradient(sig["position"])
+    segments = motions(args, rec, speed, rec.signals.get("state"))
     if not segments:
         raise NothingEstimated(f"{path}: no high-speed motion found (--segment {args.segment})")
     results = []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
-        data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, delays=delays, **part)
+        data = MotionData(rec.h, t0=rec.time(seg.start), delays=delays, **part)
         try:
             results.append(estimate_parameters(data, options, bounds))
         except (NotEnoughExcitation, EstimatorInputError) as exc:  # e.g. a rapid block too short to filter
@@ -127,7 +126,7 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
                   file=sys.stderr)
     if not results:
         raise NothingEstimated(f"{path}: no motion could be estimated (see above)")
-    return side, results
+    return side, results, recording_json(rec)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -154,21 +153,21 @@ def main(args: argparse.Namespace) -> int:
                 print(f"cosim estimate: {path} left out: {exc}", file=sys.stderr)
     if not per_file:
         raise InputError(f"none of the {len(files)} recordings could be estimated (see above)")
-    sides = {side for _, side, _ in per_file}
+    sides = {side for _, side, _, _ in per_file}
     if len(sides) > 1:
         raise InputError(f"the recordings are on different sides ({', '.join(sorted(sides))}): give --pitch or "
                          f"units that agree")
     side = sides.pop()
     units = parameter_units(side, "linear" if side == "table" else "rotary")
     if len(per_file) == 1:
-        results = per_file[0][2]
+        results, rec_keys = per_file[0][2], per_file[0][3]
         if args.json:
-            print(json.dumps({"side": side, "segments": [_with_units(r.to_dict(), units) for r in results]}))
+            print(json.dumps({"side": side, **rec_keys, "segments": [_with_units(r.to_dict(), units) for r in results]}))
         else:
             print(table(results, units))
         return 0
     # pooled and compared with the intervals not conditional on a refused parameter (MotionEstimate.joint)
-    rows = [(path, results, pool([r.joint or r.result for r in results])) for path, _, results in per_file]
+    rows = [(path, results, pool([r.joint or r.result for r in results])) for path, _, results, _ in per_file]
     # between files: a file's one motion with its full covariance, or its motions pooled
     verdict = pool([(results[0].joint or results[0].result) if len(results) == 1 else pooled.as_result()
                     for _, results, pooled in rows])

@@ -1,6 +1,8 @@
 """``cosim info FMU [--map SCENARIO.yaml]``: an FMU's variables, and a scenario's role map checked against them.
 
 ``FMU`` is the path of an .fmu file or ``builtin`` (the built-in feed-drive plant, built on first use).
+``cosim info DATA`` on a recording (``.csv``, ``.mat``, ``.parquet``, ``.txt``, ...) lists its variables or
+columns (shape, dtype, unit) and the time base: sample rate (median step), jitter and gaps.
 """
 from __future__ import annotations
 
@@ -12,12 +14,28 @@ from feeddrive.cosim.errors import InputError, ScenarioError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("fmu", help="path of an FMI 2.0 .fmu file, or 'builtin'")
+    parser.add_argument("fmu", metavar="FMU_OR_DATA",
+                        help="path of an FMI 2.0 .fmu file, 'builtin', or a recording (.csv, .mat, .parquet, .txt)")
+    parser.add_argument("--time", default=None, metavar="NAME",
+                        help="recording: the time column or variable (default: found by name)")
+    parser.add_argument("--rate", type=float, default=None, metavar="HZ",
+                        help="recording: the sample rate of a recording without a time column")
     parser.add_argument("--map", type=Path, default=None, metavar="SCENARIO",
                         help="check this scenario's plant.map against the FMU's variables")
 
 
 def main(args: argparse.Namespace) -> int:
+    from feeddrive.cosim.readers import RECORDING_SUFFIXES
+
+    if args.fmu != "builtin" and Path(args.fmu).suffix.lower() in RECORDING_SUFFIXES:
+        from feeddrive.cosim.readers import open_source
+        from feeddrive.cosim.readers.info import describe
+
+        if args.map is not None:
+            raise InputError(f"{args.fmu}: --map checks a scenario against an FMU; for a recording, give the role "
+                             "map to cosim estimate or cosim monitor")
+        print("\n".join(describe(open_source(args.fmu), args.time, args.rate)))
+        return 0
     from feeddrive.cosim.scenario import (
         INPUT_ROLES,
         ROLE_UNITS,

@@ -9,8 +9,10 @@ differentiated (central differences) into the second speed.
 
 Each high-speed motion (``--segment``: the NC state when mapped, else the speed profile) goes through
 validation, estimation, model validation and diagnosis, and is stored in the history (``--db``) of
-``--axis``, continuing from what the history already holds. Machine time of a motion: the file's
-modification time is taken as the end of the recording.
+``--axis``, continuing from what the history already holds. Machine time of a motion: from
+``--start-time``, or the time column's calendar time stamps, else the file's modification time taken as the
+end of the recording (``recorded.start_clock``; said in the console's ``time:`` line and the JSON's
+``time_source``).
 
 ``--out DIR`` writes ``report.json`` (the motions' results, the diagnosis thresholds, versions),
 ``plots/`` (the figures of the last ``keep_traces`` = 5 motions, as in a run, and the trends) and
@@ -24,21 +26,22 @@ import json
 import os
 from pathlib import Path
 
-import numpy as np
-
 from feeddrive.cosim.cli.history import DEFAULT_DB
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
 from feeddrive.cosim.recorded import (
     add_recording_arguments,
     filter_cutoff,
-    load_recording,
     mapped_roles,
+    read_recording,
+    recording_json,
     sampling_modes,
-    to_motor_side,
+    start_clock,
+)
+from feeddrive.cosim.recorded import (
+    motions as record_motions,
 )
 from feeddrive.cosim.run import _versions
-from feeddrive.estimator.segmentation import segment
 
 #: role -> monitor signal
 ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
@@ -65,15 +68,15 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
     columns = {"voltage": role_map.get("voltage"), "current": role_map.get("current1"), "speed": role_map.get("speed")}
     modes = sampling_modes(args, {q: c for q, c in columns.items() if c})
-    rec = to_motor_side(load_recording(args.data, role_map, args.sample_time, args.delimiter, args.decimal), args)
+    rec = read_recording(args, role_map)
     if rec.side == "table":  # the monitor's model is the motor's: u = R i + L di/dt + K w, w in rad/s
         raise InputError(f"{args.data}: the position/speed columns are on the table side ({rec.units}); the "
                          "monitor needs the motor side: give --pitch (and --ratio) to convert them")
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
     if "position" in rec.signals:
-        w_enc = np.gradient(rec.signals["position"], rec.h)
+        w_enc = rec.gradient(rec.signals["position"])  # within each record of a split recording
         sig["w_enc" if "w_tach" in sig else "w_tach"] = w_enc
-    segments = segment(args.segment, rec.n, rec.h, sig["w_tach"], rec.signals.get("state"))
+    segments = record_motions(args, rec, sig["w_tach"], rec.signals.get("state"))
     if not segments:
         raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
     plots = _plot_folder(args.plots, args.overwrite) if args.plots else None
@@ -82,7 +85,7 @@ def main(args: argparse.Namespace) -> int:
     config = MonitorConfig(axis=args.axis, scenario=str(rec.path), db=args.db, method=args.method,
                            filter_cutoff_hz=filter_cutoff(args, rec.h), speed_threshold=args.speed_threshold,
                            sampling=modes)
-    end_clock = rec.path.stat().st_mtime - (rec.n - 1) * rec.h  # machine time of sample 0
+    clock0, clock_source = start_clock(rec, args.start_time)  # machine time of sample 0, and where it came from
     traces = []
     if args.db == DEFAULT_DB:
         Path(DEFAULT_DB).parent.mkdir(exist_ok=True)
@@ -90,8 +93,8 @@ def main(args: argparse.Namespace) -> int:
         pipeline = MonitorPipeline(config, history, args.axis)
         for k, seg in enumerate(segments, 1):
             part = {name: x[seg.start:seg.stop] for name, x in sig.items()}
-            traces.append(pipeline.process(part, rec.h, rec.t0 + seg.start * rec.h, k,
-                                           end_clock + (seg.stop - 1) * rec.h, str(rec.path)))
+            traces.append(pipeline.process(part, rec.h, rec.time(seg.start), k,
+                                           clock0 + rec.time(seg.stop - 1) - rec.t0, str(rec.path)))
         motions = history.motions(args.axis)
         thresholds = pipeline.thresholds()
     results = [t.result for t in traces]
@@ -102,16 +105,18 @@ def main(args: argparse.Namespace) -> int:
             print(f"wrote {p}")
     if out is not None:
         report = {"kind": "monitor", "source": str(rec.path), "axis": args.axis, "db": args.db, "started": started,
-                  "status": "ok", "versions": _versions(), "method": args.method,
+                  "status": "ok", "versions": _versions(), "method": args.method, **recording_json(rec, clock_source),
                   "components": {"monitor": {"budget_s": config.budget_s}}, "diagnosis_thresholds": thresholds,
                   "motions": results}
         kept = traces[-config.keep_traces:] if config.keep_traces else []  # as the co-simulation monitor keeps
         print(f"wrote {write_monitor_report(out, report, kept, motions, thresholds)}")
     if args.json:
-        print(json.dumps({"axis": args.axis, "db": args.db, "motions": results}, default=_jsonable))
+        print(json.dumps({"axis": args.axis, "db": args.db, **recording_json(rec, clock_source), "motions": results},
+                         default=_jsonable))
     else:
         from feeddrive.cosim.cli.run import history_line
 
+        print(f"time: {clock_source}")
         print(table(results))
         print(history_line({"axis": args.axis, "db": str(Path(args.db).resolve()),
                             "diagnosis_thresholds": thresholds}).strip())

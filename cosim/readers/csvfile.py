@@ -1,0 +1,168 @@
+"""CSV recordings: one header row, ``,`` ``;`` or tab separated, decimal point or comma (detected).
+
+Column headers may carry a unit in brackets (``i [A]``); a column is found with or without it. A time
+column may hold ISO 8601 time stamps (``2024-03-01T10:00:00.004``) instead of seconds.
+"""
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+
+from feeddrive.cosim.errors import DataError
+from feeddrive.cosim.readers.source import Signal, Source, Variable
+
+#: Largest CSV file read [bytes] (the rows are held in memory as text, ~10 times the file's size).
+MAX_BYTES = 512 << 20
+DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\\t": "\t", "\t": "\t"}
+
+
+def bare(header: str) -> str:
+    """Header without a trailing unit: ``"i [A]"`` -> ``"i"``."""
+    return re.sub(r"\s*[\[(][^\])]*[\])]\s*$", "", header.strip())
+
+
+def unit_text(header: str) -> str | None:
+    """The unit in a header's trailing brackets (``"pos [mm]"`` -> ``"mm"``), or None."""
+    m = re.search(r"[\[(]([^\])]*)[\])]\s*$", header.strip())
+    return m.group(1).strip() if m else None
+
+
+def dialect(text: str, delimiter: str | None, decimal: str | None, path: Path) -> tuple[str, str]:
+    """The separator and decimal mark: given, or detected from the header and the first rows.
+
+    A header that splits into more fields on ``;`` or tab than on ``,`` uses that separator (European
+    spreadsheet exports use ``;`` with a decimal comma); the decimal mark is a comma when the
+    separator is not and the first rows hold numbers like ``1,5``.
+    """
+    if delimiter is not None:
+        if delimiter not in DELIMITERS:
+            raise DataError(f"{path}: --delimiter {delimiter!r}; expected one of ',', ';', 'tab'")
+        delimiter = DELIMITERS[delimiter]
+    head = text.splitlines()[:20]
+
+    def fields(line: str, sep: str) -> list[str]:
+        try:
+            return next(csv.reader([line], delimiter=sep), [])
+        except csv.Error:  # a NUL byte or an oversized field: the full read names its line
+            return []
+
+    if delimiter is None:
+        header = head[0] if head else ""
+        counts = {d: len(fields(header, d)) for d in (",", ";", "\t")}
+        delimiter = max(counts, key=lambda d: (counts[d], d == ","))
+    if decimal is None:
+        sample = [c.strip() for line in head[1:] for c in fields(line, delimiter)]
+        comma = any(re.fullmatch(r"[-+]?\d*,\d+([eE][-+]?\d+)?", c) for c in sample)
+        decimal = "," if comma and delimiter != "," else "."
+    if decimal not in (".", ","):
+        raise DataError(f"{path}: --decimal {decimal!r}; expected '.' or ','")
+    if decimal == delimiter:
+        raise DataError(f"{path}: the decimal mark and the separator are both {decimal!r}; expected different ones")
+    return delimiter, decimal
+
+
+def read_text(path: Path, what: str, max_bytes: int | None = None) -> str:
+    """The file as UTF-8 text (a byte-order mark dropped), refusing files over ``max_bytes`` (MAX_BYTES)."""
+    size, limit = path.stat().st_size, MAX_BYTES if max_bytes is None else max_bytes
+    if size > limit:
+        raise DataError(f"{path}: {size} bytes; expected a {what} file of at most {limit} bytes "
+                        "(split the recording)")
+    raw = path.read_bytes()
+    try:  # utf-8-sig: a byte-order mark (spreadsheet exports) must not end up in the first header
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise DataError(f"{path}: line {line}: byte 0x{exc.object[exc.start]:02x} is not UTF-8; "
+                        f"expected a UTF-8 {what} file") from None
+
+
+def iso_time(cell: str) -> _dt.datetime | None:
+    """An ISO 8601 time stamp (naive ones taken as UTC), else None."""
+    try:
+        t = _dt.datetime.fromisoformat(cell.strip().replace("Z", "+00:00"))
+    except ValueError:
+        return None
+    return t if t.tzinfo is not None else t.replace(tzinfo=_dt.timezone.utc)
+
+
+class CsvSource(Source):
+    """A CSV file as a table of columns, converted to numbers column by column when a role asks."""
+
+    def __init__(self, path: Path, delimiter: str | None = None, decimal: str | None = None,
+                 max_bytes: int | None = None) -> None:
+        self.path = path
+        text = read_text(path, "CSV", max_bytes)
+        self.sep, self.dec = dialect(text, delimiter, decimal, path)
+        reader = csv.reader(io.StringIO(text, newline=""), delimiter=self.sep)
+        try:
+            rows = list(reader)
+        except csv.Error as exc:  # a NUL byte, a field over the csv module's limit
+            raise DataError(f"{path}: line {reader.line_num}: {exc}; expected a CSV text file") from None
+        while rows and not any(c.strip() for c in rows[-1]):
+            rows.pop()  # trailing empty lines
+        if not rows:
+            raise DataError(f"{path}: empty file, expected a header row")
+        self.header = [h.strip() for h in rows[0]]
+        self.rows = rows[1:]
+        self.index: dict[str, int] = {}
+        for k, h in enumerate(self.header):
+            self.index.setdefault(h, k)
+            self.index.setdefault(bare(h), k)
+        sep = {"\t": "tab"}.get(self.sep, self.sep)
+        self.kind = f"CSV ('{sep}' separated, decimal '{self.dec}')"
+
+    def _cell(self, r: int, k: int) -> str:
+        row = self.rows[r]
+        return row[k].strip() if k < len(row) else ""
+
+    def _number(self, cell: str) -> float:
+        return float(cell.replace(",", ".") if self.dec == "," else cell)
+
+    def column(self, k: int, role: str = "") -> Signal:
+        """Column ``k`` as numbers; a time column of ISO time stamps as seconds since 1970 (absolute)."""
+        values = np.empty(len(self.rows))
+        origin = iso_time(self._cell(0, k)) if role == "time" and self.rows else None
+        absolute = origin is not None
+        for r in range(len(self.rows)):
+            cell = self._cell(r, k)
+            try:
+                if absolute:
+                    t = iso_time(cell)
+                    if t is None:
+                        raise ValueError
+                    values[r] = (t - origin).total_seconds()  # exact to the microsecond
+                else:
+                    values[r] = self._number(cell)
+            except ValueError:
+                kind = "an ISO 8601 time stamp" if absolute else "a number"
+                raise DataError(f"{self.path}: column {self.header[k]!r} row {r + 2}: {cell!r} is not {kind}"
+                                f"{' (decimal comma? use --decimal ,)' if ',' in cell and not absolute else ''}"
+                                f"{' (a truncated last line?)' if r == len(self.rows) - 1 else ''}") from None
+        return Signal(self.header[k], values, "s" if absolute else (unit_text(self.header[k]) or ""), absolute,
+                      origin.timestamp() if absolute else 0.0)
+
+    def resolve(self, expr: str, role: str) -> Signal:
+        k = self.index.get(expr.strip(), self.index.get(bare(expr)))
+        if k is None:
+            raise DataError(f"{self.path}: column {expr!r} (role {role}) not found; columns are {self.header} "
+                            f"(separator {self.sep!r}; set it with --delimiter)")
+        return self.column(k, role)
+
+    def locate(self, signal: Signal, r: int) -> str:
+        return f"column {signal.label!r} row {r + 2}: {self._cell(r, self.header.index(signal.label))!r}"
+
+    def variables(self) -> list[Variable]:
+        out = []
+        for k, h in enumerate(self.header):
+            try:
+                s = self.column(k, "time" if k == 0 else "")
+                dtype = "datetime" if s.absolute else "float64"
+            except DataError:
+                dtype = "text"
+            out.append(Variable(h or f"(column {k + 1}, no header)", (len(self.rows),), dtype, unit_text(h) or ""))
+        return out
