@@ -418,6 +418,18 @@ def to_motor_side(rec: Recording, args: argparse.Namespace) -> Recording:
     return replace(rec, signals=signals, units=rec.units | {r: units[r] for r in convert if r in rec.units})
 
 
+def _data_path(args: argparse.Namespace, path: str | None) -> str:
+    """``path``, else the one recording of ``args.data`` (``cosim estimate`` takes a list of them)."""
+    if path is not None:
+        return path
+    data = args.data
+    if isinstance(data, list):
+        if len(data) != 1:
+            raise InputError(f"expected one recording here, got {len(data)}: {', '.join(map(str, data))}")
+        return data[0]
+    return data
+
+
 def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: str | None = None) -> Recording:
     """The recording ``path`` (default ``args.data``) with the shared options applied; a resampled or split
     record is said so on stderr (and in the JSON's ``timing``)."""
@@ -426,7 +438,7 @@ def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: 
         if not args.rate > 0:
             raise InputError(f"--rate {args.rate}: expected a sample rate in Hz (> 0)")
         sample_time = 1.0 / args.rate
-    rec = load_recording(args.data if path is None else path, role_map, sample_time, args.delimiter, args.decimal,
+    rec = load_recording(_data_path(args, path), role_map, sample_time, args.delimiter, args.decimal,
                          resample=getattr(args, "resample", None), split_gaps=getattr(args, "split_gaps", False))
     rec = to_motor_side(rec, args)
     t = rec.timing
@@ -497,7 +509,7 @@ def sampling_modes(args: argparse.Namespace, columns: dict[str, str] | None = No
     if columns:
         from feeddrive.cosim.recorder import sidecar_modes
 
-        modes = sidecar_modes(args.data if path is None else path, {q: c for q, c in columns.items() if q not in modes}) | modes
+        modes = sidecar_modes(_data_path(args, path), {q: c for q, c in columns.items() if q not in modes}) | modes
     return modes
 
 
