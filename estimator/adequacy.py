@@ -37,7 +37,8 @@ because it is what makes a coefficient look undetermined (gravity on a robot axi
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.polynomial import legendre
@@ -152,7 +153,7 @@ def _block_sums(x: np.ndarray, k: int) -> np.ndarray:
 
 
 def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], N: np.ndarray, terms: list[str],
-                 blocks: int, max_relative_std: float) -> tuple[float | None, float | None, tuple | None, tuple,
+                 blocks: int, max_relative_std: float, y_scale: np.ndarray) -> tuple[float | None, float | None, tuple | None, tuple,
                                                                str | None, tuple, str]:
     """Wald test of the nuisance columns ``N`` added to ``y ~ X`` (instruments ``Z`` for ``X``); see the
     module docstring. Returns ``(p, F, df, undetermined, strongest, terms tested, reason)``."""
@@ -171,7 +172,9 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
 
     # the model's coefficients and their standard errors (excitation)
     undetermined = [nm for nm in names if nm != "constant"]
-    if k >= X.shape[1] + 2:
+    if X.shape[1] == 0:
+        undetermined = []
+    elif k >= X.shape[1] + 2:
         beta, cov = iv(Xs, Zs)
         se = np.sqrt(np.clip(np.diag(cov) * k / (k - X.shape[1]), 0.0, None))
         undetermined = [nm for nm, b, s in zip(names, beta, se) if nm != "constant" and not abs(b) * max_relative_std > s]
@@ -179,7 +182,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     # nuisance: what the model's regressors cannot represent, orthonormal; orthogonal to the instruments,
     # not to the regressors, whose noise (the derivative's) would pass into the directions and bias them
     Nn = N / np.where(np.linalg.norm(N, axis=0) > 0, np.linalg.norm(N, axis=0), 1.0)
-    Q, _ = np.linalg.qr(Zs)
+    Q = np.linalg.qr(Zs)[0] if Zs.shape[1] else np.zeros((n, 0))
     R_ = Nn - Q @ (Q.T @ Nn)
     U, s, _ = np.linalg.svd(R_, full_matrices=False)
     keep = s > MIN_DIRECTION
@@ -201,7 +204,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     # the term that carries the lack of fit: each term's share of the tested directions, weighted by their z
     z = np.abs(c) / np.sqrt(np.clip(np.diag(S), np.finfo(float).tiny, None))
     strongest = terms[int(np.argmax(np.abs(R_.T @ B) @ z))]
-    effect = float(np.sqrt(np.mean((B @ c) ** 2) / np.mean(y ** 2)))
+    effect = float(np.sqrt(np.mean((B @ c) ** 2) / np.mean(y_scale ** 2)))
     return p, F, (q, k - q), tuple(undetermined), strongest, tuple(terms), effect
 
 
@@ -215,7 +218,8 @@ def _legendre(x: np.ndarray, rows: np.ndarray, degrees: range) -> np.ndarray:
 def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None = None,
                    w: np.ndarray | None = None, torque: np.ndarray | None = None,
                    position: np.ndarray | None = None, alpha: float = 0.01, filter: FilterSpec | None = None,
-                   speed_fraction: float = 0.03, blocks: int = 30, max_relative_std: float = 0.3) -> AdequacyResult:
+                   speed_fraction: float = 0.03, blocks: int = 30, max_relative_std: float = 0.3,
+                   known: Mapping[str, float] | None = None) -> AdequacyResult:
     """Is the DC model adequate for this recording? (lack-of-fit test, see the module docstring)
 
     Parameters
@@ -236,6 +240,10 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         Blocks of the batch-means covariance.
     max_relative_std : float
         A model coefficient with a larger relative standard error is not determined.
+    known : mapping of str to float, optional
+        Parameters known in advance (``R``, ``L``, ``K``, ``Jt``, ``ft``, ``Cd``, SI): their terms are fixed,
+        not fitted, so a wrong one (or a logged command instead of the terminal voltage) is a mismatch.
+        ``Jt, ft, Cd`` with a current output need ``K``.
 
     Returns
     -------
@@ -276,7 +284,6 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         return AdequacyResult("not enough excitation", None, alpha,
                               f"{int(rows.sum())} samples with |speed| above {speed_fraction:g} of its peak")
     sgn, aw = np.sign(s["w"]), np.abs(s["w"])
-    both = bool(sgn[rows].min() < 0 < sgn[rows].max())
 
     def fitted(X: np.ndarray, y: np.ndarray) -> np.ndarray:
         Z = instruments(X)[rows]
@@ -288,43 +295,65 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     def around(x: np.ndarray) -> np.ndarray:
         return 0.5 * (shifted(x, lag) + shifted(x, -lag))
 
-    def instruments(X: np.ndarray) -> np.ndarray:
+    def instruments(X: np.ndarray) -> np.ndarray:  # noqa: N803
         # the regressors read LAG samples either side: their noise (the derivative's above all) is not
         # the residue's, so the fit is not attenuated (errors in variables), whose smooth error the
         # nuisance terms would otherwise take for a mismatch
         return np.column_stack([around(x) for x in X.T])
 
-    checks = {}
+    known = dict(known or {})
+    checks, ignored = {}, []
+
+    def equation(name: str, output: str, y: np.ndarray, terms: dict[str, np.ndarray], nuisance: list,
+                 labels: list[str]) -> None:
+        """Register one equation: known terms moved to the output side, the offset a nuisance term."""
+        for p in [p for p in terms if p in known]:
+            y = y - known[p] * terms.pop(p)
+        X = np.column_stack(list(terms.values())) if terms else np.zeros((y.size, 0))
+        yhat = fitted(X, y) if terms else np.zeros_like(y)
+        N = np.column_stack([np.ones_like(y)] + [f(yhat) for f in nuisance])
+        checks[name] = (output, y, X, instruments(X), list(terms), N, ["offset (constant)"] + labels)
+
     if "u" in s and "i" in s:
-        X = np.column_stack([s["Di"], s["i"], s["w"], np.ones_like(aw)])
-        yhat = fitted(X, s["u"])
-        N = np.column_stack([around(yhat ** 2), around(s["i"] * aw)])
-        checks["electrical"] = ("u", s["u"], X, instruments(X), ["L", "R", "K", "constant"], N,
-                                ["amplifier nonlinearity (u^2)", "current x |speed|"])
+        equation("electrical", "u", s["u"], {"L": s["Di"], "R": s["i"], "K": s["w"]},
+                 [lambda yhat: around(yhat ** 2), lambda yhat: around(s["i"] * aw)],
+                 ["amplifier nonlinearity (u^2)", "current x |speed|"])
     out = "torque" if "torque" in s else "i" if "i" in s else None
     if out is not None:
-        cols, names = [s["Dw"], s["w"], sgn if both else np.ones_like(aw)], ["Jt", "ft", "Cd"]
-        if both:  # one direction only: sign(w) is the constant (Cd and an offset confounded)
-            cols.append(np.ones_like(aw))
-            names.append("constant")
-        X = np.column_stack(cols)
-        yhat = fitted(X, s[out])
+        y = s[out]
+        if out == "i":  # i = (Jt Dw + ft w + Cd sign w) / K: the mechanical parameters need K
+            if "K" in known:
+                y, out = known["K"] * y, "K i"
+            else:
+                ignored += [p for p in ("Jt", "ft", "Cd") if p in known]
         position = shifted(s["position"], lag)
-        N = np.column_stack([_legendre(position, rows, range(1, 4)), around(yhat * aw), around(yhat ** 2)])
-        checks["mechanical"] = (out, s[out], X, instruments(X), names, N, [
-            "position-dependent torque (gravity) P1", "position-dependent torque (gravity) P2",
-            "position-dependent torque (gravity) P3", f"{'torque' if out == 'torque' else 'current'} x |speed|",
-            "output^2"])
-    checks = {k: (o, y[rows], X[rows], Z[rows], nm, N[rows], t) for k, (o, y, X, Z, nm, N, t) in checks.items()}
+        # one direction only: sign(w) is the constant (Cd and an offset confounded, the offset not tested)
+        equation("mechanical", out, y, {"Jt": s["Dw"], "ft": s["w"], "Cd": sgn},
+                 [lambda yhat, d=d: _legendre(position, rows, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
+                 + [lambda yhat: around(yhat * aw), lambda yhat: around(yhat ** 2)],
+                 ["position-dependent torque (gravity) P1", "position-dependent torque (gravity) P2",
+                  "position-dependent torque (gravity) P3", f"{'current' if out == 'i' else 'torque'} x |speed|",
+                  "output^2"])
+    scale = {"electrical": s.get("u"), "mechanical": s.get("torque", s.get("i"))}
+    checks = {k: (o, y[rows], X[rows], Z[rows], nm, N[rows], t, scale[k][rows] * (known.get("K", 1.0) if o == "K i" else 1))
+              for k, (o, y, X, Z, nm, N, t) in checks.items()}
     if not checks:
         raise EstimatorInputError("check_adequacy: neither the electrical (u, i, w) nor the mechanical "
                                   "(w and torque or i) equation can be tested")
     results = {}
-    for eq, (output, y, X, Z, names, N, terms) in checks.items():
+    for eq, (output, y, X, Z, names, N, terms, y_scale) in checks.items():
         p, F, df, undetermined, strongest, tested, last = _lack_of_fit(y, X, Z, names, N, terms, blocks,
-                                                                       max_relative_std)
+                                                                       max_relative_std, y_scale)
         effect, reason = (last, "") if p is not None else (None, last)
         results[eq] = EquationCheck(eq, output, p, F, df, tested, strongest, undetermined, effect, reason)
+    result = _verdict(results, alpha)
+    if ignored:
+        result = replace(result, reason=f"{result.reason}; known {', '.join(ignored)} not used (no K)")
+    return result
+
+
+def _verdict(results: dict[str, EquationCheck], alpha: float) -> AdequacyResult:
+    """The verdict from each equation's test (precedence: mismatch, not enough excitation, adequate)."""
     tested = {k: e for k, e in results.items() if e.p_value is not None}
     m = len(tested)
     p = min(1.0, m * min(e.p_value for e in tested.values())) if tested else None
