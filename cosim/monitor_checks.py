@@ -183,3 +183,78 @@ def _residue_dict(pair) -> dict:
     return {"kind": r.kind, "gain_diff": r.gain_diff, "gain_diff_ci95": list(r.gain_diff_ci95), "p_gain": r.p_gain,
             "offset": r.offset, "offset_ci95": list(r.offset_ci95), "p_offset": r.p_offset,
             "noise_std": r.noise_std, "trusted": pair.trusted, "valid": pair.valid}
+
+
+# -- the monitor's thresholds on the command line ---------------------------------------------------
+
+#: MonitorConfig field -> (command-line option, metavar, help). The defaults are MonitorConfig's only:
+#: an option not given leaves the field to the config (``config_with_options``), so a scenario's
+#: ``monitor:`` section and ``cosim monitor`` build the same frozen object with the same defaults.
+CLI_OPTIONS = {
+    "known": ("--known", "NAME=VALUE", "parameters known in advance, motor side, SI, e.g. R=8.4 K=0.042 "
+              "(fixed in the estimation and the model checks; K is needed without a voltage)"),
+    "min_motion_s": ("--min-motion", "SECONDS", "shorter motions are not identified"),
+    "max_motion_s": ("--max-motion", "SECONDS", "longer motions are cut to this length"),
+    "alpha": ("--alpha", "P", "level of the sensor residue tests and the drift tests"),
+    "window_s": ("--window", "SECONDS", "length of the sensor residue windows"),
+    "gain_tol": ("--gain-tol", "FRACTION", "smallest relative sensor gain error that is a fault"),
+    "offset_tol": ("--offset-tol", "FRACTION", "smallest sensor offset that is a fault, as a fraction of the range"),
+    "mismatch_alpha": ("--mismatch-alpha", "P", "family-wise level of the model checks (false-alarm rate)"),
+    "speed_fraction": ("--speed-fraction", "FRACTION", "relative speed threshold of the sign(w) term, when "
+                       "--speed-threshold is not given"),
+    "filter_order": ("--filter-order", "N", "order of the identical low-pass filter"),
+    "baseline": ("--baseline", "{motions,nominal}", "healthy baseline: the first validated motions, or the "
+                 "nominal values"),
+    "baseline_motions": ("--baseline-motions", "N", "motions of the healthy baseline"),
+    "nominal": ("--nominal", "NAME=VALUE", "design values of the axis (first motion's isolation, --baseline "
+                "nominal)"),
+    "min_relative_drift": ("--min-drift", "FRACTION", "smallest relative parameter change diagnosed"),
+    "max_motions": ("--max-motions", "N", "identification too old after this many motions"),
+    "max_age_s": ("--max-age", "SECONDS", "identification too old after this long"),
+    "budget_s": ("--budget", "SECONDS", "processing time allowed per motion"),
+    "keep_traces": ("--keep-traces", "N", "motions whose signals are kept for the plots (the last ones)"),
+}
+
+
+def add_config_arguments(parser, config_class) -> None:  # noqa: ANN001 - argparse parser, pydantic model class
+    """One option per ``CLI_OPTIONS`` entry, its default shown from ``config_class`` (never duplicated)."""
+    defaults = config_class()
+    for name, (flag, metavar, text) in CLI_OPTIONS.items():
+        default = getattr(defaults, name)
+        shown = f" (default {default})" if default not in ({}, None) else ""
+        if isinstance(default, dict):
+            parser.add_argument(flag, dest=f"cfg_{name}", action="extend", nargs="+", default=None, metavar=metavar,
+                                help=text + shown)
+        else:
+            parser.add_argument(flag, dest=f"cfg_{name}", default=None, metavar=metavar, help=text + shown)
+
+
+def config_with_options(args, config_class, **fixed):  # noqa: ANN001, ANN201 - argparse namespace, pydantic model
+    """``config_class`` from ``fixed`` and the ``CLI_OPTIONS`` given on the command line (validated by the
+    config itself: a bad value is one line naming the option, exit 2)."""
+    from pydantic import ValidationError
+
+    from feeddrive.cosim.errors import InputError
+    from feeddrive.cosim.recorded import pairs
+
+    values = dict(fixed)
+    for name, (flag, _, _) in CLI_OPTIONS.items():
+        given = getattr(args, f"cfg_{name}", None)
+        if given is None:
+            continue
+        if isinstance(config_class.model_fields[name].default, dict):
+            given = pairs(given, flag)
+            for key, text in given.items():
+                try:
+                    given[key] = float(text)
+                except ValueError:
+                    raise InputError(f"{flag} {key}={text}: expected a number") from None
+        values[name] = given
+    try:
+        return config_class.model_validate(values)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        field = str(err["loc"][0]) if err["loc"] else ""
+        flag = CLI_OPTIONS.get(field, (field,))[0]
+        detail = ".".join(str(x) for x in err["loc"][1:])
+        raise InputError(f"{flag}{' ' + detail if detail else ''}: {err['msg']} (got {err.get('input')!r})") from None
