@@ -301,8 +301,24 @@ class MonitorPipeline:
             result["notes"] += notes
             valid, u, i, w = not faults, best.get("u"), best.get("i"), best["w"]
         torque = signals.get("torque")
-        est = estimate_motion(MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
-                              replace(self.estimation_options, offset=torque is not None))
+        adequacy = None
+        try:  # before the estimation: a mismatch explains a refusal (gravity hides Jt on a robot axis)
+            adequacy = check_adequacy(h, u=u, i=i, w=w, torque=torque, alpha=cfg.mismatch_alpha, filter=cfg.filter,
+                                      speed_fraction=cfg.speed_fraction, known=known)
+            result["adequacy"] = adequacy.to_dict()
+        except EstimatorInputError as exc:
+            result["not_checked"]["model (own residue)"] = f"not checked: {exc}"
+        try:
+            est = estimate_motion(MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
+                                  replace(self.estimation_options, offset=torque is not None))
+        except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
+            # this motion cannot be used (the next may); ValueError: a non-finite simulation of the instruments
+            result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
+                f"estimation failed on this motion's data ({exc})"
+            if adequacy is not None and adequacy.mismatch:
+                result["notes"].append("not validated: model mismatch (the residue check), which may be why the "
+                                       "estimation was refused")
+            return adequacy is not None and adequacy.mismatch
         params = est.parameters
         units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
@@ -321,13 +337,6 @@ class MonitorPipeline:
             result["not_checked"]["model (paper, output error)"] = (
                 "not checked: needs the current, the voltage and the speed" if not full
                 else "not checked: needs every parameter estimated or known")
-        adequacy = None
-        try:
-            adequacy = check_adequacy(h, u=u, i=i, w=w, torque=torque, alpha=cfg.mismatch_alpha, filter=cfg.filter,
-                                      speed_fraction=cfg.speed_fraction, known=known)
-            result["adequacy"] = adequacy.to_dict()
-        except EstimatorInputError as exc:
-            result["not_checked"]["model (own residue)"] = f"not checked: {exc}"
         if mismatch_result is not None:  # the paper's check decides; the residue check is reported beside it
             mismatch = not mismatch_result.passed
         else:

@@ -14,8 +14,8 @@ a torque signal. Then:
   noise levels and instruments; without it the recording's own residue decides (estimator/adequacy.py).
 
 ``motion_verdict`` gives the one-word verdict of a motion, in the precedence ``sensor fault``,
-``not estimated: <reason>``, ``model mismatch``, ``not validated: <reason>``, ``diagnosed``,
-``drifting``, ``healthy``.
+``model mismatch``, ``not estimated: <reason>``, ``not validated: <reason>``, ``diagnosed``,
+``drifting``, ``healthy``. A mismatch wins over a refusal: it is often why the estimation was refused.
 """
 from __future__ import annotations
 
@@ -100,10 +100,10 @@ def motion_verdict(result: Mapping, mismatch: bool) -> str:
     """
     if result.get("sensor_faults") or result.get("measurements_valid") is False:
         return "sensor fault"
-    if result.get("error"):
-        return f"not estimated: {result['error']}"
     if mismatch:
         return "model mismatch"
+    if result.get("error"):
+        return f"not estimated: {result['error']}"
     if not result.get("validated"):
         reasons = [n.removeprefix("not validated: ") for n in result.get("notes", ()) if n.startswith("not validated")]
         return "not validated: " + (reasons[0] if reasons else "no model check")
