@@ -58,6 +58,8 @@ LAG_PERIODS = 3.0
 #: smallest RMS of the nuisance part, relative to the RMS of the output, that counts as a mismatch: a
 #: significant but immaterial lack of fit (a weakly excited record, a tiny deterministic error) is not one
 MIN_EFFECT = 0.005
+#: level of the check when the caller gives none (``check_motion``: ``cosim estimate``)
+ALPHA = 0.01
 #: verdicts, in precedence
 VERDICTS = ("model mismatch", "not enough excitation", "adequate")
 
@@ -229,7 +231,7 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     u, i, w, torque, position : ndarray, shape (n,), or None
         Voltage [V], current [A], speed [rad/s], torque [N.m], position [rad] of one motion (any unit
         works: the test is scale-free). The electrical equation is tested with ``u``, ``i`` and ``w``; the
-        mechanical one with ``w`` and ``torque`` (else ``i``). ``w`` is required.
+        mechanical one with ``w`` and ``torque`` (else ``i``). ``w`` or ``position`` is required.
     alpha : float
         Level of the check (its false-alarm rate on a record the model explains).
     filter : FilterSpec, optional
@@ -255,6 +257,8 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         raise EstimatorInputError(f"check_adequacy: alpha must be in (0, 0.5), got {alpha}")
     raw = {k: v for k, v in (("u", u), ("i", i), ("w", w), ("torque", torque), ("position", position))
            if v is not None}
+    if "w" not in raw and "position" in raw:  # an encoder alone: its differentiated angle
+        raw["w"] = np.gradient(np.asarray(raw["position"], dtype=float), h)
     if "w" not in raw:
         raise EstimatorInputError("check_adequacy: the speed w is required")
     n = None
@@ -374,3 +378,11 @@ def _verdict(results: dict[str, EquationCheck], alpha: float) -> AdequacyResult:
     return AdequacyResult("adequate", p, alpha, "no mismatch found (" + ", ".join(
         f"{e.equation} p = {e.p_value:.3g}" for e in tested.values()) + "; Bonferroni over the equations"
         + (f"; {note}" if note else "") + ")", results)
+
+
+def check_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estimator.MotionData, EstimationOptions
+    """``check_adequacy`` on one motion as the estimator sees it (``MotionData`` and ``EstimationOptions``:
+    its signals, filter, speed fraction and known parameters), at level ``ALPHA``."""
+    return check_adequacy(data.h, u=data.u, i=data.i, w=data.w, torque=data.torque, position=data.position,
+                          alpha=ALPHA, filter=options.filter, speed_fraction=options.speed_fraction,
+                          known=options.known)

@@ -44,6 +44,7 @@ from feeddrive.estimator import (
     NotEnoughExcitation,
     estimate_motion,
 )
+from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.motion import SAMPLING_DELAY
 from feeddrive.estimator.segmentation import segment
 
@@ -81,12 +82,13 @@ def main(args: argparse.Namespace) -> int:
     segments = segment(args.segment, rec.n, rec.h, speed, rec.signals.get("state"))
     if not segments:
         raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
-    results = []
+    results, datas = [], []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
         data = MotionData(rec.h, t0=rec.t0 + seg.start * rec.h, delays=delays, **part)
         try:
             results.append(estimate_motion(data, options))
+            datas.append(data)
         except (NotEnoughExcitation, EstimatorInputError) as exc:  # e.g. a rapid block too short to filter
             if len(segments) == 1:
                 raise
@@ -99,9 +101,14 @@ def main(args: argparse.Namespace) -> int:
         for seg in segments:
             for name, p in seg["parameters"].items():
                 p["unit"] = units[name]
+        # -- model check on the recording's own residue (estimator/adequacy.py, issue 22 item 5) --
+        for seg, data in zip(segments, datas):
+            seg["model_check"] = check_motion(data, options).to_dict()
         print(json.dumps({"side": side, "segments": segments}))
     else:
         print(table(results, units))
+        # -- model check on the recording's own residue (estimator/adequacy.py, issue 22 item 5) --
+        print("\n".join(f"motion {k}: {check_motion(data, options).line()}" for k, data in enumerate(datas, 1)))
     return 0
 
 
