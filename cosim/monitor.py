@@ -304,7 +304,7 @@ class MonitorPipeline:
         adequacy = None
         try:  # before the estimation: a mismatch explains a refusal (gravity hides Jt on a robot axis)
             adequacy = check_adequacy(h, u=u, i=i, w=w, torque=torque, alpha=cfg.mismatch_alpha, filter=cfg.filter,
-                                      speed_fraction=cfg.speed_fraction, known=known)
+                                      speed_fraction=cfg.speed_fraction, known=known, offset=torque is not None)
             result["adequacy"] = adequacy.to_dict()
         except EstimatorInputError as exc:
             result["not_checked"]["model (own residue)"] = f"not checked: {exc}"

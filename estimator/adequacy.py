@@ -177,13 +177,13 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
         return beta, M @ (G.T @ G) @ M.T
 
     # the model's coefficients and their standard errors (excitation)
-    undetermined = [nm for nm in names if nm != "constant"]
+    undetermined = [nm for nm in names if nm not in ("constant", "T0")]
     if X.shape[1] == 0:
         undetermined = []
     elif k >= X.shape[1] + 2:
         beta, cov = iv(Xs, Zs)
         se = np.sqrt(np.clip(np.diag(cov) * k / (k - X.shape[1]), 0.0, None))
-        undetermined = [nm for nm, b, s in zip(names, beta, se) if nm != "constant" and not abs(b) * max_relative_std > s]
+        undetermined = [nm for nm, b, s in zip(names, beta, se) if nm not in ("constant", "T0") and not abs(b) * max_relative_std > s]
     Zs = Zs.copy()
     for j in [j for j, nm in enumerate(names) if nm in undetermined]:
         # an undetermined term with a weak instrument (a derivative at constant speed, mostly noise) made
@@ -240,7 +240,7 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                    w: np.ndarray | None = None, torque: np.ndarray | None = None,
                    position: np.ndarray | None = None, alpha: float = 0.01, filter: FilterSpec | None = None,
                    speed_fraction: float = 0.03, blocks: int = 30, max_relative_std: float = 0.3,
-                   known: Mapping[str, float] | None = None) -> AdequacyResult:
+                   known: Mapping[str, float] | None = None, offset: bool = False) -> AdequacyResult:
     """Is the DC model adequate for this recording? (lack-of-fit test, see the module docstring)
 
     Parameters
@@ -265,6 +265,9 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         Parameters known in advance (``R``, ``L``, ``K``, ``Jt``, ``ft``, ``Cd``, SI): their terms are fixed,
         not fitted, so a wrong one (or a logged command instead of the terminal voltage) is a mismatch.
         ``Jt, ft, Cd`` with a current output need ``K``.
+    offset : bool
+        The mechanical equation has a constant torque offset ``T0`` (the estimator's ``offset``); else a
+        constant is a nuisance term (an offset the model lacks).
 
     Returns
     -------
@@ -340,10 +343,11 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         # voltage, leaves a lack of fit along it. A derivative is read LAG away (its noise is the residue's);
         # the others as they are (read away, their curvature between t - LAG and t + LAG was itself a
         # lack of fit that hid a K 10 % off)
-        N = np.column_stack([np.ones_like(y)] + [around(x) if p in DERIVATIVE_TERMS else x for p, x in fixed.items()]
+        constant = [] if "T0" in terms else [np.ones_like(y)]  # the offset: a nuisance unless modelled
+        N = np.column_stack(constant + [around(x) if p in DERIVATIVE_TERMS else x for p, x in fixed.items()]
                             + [f(yhat) for f in nuisance])
         checks[name] = (output, y, X, instruments(X), list(terms), N,
-                        ["offset (constant)"] + [f"known {p} off" for p in fixed] + labels)
+                        ["offset (constant)"] * len(constant) + [f"known {p} off" for p in fixed] + labels)
 
     if "u" in s and "i" in s:
         equation("electrical", "u", s["u"], {"L": s["Di"], "R": s["i"], "K": s["w"]},
@@ -359,7 +363,8 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                 ignored += [p for p in ("Jt", "ft", "Cd") if p in known]
         position = shifted(s["position"], lag)
         # one direction only: sign(w) is the constant (Cd and an offset confounded, the offset not tested)
-        equation("mechanical", out, y, {"Jt": s["Dw"], "ft": s["w"], "Cd": sgn},
+        terms = {"Jt": s["Dw"], "ft": s["w"], "Cd": sgn} | ({"T0": np.ones_like(sgn)} if offset else {})
+        equation("mechanical", out, y, terms,
                  [lambda yhat, d=d: _legendre(position, rows, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
                  + [lambda yhat: around(yhat * aw), lambda yhat: around(yhat ** 2)],
                  ["position-dependent torque (gravity) P1", "position-dependent torque (gravity) P2",
@@ -412,4 +417,4 @@ def check_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estimator.M
     its signals, filter, speed fraction and known parameters), at level ``ALPHA``."""
     return check_adequacy(data.h, u=data.u, i=data.i, w=data.w, torque=data.torque, position=data.position,
                           alpha=ALPHA, filter=options.filter, speed_fraction=options.speed_fraction,
-                          known=options.known)
+                          known=options.known, offset=options.offset)
