@@ -63,16 +63,17 @@ def drift_record(seed: int) -> dict:
 
 
 @pytest.fixture(scope="module")
-def healthy_p():
-    return np.array([check_adequacy(H, **record(seed)).p_value for seed in range(100)])
+def healthy():
+    return [check_adequacy(H, **record(seed)) for seed in range(100)]
 
 
-def test_healthy_records_pass_at_the_stated_level(healthy_p):
-    """False alarms: p > 0.05 on at least 95 of 100 seeds (measured: 100 of 100; the batch-means test is
-    conservative on these records), and every verdict is "adequate"."""
-    assert np.all(np.isfinite(healthy_p))
-    assert (healthy_p > 0.05).sum() >= 95
-    assert check_adequacy(H, **record(0)).verdict == "adequate"
+def test_healthy_records_pass_at_the_stated_level(healthy):
+    """False alarms: p > 0.05 on at least 95 of 100 seeds (measured: 97), and no verdict is a mismatch
+    (the few significant lacks of fit are below 1 % of the output)."""
+    p = np.array([r.p_value for r in healthy])
+    assert np.all(np.isfinite(p))
+    assert (p > 0.05).sum() >= 95
+    assert all(r.verdict == "adequate" for r in healthy)
 
 
 @pytest.mark.parametrize("build, equation, term", [
