@@ -1,11 +1,14 @@
 """``cosim monitor DATA.csv --map ROLE=COLUMN ...``: the monitor's pipeline on a recorded CSV.
 
 Roles: ``time``, ``voltage`` (terminal) and ``voltage_ref`` (regulator reference) [V], ``current1`` and
-``current2`` [A], ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
-position in m with ``--pitch``/``--ratio``],
-``state`` (NC state, 1 = rapid). Required: ``voltage``, ``current1`` and ``speed`` or ``position``;
-each missing second sensor leaves its quantity unchecked (said in the notes). The encoder angle is
-differentiated (central differences) into the second speed.
+``current2`` [A], ``torque`` [N.m] (instead of current and voltage: only the mechanical equation, Jt, ft,
+Cd and an offset T0), ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
+position in m with ``--pitch``/``--ratio``], ``state`` (NC state, 1 = rapid). Required: a current or a
+torque, and ``speed`` or ``position``; everything else is optional (cosim/monitor_checks.py): each check
+that cannot run says "not checked" with the missing sensor. The encoder angle is differentiated
+(central differences) into the second speed. The monitor's thresholds are options (``--known``,
+``--min-motion``, ``--alpha``, ``--window``, ...: ``monitor_checks.CLI_OPTIONS``), mapped onto the same
+``MonitorConfig`` as a scenario's ``monitor:`` section.
 
 Each high-speed motion (``--segment``: the NC state when mapped, else the speed profile) goes through
 validation, estimation, model validation and diagnosis, and is stored in the history (``--db``) of
