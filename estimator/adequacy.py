@@ -64,8 +64,8 @@ WEAK_INSTRUMENT = 0.5
 DERIVATIVE_TERMS = ("L", "Jt")
 #: level of the check when the caller gives none (``check_motion``: ``cosim estimate``)
 ALPHA = 0.01
-#: verdicts, in precedence
-VERDICTS = ("model mismatch", "not enough excitation", "adequate")
+#: verdicts, in precedence (``not checked``: ``check_motion`` on signals that allow no test)
+VERDICTS = ("model mismatch", "not enough excitation", "adequate", "not checked")
 
 
 @dataclass(frozen=True)
@@ -143,7 +143,7 @@ def _rows(w: np.ndarray, h: float, cutoff_hz: float, speed_fraction: float, lag:
     """Samples used: ``|w|`` above ``speed_fraction`` of its peak, away from the zero crossings (the
     filter smears sign(w) over about 1/cutoff) and from the filter's ends (and ``lag`` samples)."""
     speed = np.abs(w)
-    fast = speed >= speed_fraction * float(speed.max(initial=0.0))
+    fast = (speed >= speed_fraction * float(speed.max(initial=0.0))) & (speed > 0)
     guard = int(np.ceil(2.0 / (cutoff_hz * h)))
     keep = binary_erosion(fast, iterations=guard, border_value=True) if guard else fast
     edge = max(int(np.ceil(3.0 / (cutoff_hz * h))), lag)
@@ -378,8 +378,15 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                                   "(w and torque or i) equation can be tested")
     results = {}
     for eq, (output, y, X, Z, names, N, terms, y_scale) in checks.items():
-        p, F, df, undetermined, strongest, tested, last = _lack_of_fit(y, X, Z, names, N, terms, blocks,
-                                                                       max_relative_std, y_scale)
+        try:
+            with np.errstate(all="ignore"):
+                p, F, df, undetermined, strongest, tested, last = _lack_of_fit(y, X, Z, names, N, terms, blocks,
+                                                                               max_relative_std, y_scale)
+            if p is not None and not (np.isfinite(p) and np.isfinite(F) and np.isfinite(last)):
+                raise FloatingPointError("a non-finite statistic")
+        except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # degenerate data: no power
+            p, F, df, undetermined, strongest, tested = None, None, None, (), None, ()
+            last = f"the test failed numerically on this record ({exc})"
         effect, reason = (last, "") if p is not None else (None, last)
         results[eq] = EquationCheck(eq, output, p, F, df, tested, strongest, undetermined, effect, reason)
     result = _verdict(results, alpha)
@@ -414,7 +421,10 @@ def _verdict(results: dict[str, EquationCheck], alpha: float) -> AdequacyResult:
 
 def check_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estimator.MotionData, EstimationOptions
     """``check_adequacy`` on one motion as the estimator sees it (``MotionData`` and ``EstimationOptions``:
-    its signals, filter, speed fraction and known parameters), at level ``ALPHA``."""
+    its signals, filter, speed fraction and known parameters), at level ``ALPHA``. Signals that allow no
+    test give the verdict ``not checked`` with the reason (never an exception: the estimate stands)."""
+    if data.w is None and data.position is None or data.torque is None and data.i is None:
+        return AdequacyResult("not checked", None, ALPHA, "needs a speed (or position) and a current or torque")
     return check_adequacy(data.h, u=data.u, i=data.i, w=data.w, torque=data.torque, position=data.position,
                           alpha=ALPHA, filter=options.filter, speed_fraction=options.speed_fraction,
                           known=options.known, offset=options.offset)
