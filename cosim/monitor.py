@@ -301,16 +301,22 @@ class MonitorPipeline:
             result["notes"] += notes
             valid, u, i, w = not faults, best.get("u"), best.get("i"), best["w"]
         torque = signals.get("torque")
+        # a torque's offset T0 needs both directions: in one, sign(w) is a constant and Cd absorbs it
+        peak = float(np.max(np.abs(w))) if np.size(w) else 0.0
+        both = bool(np.max(w) > cfg.speed_fraction * peak and np.min(w) < -cfg.speed_fraction * peak)
+        offset = torque is not None and both
+        if torque is not None and not both:
+            result["notes"].append("one direction only: Cd and a torque offset cannot be told apart (Cd holds both)")
         adequacy = None
         try:  # before the estimation: a mismatch explains a refusal (gravity hides Jt on a robot axis)
             adequacy = check_adequacy(h, u=u, i=i, w=w, torque=torque, alpha=cfg.mismatch_alpha, filter=cfg.filter,
-                                      speed_fraction=cfg.speed_fraction, known=known, offset=torque is not None)
+                                      speed_fraction=cfg.speed_fraction, known=known, offset=offset)
             result["adequacy"] = adequacy.to_dict()
         except EstimatorInputError as exc:
             result["not_checked"]["model (own residue)"] = f"not checked: {exc}"
         try:
             est = estimate_motion(MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
-                                  replace(self.estimation_options, offset=torque is not None))
+                                  replace(self.estimation_options, offset=offset))
         except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
             # this motion cannot be used (the next may); ValueError: a non-finite simulation of the instruments
             result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
