@@ -21,17 +21,20 @@ from __future__ import annotations
 import math
 import time as _time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from feeddrive.cosim import monitor_checks as checks
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import InputError, ScenarioError
+from feeddrive.cosim.monitor_checks import _drift_reference, _residue_dict, centred_speed, interval_mean_speed
 from feeddrive.cosim.nc import describe_validation_error
+from feeddrive.estimator.adequacy import check_adequacy
 from feeddrive.estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
 from feeddrive.estimator.errors import EstimatorInputError, HistoryError, NotEnoughExcitation
 from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
@@ -83,6 +86,10 @@ class MonitorConfig(BaseModel):
     nominal : dict of str to float
         The axis's design values of ``R, L, K, Jt, ft, Cd`` (motor side, SI) where they differ from the
         built-in model's: the first motion's sensor isolation and ``baseline: nominal`` use them.
+    known : dict of str to float
+        Parameters known in advance (motor side, SI), fixed in the estimation and the model checks, e.g.
+        ``{R: 8.4, K: 0.042}`` (``cosim monitor --known R=8.4 K=0.042``); K is needed to estimate Jt, ft,
+        Cd from a current without a voltage.
     min_relative_drift : float
         Smallest relative parameter change diagnosed.
     min_motion_s, max_motion_s : float
@@ -122,6 +129,7 @@ class MonitorConfig(BaseModel):
     baseline: Literal["motions", "nominal"] = "motions"
     baseline_motions: int = Field(3, ge=1)
     nominal: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
+    known: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
     min_relative_drift: float = Field(0.05, gt=0)
     min_motion_s: float = Field(1.0, gt=0)
     max_motion_s: float = Field(30.0, gt=0)
@@ -170,11 +178,11 @@ class MonitorPipeline:
 
         self.config, self.history, self.axis = config, history, axis
         # the axis's own design values when given (a vendor motor), else the built-in model's
-        self.nominal = feed_drive().nominal(("physical",)) | dict(config.nominal)
+        self.nominal = feed_drive().nominal(("physical",)) | dict(config.nominal) | dict(config.known)
         self.validation_options = ValidationOptions(config.alpha, config.window_s, config.gain_tol, config.offset_tol)
         self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
                                                     speed_threshold=config.speed_threshold,
-                                                    speed_fraction=config.speed_fraction)
+                                                    speed_fraction=config.speed_fraction, known=dict(config.known))
         self.diagnosis_options = DiagnosisOptions(config.alpha, config.min_relative_drift)
         last = history.last_validated(axis)
         self.last_validated: dict | None = last["parameters"] if last else None
@@ -214,7 +222,8 @@ class MonitorPipeline:
         Parameters
         ----------
         signals : mapping of str to ndarray, shape (n,)
-            ``Im1, Im2`` [A], ``u, u_ref`` [V], ``w_tach, w_enc`` [rad/s] (second sensors may be None).
+            ``Im1, Im2`` [A], ``u, u_ref`` [V], ``w_tach, w_enc`` [rad/s], ``torque`` [N.m]: any subset with a
+            speed (cosim/monitor_checks.py); a missing or None sensor leaves its pair not checked.
         h : float
             Sample time [s].
         start : float
@@ -232,20 +241,29 @@ class MonitorPipeline:
             ``result`` is the per-motion dict stored in the history and in report.json.
         """
         tic, cpu = _time.perf_counter(), _time.process_time()
-        n = len(signals["Im1"])
+        signals = {k: v for k, v in signals.items() if v is not None}
+        n = len(next(iter(signals.values())))
         result: dict[str, Any] = {"motion": int(motion), "start": start, "end": start + (n - 1) * h,
                                   "method": self.config.method, "validated": False, "measurements_valid": None,
                                   "reference": None, "parameters": {}, "sensor_faults": [], "gain_ratio": None,
-                                  "residues": {}, "mismatch": None, "diagnosis": [], "notes": [], "error": None}
+                                  "residues": {}, "mismatch": None, "adequacy": None, "diagnosis": [], "notes": [],
+                                  "error": None, "verdict": None,
+                                  "not_checked": checks.not_checked(checks.present(signals), "torque" in signals)}
+        if self.config.known:
+            result["known"] = dict(self.config.known)
         trace = MotionTrace(int(motion), start + h * np.arange(n), dict(signals), result=result)
+        mismatch = False
         if (n - 1) * h < self.config.min_motion_s:
             result["error"] = (f"motion of {(n - 1) * h:.3g} s is shorter than "
-                               f"min_motion_s = {self.config.min_motion_s} s")
+                               f"min_motion_s = {self.config.min_motion_s} s (set it with --min-motion)")
         else:
             try:
-                self._identify(signals, h, start, trace)
+                mismatch = self._identify(signals, h, start, trace)
             except (NotEnoughExcitation, EstimatorInputError) as exc:  # this motion cannot be used; the next may
                 result["error"] = str(exc)
+            except (np.linalg.LinAlgError, FloatingPointError) as exc:  # ill-conditioned data: a refusal, not a crash
+                result["error"] = f"numerical failure on this motion's data ({exc})"
+        result["verdict"] = checks.motion_verdict(result, mismatch)
         result["processing_s"] = _time.perf_counter() - tic
         # judged on CPU time: the wall time also counts whatever else the host runs meanwhile
         result["processing_cpu_s"] = _time.process_time() - cpu
@@ -253,41 +271,96 @@ class MonitorPipeline:
         self.history.record(self.axis, result, scenario=scenario, time=time)
         return trace
 
-    def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> None:
-        result = trace.result
-        electrical = None if self.last_validated is None else {k: self.last_validated[k]["value"] for k in "RLK"}
-        if self.config.sampling.get("speed") == "mean" and signals.get("w_enc") is not None:
-            signals = {**signals, "w_enc": interval_mean_speed(signals["w_enc"])}
-        v = validate_measurements(signals, h, electrical, self.config.filter, self.validation_options,
-                                  nominal=self.nominal)
-        trace.validation = v
-        result |= {"measurements_valid": v.valid, "reference": v.reference, "gain_ratio": v.gain_ratio,
-                   "relative_gain_error": 1.0 - v.gain_ratio,
-                   "sensor_faults": [f.to_dict() for f in v.sensor_faults],
-                   "residues": {q: _residue_dict(p) for q, p in v.pairs.items() if p.residue is not None}}
-        result["notes"] += list(v.notes) + [n for p in v.pairs.values() for n in p.notes]
-        est = estimate_motion(MotionData(h, u=v.u, i=v.i, w=v.w, t0=start, delays=self.config.delays(h)),
-                              self.estimation_options)
+    def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> bool:
+        """Validation, estimation, model check and diagnosis of one motion; True when the model check that
+        decided found a mismatch."""
+        result, cfg = trace.result, self.config
+        have = checks.present(signals)
+        known = dict(cfg.known)
+        if "w_tach" not in have and "w_enc" in have:
+            signals, have = {**signals, "w_tach": signals["w_enc"]}, have | {"w_tach"}
+            signals.pop("w_enc")
+            have.discard("w_enc")
+        full = {"Im1", "u", "w_tach"} <= have
+        v, mismatch_result = None, None
+        if full:
+            electrical = checks.electrical_reference(self.last_validated, self.nominal, known)
+            if cfg.sampling.get("speed") == "mean" and signals.get("w_enc") is not None:
+                signals = {**signals, "w_enc": interval_mean_speed(signals["w_enc"])}
+            v = validate_measurements(signals, h, electrical, cfg.filter, self.validation_options,
+                                      nominal=self.nominal)
+            trace.validation = v
+            faults = [f.to_dict() for f in v.sensor_faults]
+            ratio = v.pairs["current"].gain_ratio if v.pairs["current"].residue is not None else None
+            result |= {"measurements_valid": bool(v.valid and not faults), "reference": v.reference,
+                       "gain_ratio": ratio, "relative_gain_error": None if ratio is None else 1.0 - ratio,
+                       "sensor_faults": faults,
+                       "residues": {q: _residue_dict(p) for q, p in v.pairs.items() if p.residue is not None}}
+            result["notes"] += list(v.notes) + [n for p in v.pairs.values() for n in p.notes if p.residue is not None]
+            valid, u, i, w = v.valid, v.u, v.i, v.w
+        else:
+            residues, faults, best, notes = checks.detect_subset(signals, h, self.validation_options, have)
+            result |= {"measurements_valid": not faults, "sensor_faults": faults, "residues": residues}
+            result["notes"] += notes
+            valid, u, i, w = not faults, best.get("u"), best.get("i"), best["w"]
+        torque = signals.get("torque")
+        # a torque's offset T0 needs both directions: in one, sign(w) is a constant and Cd absorbs it
+        peak = float(np.max(np.abs(w))) if np.size(w) else 0.0
+        both = bool(np.max(w) > cfg.speed_fraction * peak and np.min(w) < -cfg.speed_fraction * peak)
+        offset = torque is not None and both
+        if torque is not None and not both:
+            result["notes"].append("one direction only: Cd and a torque offset cannot be told apart (Cd holds both)")
+        adequacy = None
+        try:  # before the estimation: a mismatch explains a refusal (gravity hides Jt on a robot axis)
+            adequacy = check_adequacy(h, u=u, i=i, w=w, torque=torque, alpha=cfg.mismatch_alpha, filter=cfg.filter,
+                                      speed_fraction=cfg.speed_fraction, known=known, offset=offset)
+            result["adequacy"] = adequacy.to_dict()
+        except EstimatorInputError as exc:
+            result["not_checked"]["model (own residue)"] = f"not checked: {exc}"
+        try:
+            est = estimate_motion(MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
+                                  replace(self.estimation_options, offset=offset))
+        except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
+            # this motion cannot be used (the next may); ValueError: a non-finite simulation of the instruments
+            result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
+                f"estimation failed on this motion's data ({exc})"
+            if adequacy is not None and adequacy.mismatch:
+                result["notes"].append("not validated: model mismatch (the residue check), which may be why the "
+                                       "estimation was refused")
+            return adequacy is not None and adequacy.mismatch
         params = est.parameters
         units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
-        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units[k]}
+        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
                                 for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
-        inputs, instruments, noise = check_signals(v, signals)
-        mismatch = check_model(inputs["u"], inputs["i"], inputs["w"], h, {k: p.value for k, p in params.items()},
-                               self.config.filter, self.config.mismatch_alpha, covariance=est.covariance,
-                               names=est.names, noise=noise, noise_dof=len(v.i),
-                               speed_threshold=self.config.speed_threshold,
-                               speed_fraction=self.config.speed_fraction, instruments=instruments)
-        trace.mismatch = mismatch
-        result["mismatch"] = mismatch.to_dict()
-        result["validated"] = bool(v.valid and mismatch.passed)
-        if not v.valid:
+        values = {k: p.value for k, p in params.items()} | known
+        if full and all(k in values for k in ("R", "L", "K", "Jt", "ft", "Cd")):
+            inputs, instruments, noise = check_signals(v, signals)
+            mismatch_result = check_model(inputs["u"], inputs["i"], inputs["w"], h, values, cfg.filter,
+                                          cfg.mismatch_alpha, covariance=est.covariance, names=est.names,
+                                          noise=noise, noise_dof=len(v.i), speed_threshold=cfg.speed_threshold,
+                                          speed_fraction=cfg.speed_fraction, instruments=instruments)
+            trace.mismatch = mismatch_result
+            result["mismatch"] = mismatch_result.to_dict()
+        else:
+            result["not_checked"]["model (paper, output error)"] = (
+                "not checked: needs the current, the voltage and the speed" if not full
+                else "not checked: needs every parameter estimated or known")
+        if mismatch_result is not None:  # the paper's check decides; the residue check is reported beside it
+            mismatch = not mismatch_result.passed
+        else:
+            mismatch = adequacy is not None and adequacy.mismatch
+        result["validated"] = bool(valid and not mismatch and (mismatch_result is not None or (
+            adequacy is not None and adequacy.verdict == "adequate")))
+        if not valid:
             result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
-        if not mismatch.passed:
+        if mismatch:
             result["notes"].append("not validated: model mismatch (no diagnosis; parameters reported)")
+        elif valid and not result["validated"]:
+            why = adequacy.verdict if adequacy is not None else "model not checked"
+            result["notes"].append(f"not validated: {why} (the model check has no power; parameters reported)")
         if not result["validated"]:
-            return
+            return mismatch
         current = result["parameters"]
         reference = self.baseline()
         if reference is not None:
@@ -305,53 +378,7 @@ class MonitorPipeline:
                 result["notes"].append(f"healthy baseline: motion {k + 1} of {n}")
         self.last_validated = current
         self.recent = (self.recent + [current])[-self.diagnosis_options.trend_motions:]
-
-
-def interval_mean_speed(w_enc: np.ndarray) -> np.ndarray:
-    """The latched encoder's speed at the sample times -> its mean over each sampling interval (trapezoid).
-
-    With a tachometer sampled as an interval mean, the average of the two speeds would otherwise lag the
-    tachometer by a quarter sample (R -0.04 % on the vendor-style drive at 10 kHz).
-    """
-    w_enc = np.asarray(w_enc, dtype=float)
-    return np.r_[w_enc[:1], 0.5 * (w_enc[1:] + w_enc[:-1])]
-
-
-def centred_speed(theta: np.ndarray, fallback: np.ndarray, h: float, window_s: float) -> np.ndarray:
-    """Encoder speed at the sample times: ``(theta(t + k h) - theta(t - k h)) / (2 k h)``, ``2 k h ~ window_s``.
-
-    Parameters
-    ----------
-    theta : ndarray, shape (n,)
-        Encoder angle [rad].
-    fallback : ndarray, shape (n,)
-        Speed [rad/s] kept on the ``k`` samples at each end, where the centred window does not fit.
-    h, window_s : float
-        Sample time and differencing window [s].
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        Speed [rad/s], without the half-window delay of a backward difference.
-    """
-    k = max(1, int(round(window_s / (2 * h))))
-    w = np.array(fallback, dtype=float)
-    if theta.size > 2 * k:
-        w[k:-k] = (theta[2 * k:] - theta[:-2 * k]) / (2 * k * h)
-    return w
-
-
-def _drift_reference(reference: Mapping | None, options: DiagnosisOptions, names: Sequence[str]) -> dict:
-    """``{"z_crit", "min_relative": {name}, "baseline": {name: {"value", "std"}} or None}`` of a drift test."""
-    base = None if reference is None else {k: {"value": float(v), "std": float(s)} for k, (v, s) in reference.items()}
-    return {"z_crit": options.z_crit, "min_relative": {n: options.min_rel(n) for n in names}, "baseline": base}
-
-
-def _residue_dict(pair) -> dict:
-    r = pair.residue
-    return {"kind": r.kind, "gain_diff": r.gain_diff, "gain_diff_ci95": list(r.gain_diff_ci95), "p_gain": r.p_gain,
-            "offset": r.offset, "offset_ci95": list(r.offset_ci95), "p_offset": r.p_offset,
-            "noise_std": r.noise_std, "trusted": pair.trusted, "valid": pair.valid}
+        return False
 
 
 class Monitor(Component):

@@ -29,15 +29,20 @@ def plot_motion(trace, path: Path) -> Path:
     fig, axes = plt.subplots(panels, 1, figsize=(9, 2.4 * panels), sharex=True, squeeze=False)
     axes = axes[:, 0]
     t = trace.t
-    r = np.asarray(trace.signals["Im1"]) - np.asarray(trace.signals["Im2"])
-    axes[0].plot(t, r, lw=0.3, color="0.6", label="r = Im1 - Im2")
+    if trace.signals.get("Im1") is not None and trace.signals.get("Im2") is not None:
+        r = np.asarray(trace.signals["Im1"]) - np.asarray(trace.signals["Im2"])
+        axes[0].plot(t, r, lw=0.3, color="0.6", label="r = Im1 - Im2")
+    else:  # one current sensor or a torque signal: the pair is not checked, and the panel says so
+        why = trace.result.get("not_checked", {}).get("current", "not checked")
+        axes[0].text(0.5, 0.5, f"current residue: {why}", transform=axes[0].transAxes, ha="center", va="center")
     if v is not None and v.pairs["current"].residue is not None:
         res = v.pairs["current"].residue
         tw = t[0] + res.centers * (t[1] - t[0])
         axes[0].step(tw, res.means, where="mid", color="C0", label=f"window means ({res.kind})")
         axes[0].plot(tw, res.offset + res.gain_diff * res.levels, "C3--", lw=1, label="offset + gain diff x level")
     axes[0].set_ylabel("residue [A]")
-    _legend_outside(axes[0])
+    if axes[0].get_legend_handles_labels()[0]:
+        _legend_outside(axes[0])
     if mm is not None:
         cur, speed = mm.checks["current"], mm.checks["speed"]
         axes[1].plot(t, cur.simulated + cur.residue, label="measured (filtered)")

@@ -55,6 +55,7 @@ from feeddrive.estimator import (
     MotionData,
     NotEnoughExcitation,
 )
+from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.motion import SAMPLING_DELAY
 from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.estimator.physical import parse_bounds
@@ -93,9 +94,10 @@ def data_files(patterns: list[str]) -> list[str]:
     return files
 
 
-def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict) -> tuple[str, list, dict]:
+def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict) -> tuple[str, list, dict, list]:
     """Load one recording (``cosim.recorded.load_recording``: any reader that returns a ``Recording`` plugs in
-    here), cut it into motions and estimate each; returns (side, estimates, the recording's JSON keys).
+    here), cut it into motions and estimate each; returns (side, estimates, the recording's JSON keys,
+    the model checks on each motion's own residue).
     Motions of which nothing can be estimated are reported on stderr and left out; none left is an
     ``InputError``."""
     roles = mapped_roles(args, ROLES)
@@ -113,12 +115,13 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
     segments = motions(args, rec, speed, rec.signals.get("state"))
     if not segments:
         raise NothingEstimated(f"{path}: no high-speed motion found (--segment {args.segment})")
-    results = []
+    results, datas = [], []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
         data = MotionData(rec.h, t0=rec.time(seg.start), delays=delays, **part)
         try:
             results.append(estimate_parameters(data, options, bounds))
+            datas.append(data)
         except (NotEnoughExcitation, EstimatorInputError) as exc:  # e.g. a rapid block too short to filter
             if len(segments) == 1:
                 raise
@@ -126,7 +129,8 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
                   file=sys.stderr)
     if not results:
         raise NothingEstimated(f"{path}: no motion could be estimated (see above)")
-    return side, results, recording_json(rec)
+    # -- model check on the recording's own residue (estimator/adequacy.py, issue 22 item 5) --
+    return side, results, recording_json(rec), [check_motion(data, options) for data in datas]
 
 
 def main(args: argparse.Namespace) -> int:
@@ -153,32 +157,40 @@ def main(args: argparse.Namespace) -> int:
                 print(f"cosim estimate: {path} left out: {exc}", file=sys.stderr)
     if not per_file:
         raise InputError(f"none of the {len(files)} recordings could be estimated (see above)")
-    sides = {side for _, side, _, _ in per_file}
+    sides = {side for _, side, _, _, _ in per_file}
     if len(sides) > 1:
         raise InputError(f"the recordings are on different sides ({', '.join(sorted(sides))}): give --pitch or "
                          f"units that agree")
     side = sides.pop()
     units = parameter_units(side, "linear" if side == "table" else "rotary")
     if len(per_file) == 1:
-        results, rec_keys = per_file[0][2], per_file[0][3]
+        results, rec_keys, checks = per_file[0][2:]
         if args.json:
-            print(json.dumps({"side": side, **rec_keys, "segments": [_with_units(r.to_dict(), units) for r in results]}))
+            print(json.dumps({"side": side, **rec_keys, "segments": [
+                _with_units(r.to_dict(), units) | {"model_check": c.to_dict()} for r, c in zip(results, checks)]}))
         else:
             print(table(results, units))
+            print("\n".join(f"motion {k}: {c.line()}" for k, c in enumerate(checks, 1)))
         return 0
     # pooled and compared with the intervals not conditional on a refused parameter (MotionEstimate.joint)
-    rows = [(path, results, pool([r.joint or r.result for r in results])) for path, _, results, _ in per_file]
+    all_checks = [checks for *_, checks in per_file]
+    rows = [(path, results, pool([r.joint or r.result for r in results])) for path, _, results, _, _ in per_file]
     # between files: a file's one motion with its full covariance, or its motions pooled
     verdict = pool([(results[0].joint or results[0].result) if len(results) == 1 else pooled.as_result()
                     for _, results, pooled in rows])
     if args.json:
-        files_out = [{"file": path, "segments": [_with_units(r.to_dict(), units) for r in results],
-                      "estimate": _units(_params(pooled.parameters), units)} for path, results, pooled in rows]
+        files_out = [{"file": path, "segments": [_with_units(r.to_dict(), units) | {"model_check": c.to_dict()}
+                                                 for r, c in zip(results, checks)],
+                      "estimate": _units(_params(pooled.parameters), units)}
+                     for (path, results, pooled), checks in zip(rows, all_checks)]
         out = verdict.to_dict()
         _units(out["pooled"], units)
         print(json.dumps({"side": side, "files": files_out, "consistency": out}))
     else:
         print(several_table(rows, verdict, units))
+        # -- model check on each recording's own residue (estimator/adequacy.py) --
+        print("\n".join(f"{path} motion {k}: {c.line()}" for (path, *_), checks in zip(rows, all_checks)
+                        for k, c in enumerate(checks, 1)))
     return 0
 
 

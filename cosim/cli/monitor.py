@@ -1,11 +1,14 @@
 """``cosim monitor DATA.csv --map ROLE=COLUMN ...``: the monitor's pipeline on a recorded CSV.
 
 Roles: ``time``, ``voltage`` (terminal) and ``voltage_ref`` (regulator reference) [V], ``current1`` and
-``current2`` [A], ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
-position in m with ``--pitch``/``--ratio``],
-``state`` (NC state, 1 = rapid). Required: ``voltage``, ``current1`` and ``speed`` or ``position``;
-each missing second sensor leaves its quantity unchecked (said in the notes). The encoder angle is
-differentiated (central differences) into the second speed.
+``current2`` [A], ``torque`` [N.m] (instead of current and voltage: only the mechanical equation, Jt, ft,
+Cd and an offset T0), ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
+position in m with ``--pitch``/``--ratio``], ``state`` (NC state, 1 = rapid). Required: a current or a
+torque, and ``speed`` or ``position``; everything else is optional (cosim/monitor_checks.py): each check
+that cannot run says "not checked" with the missing sensor. The encoder angle is differentiated
+(central differences) into the second speed. The monitor's thresholds are options (``--known``,
+``--min-motion``, ``--alpha``, ``--window``, ...: ``monitor_checks.CLI_OPTIONS``), mapped onto the same
+``MonitorConfig`` as a scenario's ``monitor:`` section.
 
 Each high-speed motion (``--segment``: the NC state when mapped, else the speed profile) goes through
 validation, estimation, model validation and diagnosis, and is stored in the history (``--db``) of
@@ -26,9 +29,11 @@ import json
 import os
 from pathlib import Path
 
+from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.cli.history import DEFAULT_DB
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
+from feeddrive.cosim.monitor_checks import add_config_arguments, config_with_options
 from feeddrive.cosim.recorded import (
     add_recording_arguments,
     filter_cutoff,
@@ -43,9 +48,11 @@ from feeddrive.cosim.recorded import (
 )
 from feeddrive.cosim.run import _versions
 
+#: units of the monitor's parameters (motor side)
+UNITS = parameter_units("motor")
 #: role -> monitor signal
 ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
-         "speed": "w_tach", "position": None, "state": None}
+         "speed": "w_tach", "position": None, "torque": "torque", "state": None}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -55,24 +62,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plots", metavar="DIR", help="write the monitor plots of every motion into DIR")
     parser.add_argument("--out", metavar="DIR", help="write report.json, report.html and plots/ into DIR")
     parser.add_argument("--overwrite", action="store_true", help="replace existing plot files")
+    add_config_arguments(parser, MonitorConfig)
 
 
 def main(args: argparse.Namespace) -> int:
     from feeddrive.estimator.history import History
 
     role_map = mapped_roles(args, ROLES)
-    missing = [r for r in ("voltage", "current1") if r not in role_map]
+    missing = [] if {"current1", "current2", "torque"} & set(role_map) else ["current1 (or torque)"]
     if not {"speed", "position"} & set(role_map):
         missing.append("speed or position")
     if missing:
         raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
-    columns = {"voltage": role_map.get("voltage"), "current": role_map.get("current1"), "speed": role_map.get("speed")}
-    modes = sampling_modes(args, {q: c for q, c in columns.items() if c})
+    columns = {"voltage": role_map.get("voltage"), "current": role_map.get("current1") or role_map.get("current2"),
+               "speed": role_map.get("speed")}
+    config = config_with_options(args, MonitorConfig, axis=args.axis, db=args.db, method=args.method,
+                                 speed_threshold=args.speed_threshold,
+                                 sampling=sampling_modes(args, {q: c for q, c in columns.items() if c}))
     rec = read_recording(args, role_map)
     if rec.side == "table":  # the monitor's model is the motor's: u = R i + L di/dt + K w, w in rad/s
         raise InputError(f"{args.data}: the position/speed columns are on the table side ({rec.units}); the "
                          "monitor needs the motor side: give --pitch (and --ratio) to convert them")
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
+    if "Im1" not in sig and "Im2" in sig:  # a single current sensor, whatever it is called
+        sig["Im1"] = sig.pop("Im2")
     if "position" in rec.signals:
         w_enc = rec.gradient(rec.signals["position"])  # within each record of a split recording
         sig["w_enc" if "w_tach" in sig else "w_tach"] = w_enc
@@ -82,9 +95,7 @@ def main(args: argparse.Namespace) -> int:
     plots = _plot_folder(args.plots, args.overwrite) if args.plots else None
     out = _out_folder(args.out, args.overwrite) if args.out else None
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    config = MonitorConfig(axis=args.axis, scenario=str(rec.path), db=args.db, method=args.method,
-                           filter_cutoff_hz=filter_cutoff(args, rec.h), speed_threshold=args.speed_threshold,
-                           sampling=modes)
+    config = config.model_copy(update={"scenario": str(rec.path), "filter_cutoff_hz": filter_cutoff(args, rec.h)})
     clock0, clock_source = start_clock(rec, args.start_time)  # machine time of sample 0, and where it came from
     traces = []
     if args.db == DEFAULT_DB:
@@ -170,6 +181,13 @@ def _jsonable(x):  # noqa: ANN001, ANN202 - numpy scalars in the results
     raise TypeError(f"cosim monitor: {type(x).__name__} is not JSON-serialisable")
 
 
+def adequacy_line(a: dict) -> str:
+    """The residue model check's line from its report.json dict (``AdequacyResult.to_dict``)."""
+    p = "" if a["p_value"] is None else f" (p = {a['p_value']:.3g} at alpha = {a['alpha']:g})"
+    verdict = "MODEL MISMATCH" if a["verdict"] == "model mismatch" else a["verdict"]
+    return f"model check (own residue): {verdict}{p}: {a['reason']}"
+
+
 def table(results: list[dict]) -> str:
     """One block per motion: verdicts, sensor faults, parameters with 95 % CIs, model check, diagnosis."""
     from feeddrive.cosim.report.verdict import finite, verdict_line
@@ -182,6 +200,8 @@ def table(results: list[dict]) -> str:
         lines.append(f"  {r['start']:.4g}-{r['end']:.4g} s, {verdict}, processing "
                      + (f"{cpu:.3g} s CPU ({r['processing_s']:.3g} s wall)" if cpu is not None
                         else f"{r['processing_s']:.3g} s wall"))
+        for quantity, why in (r.get("not_checked") or {}).items():
+            lines.append(f"  {quantity}: {why}")
         if r["error"]:
             lines.append(f"  not identified: {r['error']}")
         for f in r["sensor_faults"]:
@@ -195,10 +215,14 @@ def table(results: list[dict]) -> str:
         for name, p in r["parameters"].items():
             lines.append(f"  {name:3} {p['value']:12.6g} {p.get('unit', ''):10} 95 % CI "
                          f"[{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")
+        for name, value in r.get("known", {}).items():
+            lines.append(f"  {name:3} {value:12.6g} {UNITS.get(name, ''):10} known (--known)")
         if r["mismatch"]:
             m = r["mismatch"]
             lines.append(f"  model check: {'passed' if m['passed'] else 'MISMATCH'} (decided by the {m['test']} "
                          f"test: statistic {m['statistic']:.3g}, p = {m['p_value']:.3g} at alpha = {m['alpha']:g})")
+        if r.get("adequacy"):
+            lines.append(f"  {adequacy_line(r['adequacy'])}")
         for d in r["diagnosis"]:
             lines.append(f"  diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
         lines += [f"  note: {n}" for n in r["notes"]]

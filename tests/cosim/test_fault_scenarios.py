@@ -117,10 +117,13 @@ SENSOR_FAULTS = {
 @pytest.mark.parametrize("case", SENSOR_FAULTS)
 def test_single_sensor_fault_is_detected_isolated_and_sized(tmp_path, healthy, case):
     """One faulty sensor: the residue (eq. 10) detects it, isolation (eq. 13-14) names and sizes it,
-    the other sensor is trusted and the motion stays validated, with no plant fault diagnosed."""
+    the other sensor is trusted and the motion stays validated, with no plant fault diagnosed. A motion
+    with a sensor fault is never "measurements valid" (issue 22/23: it was, and the report badged it green);
+    its verdict is "sensor fault"."""
     kwargs, quantity, sensor, other, kind, gain, offset, tol = SENSOR_FAULTS[case]
     m, _, _ = run_fault(tmp_path, healthy, case, **kwargs)
-    assert m["validated"] and m["measurements_valid"] and m["diagnosis"] == []
+    assert m["validated"] and not m["measurements_valid"] and m["diagnosis"] == []
+    assert m["verdict"] == "sensor fault"
     (fault,) = m["sensor_faults"]
     assert (fault["sensor"], fault["kind"]) == (sensor, kind)
     faulty_field = "offset" if kind == "offset" else "gain"

@@ -74,7 +74,7 @@ def test_plots_and_errors(recording, tmp_path, capsys):
     assert "--overwrite" in capsys.readouterr().err
     assert main(["monitor", str(recording), "--map", "voltage=u", "--db", db]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "missing required role(s): current1, speed or position" in err
+    assert err.count("\n") == 1 and "missing required role(s): current1 (or torque), speed or position" in err
     assert main(["monitor", str(recording), "--map", "volt=u", "--db", db]) == 2
     assert "unknown role(s) ['volt']" in capsys.readouterr().err
     assert main(["monitor", str(recording), *MAP[:-4], "--map", "current2=nope", "--db", db]) == 2
