@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from feeddrive.cosim import monitor_checks as checks
 from feeddrive.cosim.axis import parameter_units
@@ -42,6 +42,7 @@ from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.history import History
 from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
 from feeddrive.estimator.motion import SAMPLING_DELAY
+from feeddrive.estimator.physical import physical_flags
 from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
 #: NC state of a high-speed motion without machining
@@ -130,6 +131,7 @@ class MonitorConfig(BaseModel):
     baseline_motions: int = Field(3, ge=1)
     nominal: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
     known: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
+    bounds: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], tuple[float | None, float | None]] = {}
     min_relative_drift: float = Field(0.05, gt=0)
     min_motion_s: float = Field(1.0, gt=0)
     max_motion_s: float = Field(30.0, gt=0)
@@ -139,6 +141,20 @@ class MonitorConfig(BaseModel):
     keep_traces: int = Field(5, ge=0)
     encoder_window_s: float = Field(1.0e-3, gt=0)
     sampling: dict[Literal["voltage", "current", "speed"], Literal["instant", "mean"]] = {}
+
+
+    @field_validator("bounds", mode="before")
+    @classmethod
+    def _bounds(cls, raw: object) -> object:
+        """``{Jt: "4e-6:", ft: [0, 1]}`` (the scenario's and ``--bounds``' forms) -> (low, high) pairs."""
+        from feeddrive.estimator.physical import bounds_mapping
+
+        if isinstance(raw, dict):
+            try:
+                return bounds_mapping(raw, "")
+            except ValueError as exc:
+                raise ValueError(str(exc).lstrip(": ")) from None
+        return raw
 
     def delays(self, h: float) -> dict[str, float]:
         """Estimator signal -> delay [s] of its samples (see ``sampling``), for sampling period ``h``."""
@@ -333,6 +349,9 @@ class MonitorPipeline:
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
                                 for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
+        flags = physical_flags(est, dict(cfg.bounds))
+        if flags:  # outside the physical range or the user's bounds: reported, never validated
+            result["flags"] = flags
         values = {k: p.value for k, p in params.items()} | known
         if full and all(k in values for k in ("R", "L", "K", "Jt", "ft", "Cd")):
             inputs, instruments, noise = check_signals(v, signals)
@@ -352,6 +371,9 @@ class MonitorPipeline:
             mismatch = adequacy is not None and adequacy.mismatch
         result["validated"] = bool(valid and not mismatch and (mismatch_result is not None or (
             adequacy is not None and adequacy.verdict == "adequate")))
+        if flags:
+            result["validated"] = False
+            result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values()))
         if not valid:
             result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
         if mismatch:

@@ -193,6 +193,8 @@ def _residue_dict(pair) -> dict:
 CLI_OPTIONS = {
     "known": ("--known", "NAME=VALUE", "parameters known in advance, motor side, SI, e.g. R=8.4 K=0.042 "
               "(fixed in the estimation and the model checks; K is needed without a voltage)"),
+    "bounds": ("--bounds", "NAME=LOW:HIGH", "bounds beyond the physical range, either side may be empty, e.g. "
+               "Jt=4e-6: (the rotor's own inertia); an estimate outside is flagged and never validated"),
     "min_motion_s": ("--min-motion", "SECONDS", "shorter motions are not identified"),
     "max_motion_s": ("--max-motion", "SECONDS", "longer motions are cut to this length"),
     "alpha": ("--alpha", "P", "level of the sensor residue tests and the drift tests"),
@@ -245,6 +247,8 @@ def config_with_options(args, config_class, **fixed):  # noqa: ANN001, ANN201 - 
         if isinstance(config_class.model_fields[name].default, dict):
             given = pairs(given, flag)
             for key, text in given.items():
+                if name == "bounds":  # LOW:HIGH, parsed by the config itself
+                    continue
                 try:
                     given[key] = float(text)
                 except ValueError:

@@ -319,15 +319,6 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     if "class" in raw:
         raw, prefix = raw.get("config") or {}, ("monitor", "config")
     fields = MonitorConfig.model_fields
-    if isinstance(raw, dict) and "bounds" in raw and "bounds" not in fields:  # checked here until the monitor uses it
-        from feeddrive.estimator.physical import EstimatorInputError, bounds_mapping
-
-        try:
-            bounds_mapping(raw["bounds"], "")
-        except EstimatorInputError as exc:
-            raise located_error(source, lines, (*prefix, "bounds"), str(exc).lstrip(": ")) from None
-        warnings.warn(f"{source}: monitor: bounds are valid, but this monitor does not apply them yet", stacklevel=3)
-        raw = {k: v for k, v in raw.items() if k != "bounds"}
     name = data.get("axis", "X")
     name = name.get("name", "X") if isinstance(name, dict) else name
     implied = {k: v for k, v in (("axis", name), ("scenario", data.get("name")))

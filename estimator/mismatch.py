@@ -70,7 +70,7 @@ import casadi as ca
 import numpy as np
 from scipy import ndimage, signal
 
-from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
@@ -180,7 +180,12 @@ def sensitivity_directions(simulate: Callable[[dict[str, float]], np.ndarray], p
         p = dict(parameters)
         for k, d in step.items():
             p[k] += d
-        cols.append(simulate(p) - base)
+        with np.errstate(all="ignore"):  # a diverging perturbed simulation is a refusal below, not a warning
+            col = simulate(p) - base
+        if not np.all(np.isfinite(col)):
+            raise NumericalFailure(f"the model check's simulation diverges when {', '.join(step)} moves by one "
+                                   "standard deviation: the estimate is too uncertain to check")
+        cols.append(col)
     return np.column_stack(cols) if cols else np.zeros((base.size, 0))
 
 

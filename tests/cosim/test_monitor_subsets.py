@@ -142,3 +142,16 @@ def test_verdict_precedence():
     assert motion_verdict(base | {"error": "too short", "validated": False}, False) == "not estimated: too short"
     assert motion_verdict(base | {"sensor_faults": [{"sensor": "Im1"}]}, True) == "sensor fault"
     assert motion_verdict(base | {"measurements_valid": False}, False) == "sensor fault"
+
+
+def test_bounds_flag_the_estimate_and_it_is_never_validated(recording, tmp_path, capsys):
+    """A stated lower bound above the true inertia (0.1 kg.m2): Jt is reported, flagged with the bound, the motion is
+    not validated (no diagnosis, no baseline); without the bound the same motion is healthy."""
+    code, out, err, text = monitor(recording, tmp_path, capsys, "torque=T", "speed=w", extra=("--bounds", "Jt=0.15:"))
+    assert code == 0, err
+    (m,) = json.loads(text)["motions"]
+    assert m["flags"]["Jt"].startswith(("Jt = 0.1", "Jt = 0.09")) and "below the stated lower bound 0.15" in m["flags"]["Jt"]
+    assert not m["validated"] and m["verdict"].startswith("not validated: physically impossible estimate: Jt = ")
+    assert m["diagnosis"] == [] and "drift_reference" not in m
+    code, _, err, _ = monitor(recording, tmp_path / "b", capsys, "torque=T", "speed=w", extra=("--bounds", "Jt=x:"))
+    assert code == 2 and err.count("\n") == 1 and "--bounds" in err

@@ -5,7 +5,6 @@ import pytest
 from test_scenario import BASE, write
 
 from feeddrive.cosim.errors import ScenarioError
-from feeddrive.cosim.monitor import MonitorConfig
 from feeddrive.cosim.scenario import load_scenario
 from feeddrive.estimator.physical import bounds_mapping
 
@@ -14,11 +13,9 @@ def test_bounds_mapping_reads_strings_and_pairs():
     assert bounds_mapping({"Jt": "4e-6:", "ft": [0, None]}) == {"Jt": (4e-6, None), "ft": (0.0, None)}
 
 
-@pytest.mark.skipif("bounds" in MonitorConfig.model_fields, reason="the monitor validates its own bounds")
-def test_monitor_bounds_are_checked_and_bad_ones_located(tmp_path, feeddrive_fmu):
-    with pytest.warns(UserWarning, match="bounds are valid, but this monitor does not apply them yet"):
-        s = load_scenario(write(tmp_path, BASE + "monitor: {bounds: {Jt: '4e-6:', ft: [0, null]}}\n"))
-    assert s.monitor is not None
-    with pytest.raises(ScenarioError, match=r"monitor\.bounds: 'Q=0:1': expected NAME=LOW:HIGH") as exc:
+def test_monitor_bounds_are_read_and_bad_ones_located(tmp_path, feeddrive_fmu):
+    s = load_scenario(write(tmp_path, BASE + "monitor: {bounds: {Jt: '4e-6:', ft: [0, null]}}\n"))
+    assert s.monitor is not None and s.monitor.config.bounds == {"Jt": (4e-6, None), "ft": (0.0, None)}
+    with pytest.raises(ScenarioError, match=r"monitor\.bounds") as exc:
         load_scenario(write(tmp_path, BASE + "monitor: {bounds: {Q: '0:1'}}\n"))
     assert "\n" not in str(exc.value) and ".yaml:" in str(exc.value)
