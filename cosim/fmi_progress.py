@@ -13,7 +13,7 @@ from __future__ import annotations
 import ctypes
 import mmap
 
-#: FMI 2.0 functions, in the order of the standard's sections; the record holds an index into it
+#: FMI 2.0 functions, in the order of the standard's sections, then FMI 3.0's; the record holds an index into it
 FUNCTIONS = (
     "", "fmi2Instantiate", "fmi2FreeInstance", "fmi2SetDebugLogging", "fmi2SetupExperiment",
     "fmi2EnterInitializationMode", "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset",
@@ -26,6 +26,15 @@ FUNCTIONS = (
     "fmi2GetNominalsOfContinuousStates", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
     "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus",
     "fmi2GetBooleanStatus", "fmi2GetStringStatus",
+    # FMI 3.0 (appended: the codes of FMI 2.0 stay as they were)
+    "fmi3InstantiateModelExchange", "fmi3InstantiateCoSimulation", "fmi3FreeInstance", "fmi3SetDebugLogging",
+    "fmi3EnterInitializationMode", "fmi3ExitInitializationMode", "fmi3EnterEventMode", "fmi3Terminate",
+    "fmi3Reset", "fmi3GetFloat64", "fmi3SetFloat64", "fmi3GetFloat32", "fmi3GetInt32", "fmi3GetUInt32",
+    "fmi3GetInt64", "fmi3GetBoolean", "fmi3UpdateDiscreteStates", "fmi3EnterContinuousTimeMode",
+    "fmi3CompletedIntegratorStep", "fmi3SetTime", "fmi3SetContinuousStates",
+    "fmi3GetContinuousStateDerivatives", "fmi3GetEventIndicators", "fmi3GetContinuousStates",
+    "fmi3GetNominalsOfContinuousStates", "fmi3EnterStepMode", "fmi3DoStep", "fmi3GetInt8", "fmi3GetUInt8",
+    "fmi3GetInt16", "fmi3GetUInt16", "fmi3GetUInt64",
 )
 CODE = {name: k for k, name in enumerate(FUNCTIONS)}
 IDLE = 0
@@ -44,10 +53,13 @@ class Record(ctypes.Structure):
         The component's watchdog, ``plant.call_timeout`` [s] (0: none set yet).
     component : bytes
         The component's name in the scenario.
+    owner : int
+        Which component wrote ``component`` and ``call_timeout`` (an id of its own): with several FMU
+        components, each one claims the record before its calls when another one had it.
     """
 
     _fields_ = [("function", ctypes.c_int32), ("_pad", ctypes.c_int32), ("time", ctypes.c_double),
-                ("call_timeout", ctypes.c_double), ("component", ctypes.c_char * 64)]
+                ("call_timeout", ctypes.c_double), ("component", ctypes.c_char * 64), ("owner", ctypes.c_int64)]
 
 
 _shared: Record | None = None

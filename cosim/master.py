@@ -131,14 +131,14 @@ class Master:
     @classmethod
     def from_scenario(cls, scenario: Any) -> Master:
         """The standard components of a :class:`cosim.scenario.Scenario`, plus its user components."""
-        from feeddrive.cosim.fmu_adapter import FMUComponent
+        from feeddrive.cosim.fmu_adapter import fmu_component
         from feeddrive.cosim.nc import NCComponent
         from feeddrive.cosim.sensors import SensorsComponent
 
         m = scenario.plant.oversample
         cycle = scenario.nc_cycle_ticks()
         nc = NCComponent("nc", scenario.nc)
-        plant = FMUComponent("plant", scenario.plant, input_period=cycle)
+        plant = fmu_component("plant", scenario.plant, input_period=cycle)
         comps: list[tuple[str, Component]] = [
             ("nc", nc), ("plant", plant),
             ("sensors", SensorsComponent("sensors", scenario.sensors, oversample=m, exact_means=plant.interval_means))]

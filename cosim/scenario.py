@@ -28,9 +28,10 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
+from feeddrive.cosim import fmu_inspect
 from feeddrive.cosim.axis import Axis, resolve_drive_chain
 from feeddrive.cosim.errors import ScenarioError
-from feeddrive.cosim.fmu_inspect import check_archive, fmi_version, model_description, sha256
+from feeddrive.cosim.fmu_inspect import REAL_TYPES, check_archive, fmi_version, model_description, runnable, sha256
 from feeddrive.cosim.nc import SETTLING, NCConfig, drive_chain_nominal, plan_program
 from feeddrive.cosim.sensors import EVENT_FIELDS, SensorsConfig
 from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error, read_yaml
@@ -105,10 +106,11 @@ class PlantConfig(_Strict):
             the message says what was expected.
         """
         # Model Exchange: the master integrates and interpolates the inputs itself
-        can = self.interface == "me" or (md.coSimulation is not None and bool(md.coSimulation.canInterpolateInputs))
+        can = self.interface == "me" or fmu_inspect.interpolates_inputs(md)
         if self.input_hold == "foh" and not can:
-            raise ValueError("input_hold foh is not available: the FMU does not declare canInterpolateInputs; "
-                             "expected zoh, no input_hold, or interface me")
+            raise ValueError("input_hold foh is not available: the FMU does not declare canInterpolateInputs "
+                             "(FMI 2.0) or intermediate update of its inputs (FMI 3.0); expected zoh, no "
+                             "input_hold, or interface me")
         return self.input_hold or ("foh" if can else "zoh")
 
 
@@ -360,12 +362,12 @@ def check_map(md: Any, role_map: Mapping[str, MapEntry], fmu_name: str) -> list[
         v = variables.get(entry.var)
         path = ("plant", "map", role, "var")
         want = "input" if role in INPUT_ROLES else "output"
-        candidates = [n for n, x in variables.items() if x.causality == want and x.type == "Real"]
+        candidates = [n for n, x in variables.items() if x.causality == want and x.type in REAL_TYPES]
         if v is None:
             problems.append((path, f"FMU {fmu_name!r} has no variable {entry.var!r}; its Real {want}s are: "
                              f"{', '.join(candidates) or 'none'}"))
-        elif v.type != "Real":
-            problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real"))
+        elif v.type not in REAL_TYPES:
+            problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real (FMI 3.0: Float64)"))
         elif role in INPUT_ROLES and v.causality != "input":
             problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an input"))
         elif role not in INPUT_ROLES and v.causality not in ("output", "local"):
@@ -390,8 +392,8 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         version = fmi_version(path)
     except ValueError as exc:
         raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    if version != "2.0":
-        raise s.error(("plant", "fmu"), f"{path.name} is an FMI {version or '(unknown)'} FMU; expected FMI 2.0")
+    if version not in ("2.0", "3.0"):
+        raise s.error(("plant", "fmu"), f"{path.name} is an FMI {version or '(unknown)'} FMU; expected FMI 2.0 or 3.0")
     try:
         check_archive(path)
     except ValueError as exc:
@@ -404,10 +406,9 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         md = model_description(path)
     except ValueError as exc:
         raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    if (md.coSimulation if p.interface == "cs" else md.modelExchange) is None:
-        kind = {"cs": "Co-Simulation", "me": "Model Exchange"}[p.interface]
-        raise s.error(("plant", "interface"), f"{path.name} does not support {kind}; expected interface "
-                                              f"{'me' if p.interface == 'cs' else 'cs'}")
+    problem = runnable(md, p.interface, path.name)
+    if problem:
+        raise s.error(("plant", "fmu" if problem[0] == "fmu" else "interface"), problem[1])
     try:
         check_archive(path, (md.coSimulation if p.interface == "cs" else md.modelExchange).modelIdentifier)
     except ValueError as exc:
@@ -423,8 +424,8 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     for key, want in (("parameters", ("parameter",)), ("start", None)):
         for name in getattr(p, key):
             v = variables.get(name)
-            if v is None or (want and v.causality not in want) or v.type != "Real":
-                kinds = ", ".join(n for n, x in variables.items() if x.type == "Real"
+            if v is None or (want and v.causality not in want) or v.type not in REAL_TYPES:
+                kinds = ", ".join(n for n, x in variables.items() if x.type in REAL_TYPES
                                   and (not want or x.causality in want))
                 raise s.error(("plant", key, name), f"{path.name} has no Real "
                               f"{'parameter' if want else 'variable'} {name!r}; expected one of: {kinds}")
@@ -439,7 +440,7 @@ def _check_drive_chain(s: Scenario, md: Any) -> None:
     variables = {v.name: v for v in md.modelVariables}
     for fmu_name, key in (("pitch", "pitch"), ("belt_ratio", "ratio")):
         v = variables.get(fmu_name)
-        if v is None or v.causality != "parameter" or v.type != "Real" or s.axis.kind != "linear":
+        if v is None or v.causality != "parameter" or v.type not in REAL_TYPES or s.axis.kind != "linear":
             continue
         value = s.plant.parameters.get(fmu_name, v.start)
         ours = getattr(s.axis, key)
@@ -472,9 +473,9 @@ def _check_events(s: Scenario, md: Any) -> None:
                                                    f"{', '.join(sorted(names))}")
         if comp == "plant":
             v = variables.get(param)
-            if v is None or v.causality != "parameter" or v.variability != "tunable" or v.type != "Real":
+            if v is None or v.causality != "parameter" or v.variability != "tunable" or v.type not in REAL_TYPES:
                 tunable = [n for n, x in variables.items() if x.causality == "parameter"
-                           and x.variability == "tunable" and x.type == "Real"]
+                           and x.variability == "tunable" and x.type in REAL_TYPES]
                 raise s.error(("events", k, "target"), f"{param!r} is not a tunable Real parameter of the plant "
                                                        f"FMU; expected one of: {', '.join(tunable)}")
             if not isinstance(ev.value, float):
