@@ -107,7 +107,8 @@ def check_archive(path: Path, model_identifier: str | None = None) -> None:
         if name.startswith(("/", "\\")) or ".." in parts or (parts and parts[0].endswith(":")):
             raise ValueError(f"archive entry {name!r} points outside the FMU; expected relative paths only")
     if model_identifier is not None:
-        binary = f"binaries/{fmpy.platform}/{model_identifier}{fmpy.sharedLibraryExtension}"
+        platform = fmpy.platform_tuple if fmi_version(path).startswith("3") else fmpy.platform  # x86_64-linux
+        binary = f"binaries/{platform}/{model_identifier}{fmpy.sharedLibraryExtension}"
         if binary not in names:
             have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
             raise ValueError(f"no binary for this platform: expected {binary} in the FMU"

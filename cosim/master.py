@@ -136,15 +136,22 @@ class Master:
         from feeddrive.cosim.sensors import SensorsComponent
 
         m = scenario.plant.oversample
-        cycle = scenario.nc_cycle_ticks()
-        nc = NCComponent("nc", scenario.nc)
-        plant = fmu_component("plant", scenario.plant, input_period=cycle)
-        comps: list[tuple[str, Component]] = [
-            ("nc", nc), ("plant", plant),
-            ("sensors", SensorsComponent("sensors", scenario.sensors, oversample=m, exact_means=plant.interval_means))]
+        comps: list[tuple[str, Component]] = []
+        rates: dict[str, int] = {}
+        if scenario.nc is not None:  # the drive; without nc: a system of components only
+            cycle = scenario.nc_cycle_ticks()
+            nc = NCComponent("nc", scenario.nc)
+            plant = fmu_component("plant", scenario.plant, input_period=cycle)
+            comps += [("nc", nc), ("plant", plant), ("sensors", SensorsComponent(
+                "sensors", scenario.sensors, oversample=m, exact_means=plant.interval_means))]
+            rates |= {"nc": cycle, "plant": 1, "sensors": 1}
         specs = [(("monitor", "class"), scenario.monitor)] if scenario.monitor is not None else []
         specs += [(("components", k, "class"), spec) for k, spec in enumerate(scenario.components)]
         for where, spec in specs:
+            if spec.fmu is not None:  # an FMU component: its own ports, step multiple and watchdog
+                comps.append((spec.name, fmu_component(spec.name, spec.config, own_inputs=True)))
+                rates[spec.name] = spec.config.step_multiple or m
+                continue
             try:
                 cls_ = load_component_class(spec.class_, where="class")
             except ScenarioError as exc:
@@ -159,8 +166,7 @@ class Master:
         stop = scenario.stop_time if scenario.stop_time is not None else nc.duration() + SETTLING
         return cls(comps, step=scenario.step, n_steps=event_step(stop, 0.0, scenario.step),
                    connections=connections, events=[(e.time, e.target, e.value) for e in scenario.events],
-                   record=scenario.record, error=scenario.error, oversample=m,
-                   rates={"nc": cycle, "plant": 1, "sensors": 1})
+                   record=scenario.record, error=scenario.error, oversample=m, rates=rates)
 
     @property
     def stop_time(self) -> float:

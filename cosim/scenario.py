@@ -118,8 +118,9 @@ class ComponentSpec(_Strict):
     """A user component: ``class: package.module:ClassName``; ``inputs`` maps its ports to sources."""
 
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
-    class_: str = Field(alias="class")
-    config: dict[str, Any] = {}
+    class_: str | None = Field(None, alias="class")
+    fmu: str | None = None  # an FMU component instead of a class (cosim/fmu_components.py)
+    config: Any = {}
     inputs: dict[str, str | float] = {}
 
 
@@ -140,7 +141,7 @@ class Scenario(_Strict):
     stop_time: float | None = Field(None, gt=0, description="[s]; default: NC program duration + 0.3 s")
     plant: PlantConfig = PlantConfig()
     sensors: SensorsConfig = Field(default_factory=SensorsConfig)
-    nc: NCConfig
+    nc: NCConfig | None = None  # None: a system of components only (cosim/fmu_components.py)
     monitor: Any = None  # ComponentSpec or None, built by the loader from the ``monitor:`` section
     components: list[ComponentSpec] = []
     connections: dict[str, str | float] = {}
@@ -234,7 +235,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     lines = dict(lines or {})
     if not isinstance(data, dict):
         raise located_error(source, lines, (), f"expected a mapping of scenario keys, got {type(data).__name__}")
-    data = _drive_chain(dict(data), source, lines)
+    given, data = dict(data), _drive_chain(dict(data), source, lines)
     base_dir = Path(base_dir or ".").resolve()
     data["monitor"] = _monitor_spec(data.get("monitor"), data, base_dir, source, lines)
     try:
@@ -244,6 +245,11 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     scenario._source = source
     scenario._lines = lines
     scenario._base_dir = base_dir
+    from feeddrive.cosim import fmu_components
+
+    if scenario.nc is None:
+        fmu_components.check_components_only(scenario, given)
+        return scenario.model_copy(update={"components": fmu_components.resolve_components(scenario)})
     # the master runs ceil(stop / step) steps: a longer step would be one step past the stop time, no motion sampled
     if scenario.stop_time is not None:
         stop, what = scenario.stop_time, "stop_time"
@@ -263,7 +269,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     plant, md = _resolve_plant(scenario)
     _check_drive_chain(scenario, md)
     _check_events(scenario, md)
-    return scenario.model_copy(update={"plant": plant})
+    return scenario.model_copy(update={"plant": plant, "components": fmu_components.resolve_components(scenario)})
 
 
 def _drive_chain(data: dict, source: str, lines: dict) -> dict:
