@@ -174,7 +174,7 @@ class FMUComponent(ModelExchange, Component):
         roles = cfg.map
         mapped = {e.var for e in roles.values()}
         in_roles = tuple(r for r in INPUT_ROLES if r in roles)
-        own_in = fmu_ports.own_inputs(md, mapped) if self.own_inputs else []
+        own_in = fmu_ports.own_inputs(md, mapped, cfg.interface) if self.own_inputs else []
         self.input_names = in_roles + tuple(p for v in own_in for p in v.ports())
         reserved = mapped | set(OUTPUT_ROLES + INPUT_ROLES)
         extras, others = fmu_ports.extra_outputs(md, reserved)

@@ -69,11 +69,15 @@ def var(v: Any, variables: dict[str, Any]) -> Var:
                bool(getattr(v, "dimensions", None)))
 
 
-def own_inputs(md: Any, exclude: set[str]) -> list[Var]:
-    """The FMU's Real / Float64 inputs not in ``exclude`` (those mapped to roles), in declaration order."""
+def own_inputs(md: Any, exclude: set[str], interface: str = "cs") -> list[Var]:
+    """The FMU's Real / Float64 inputs not in ``exclude`` (those mapped to roles), in declaration order.
+
+    In Model Exchange only the continuous ones: a discrete input may change only in event mode, which the
+    master does not enter for an input (a discrete input keeps its start value there)."""
     variables = {v.name: v for v in md.modelVariables}
     return [var(v, variables) for v in md.modelVariables
-            if v.causality == "input" and v.type in REAL_TYPES and v.name not in exclude]
+            if v.causality == "input" and v.type in REAL_TYPES and v.name not in exclude
+            and (interface == "cs" or v.variability == "continuous")]
 
 
 def extra_outputs(md: Any, exclude: set[str]) -> tuple[list[Var], list[Var]]:
