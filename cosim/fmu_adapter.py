@@ -50,17 +50,6 @@ STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi
 _LOG_LEVEL = (logging.DEBUG, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
 
 
-def fmu_component(name: str, config: PlantConfig, **kwargs: Any) -> FMUComponent:
-    """The adapter of ``config.fmu``'s FMI version: :class:`FMUComponent` (2.0) or ``FMU3Component`` (3.0)."""
-    from feeddrive.cosim.fmu_inspect import fmi_version
-
-    if fmi_version(config.fmu).startswith("3."):
-        from feeddrive.cosim.fmi3_adapter import FMU3Component
-
-        return FMU3Component(name, config, **kwargs)
-    return FMUComponent(name, config, **kwargs)
-
-
 class FMUDiscard(FMIError):
     """The FMU returned fmi2Discard: it could not complete the call (e.g. a step). The run stops."""
 
@@ -125,6 +114,7 @@ class FMUComponent(ModelExchange, Component):
 
     def _raise(self, function: str, status: int) -> None:
         t = self._t0 + self._k * self._h
+        self._rec.function = fmi_progress.IDLE  # the call has returned: the watchdog must not time the failure's aftermath
         self._state = "fatal" if status == 4 else "failed"
         if status == 2:
             exc: FMIError = FMUDiscard(self.name, function, t, self.last_log, self.STATUS[2])

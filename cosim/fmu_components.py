@@ -23,21 +23,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pydantic import Field, ValidationError
+from pydantic import ValidationError
 
 from feeddrive.cosim.fmu_inspect import REAL_TYPES, check_archive, fmi_version, model_description, runnable, sha256
-from feeddrive.cosim.scenario import PlantConfig, check_map
 from feeddrive.cosim.yaml_source import from_validation
 
 #: top-level keys a components-only scenario (no ``nc:``) cannot have
 DRIVE_KEYS = ("plant", "sensors", "monitor", "axis")
-
-
-class FMUConfig(PlantConfig):
-    """An FMU component's ``config``: the keys of ``plant:`` and its own step multiple."""
-
-    step_multiple: int | None = Field(None, ge=1, description="communication step of the FMU in ticks of the "
-                                      "master's finest step (step / plant.oversample); default: the recording step")
 
 
 def check_components_only(s: Any, data: dict) -> None:
@@ -55,19 +47,21 @@ def check_components_only(s: Any, data: dict) -> None:
                                  "communication step <= the stop time")
 
 
-def resolve_components(s: Any) -> list:
-    """The scenario's components with each ``fmu:`` entry's config checked and resolved (path, sha256)."""
+def resolve_components(s: Any, config_class: type, check_map: Any) -> list:
+    """The scenario's components with each ``fmu:`` entry's config checked and resolved (path, sha256).
+
+    ``config_class`` is ``cosim.scenario.FMUConfig`` and ``check_map`` ``cosim.scenario.check_map``
+    (passed in: the scenario module imports this one)."""
     out = []
     for k, spec in enumerate(s.components):
         if (spec.fmu is None) == (spec.class_ is None):
             raise s.error(("components", k), f"component {spec.name!r}: expected exactly one of class: or fmu:")
-        out.append(spec if spec.fmu is None else _resolve_fmu(s, k, spec))
+        out.append(spec if spec.fmu is None else _resolve_fmu(s, k, spec, config_class, check_map))
     return out
 
 
-def _resolve_fmu(s: Any, k: int, spec: Any) -> Any:
+def _resolve_fmu(s: Any, k: int, spec: Any, cls: type, check_map: Any) -> Any:
     where = ("components", k)
-    cls = FMUConfig
     try:
         cfg = cls.model_validate(spec.config)
     except ValidationError as exc:

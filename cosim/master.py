@@ -131,7 +131,7 @@ class Master:
     @classmethod
     def from_scenario(cls, scenario: Any) -> Master:
         """The standard components of a :class:`cosim.scenario.Scenario`, plus its user components."""
-        from feeddrive.cosim.fmu_adapter import fmu_component
+        from feeddrive.cosim.fmu_factory import fmu_component
         from feeddrive.cosim.nc import NCComponent
         from feeddrive.cosim.sensors import SensorsComponent
 

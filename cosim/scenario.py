@@ -114,6 +114,13 @@ class PlantConfig(_Strict):
         return self.input_hold or ("foh" if can else "zoh")
 
 
+class FMUConfig(PlantConfig):
+    """An FMU component's ``config`` (cosim/fmu_components.py): the keys of ``plant:`` and its step multiple."""
+
+    step_multiple: int | None = Field(None, ge=1, description="communication step of the FMU in ticks of the "
+                                      "master's finest step (step / plant.oversample); default: the recording step")
+
+
 class ComponentSpec(_Strict):
     """A user component: ``class: package.module:ClassName``; ``inputs`` maps its ports to sources."""
 
@@ -249,7 +256,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
 
     if scenario.nc is None:
         fmu_components.check_components_only(scenario, given)
-        return scenario.model_copy(update={"components": fmu_components.resolve_components(scenario)})
+        return scenario.model_copy(update={"components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
     # the master runs ceil(stop / step) steps: a longer step would be one step past the stop time, no motion sampled
     if scenario.stop_time is not None:
         stop, what = scenario.stop_time, "stop_time"
@@ -269,7 +276,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     plant, md = _resolve_plant(scenario)
     _check_drive_chain(scenario, md)
     _check_events(scenario, md)
-    return scenario.model_copy(update={"plant": plant, "components": fmu_components.resolve_components(scenario)})
+    return scenario.model_copy(update={"plant": plant, "components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
 
 
 def _drive_chain(data: dict, source: str, lines: dict) -> dict:
