@@ -166,6 +166,7 @@ class FMUComponent(ModelExchange, Component):
         in_roles = tuple(r for r in INPUT_ROLES if r in roles)
         own_in = fmu_ports.own_inputs(md, mapped, cfg.interface) if self.own_inputs else []
         self.input_names = in_roles + tuple(p for v in own_in for p in v.ports())
+        self.input_units = tuple(ROLE_UNITS[r] for r in in_roles) + tuple(v.unit for v in own_in for _ in range(v.size))
         reserved = mapped | set(OUTPUT_ROLES + INPUT_ROLES)
         extras, others = fmu_ports.extra_outputs(md, reserved)
         out_roles = tuple(r for r in OUTPUT_ROLES if r in roles)

@@ -34,6 +34,7 @@ from tqdm import tqdm
 from feeddrive.cosim.component import Component, load_component_class
 from feeddrive.cosim.errors import InputError, ScenarioError, SimulationError, format_path
 from feeddrive.cosim.nc import SETTLING
+from feeddrive.cosim.port_units import mismatch
 from feeddrive.cosim.recorder import Recorder
 
 #: preferred source components of each standard component's inputs
@@ -235,6 +236,10 @@ class Master:
                     if src not in index:
                         raise self._error(("connections", dst), f"unknown source {src!r}; outputs are: "
                                           f"{', '.join(names)}")
+                    declared = tuple(getattr(c, "input_units", ()))
+                    problem = mismatch(units[index[src]], declared[len(idx)] if len(declared) > len(idx) else "")
+                    if problem:
+                        raise self._error(("connections", dst), f"{src} -> {dst}: {problem}")
                     idx.append(index[src])
                 else:
                     idx.append(self.n_signals + len(constants))

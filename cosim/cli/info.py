@@ -8,11 +8,12 @@ import argparse
 from pathlib import Path
 
 from feeddrive.cosim.errors import InputError, ScenarioError
+from feeddrive.cosim.fmu_ports import unit_of
 from feeddrive.cosim.scenario import INPUT_ROLES, ROLE_UNITS, check_map, fmi_version, load_plant_map, model_description
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("fmu", help="path of an FMI 2.0 .fmu file, or 'builtin'")
+    parser.add_argument("fmu", help="path of an FMI 2.0 or 3.0 .fmu file, or 'builtin'")
     parser.add_argument("--map", type=Path, default=None, metavar="SCENARIO",
                         help="check this scenario's plant.map against the FMU's variables")
 
@@ -28,8 +29,8 @@ def main(args: argparse.Namespace) -> int:
             raise InputError(f"{path}: no such FMU file (expected the path of an .fmu, or 'builtin')")
     try:
         version = fmi_version(path)
-        if version != "2.0":
-            raise ValueError(f"an FMI {version or '(unknown)'} FMU; expected FMI 2.0")
+        if version not in ("2.0", "3.0"):
+            raise ValueError(f"an FMI {version or '(unknown)'} FMU; expected FMI 2.0 or 3.0")
         md = model_description(path)
     except ValueError as exc:
         raise InputError(f"{path}: {exc}") from None
@@ -40,7 +41,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"  feeddrive {exported['kind']} of scenario {exported.get('scenario', '?')}, step_size "
               f"{exported['step']:g} s (resources/component.json); needs Python with feeddrive-monitor installed")
     rows = [("name", "type", "causality", "variability", "unit", "start")]
-    rows += [(v.name, v.type, v.causality, v.variability, v.unit or "", "" if v.start is None else str(v.start))
+    rows += [(v.name, v.type, v.causality, v.variability, unit_of(v), "" if v.start is None else str(v.start))
              for v in md.modelVariables]
     widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
     for r in rows:
@@ -53,7 +54,7 @@ def main(args: argparse.Namespace) -> int:
     for role, e in role_map.items():
         v = variables.get(e.var)
         arrow = "->" if role in INPUT_ROLES else "<-"
-        unit = f" [{v.unit or ''}]" if v is not None else " (missing)"
+        unit = f" [{unit_of(v)}]" if v is not None else " (missing)"
         print(f"  {role} [{ROLE_UNITS[role]}] {arrow} {e.var}{unit}  scale {e.scale:g} offset {e.offset:g}")
     problems = check_map(md, role_map, path.name)
     if problems:
