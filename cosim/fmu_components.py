@@ -12,7 +12,9 @@
 input_hold) plus ``step_multiple``: the FMU's communication step in ticks of the master's finest step
 (``step / plant.oversample``); default one recording ``step``. Its ports are the FMU's Real / Float64
 inputs and its numeric outputs under their own names (cosim/fmu_ports.py), after the roles of ``map``
-when it has one (a plant split into several FMUs maps each role where it lives).
+when it has one. A plant split into several FMUs maps each role where it lives: ``plant.map`` the drive's
+roles, a component's ``map`` the others (e.g. ``position``); such a part steps right after the plant, at
+the plant's rate (default), and the NC and the sensors read the roles the plant lacks from it.
 
 A scenario without ``nc:`` is a system of components only (e.g. foreign FMUs run alone, as the
 conformance tests run the Modelica Reference-FMUs): no NC, plant, sensors or monitor; ``stop_time``

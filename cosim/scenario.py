@@ -363,11 +363,13 @@ def _implied_sampling(data: dict) -> dict[str, str]:
 
 # -- the plant FMU -------------------------------------------------------------------------------
 
-def check_map(md: Any, role_map: Mapping[str, MapEntry], fmu_name: str) -> list[tuple[KeyPath, str]]:
-    """Problems of a role map against an FMU's model description, as ``(key path, message)`` pairs."""
+def check_map(md: Any, role_map: Mapping[str, MapEntry], fmu_name: str,
+              elsewhere: Any = ()) -> list[tuple[KeyPath, str]]:
+    """Problems of a role map against an FMU's model description, as ``(key path, message)`` pairs.
+    ``elsewhere``: roles that FMU components map (a plant split into several FMUs)."""
     variables = {v.name: v for v in md.modelVariables}
     problems = []
-    missing = [r for r in REQUIRED_ROLES if r not in role_map]
+    missing = [r for r in REQUIRED_ROLES if r not in role_map and r not in elsewhere]
     if missing:
         problems.append((("plant", "map"), f"roles {', '.join(missing)} are not mapped; expected entries "
                          f"{{role: {{var: <FMU variable>}}}} for {', '.join(REQUIRED_ROLES)}"))
@@ -426,7 +428,8 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         check_archive(path, (md.coSimulation if p.interface == "cs" else md.modelExchange).modelIdentifier)
     except ValueError as exc:
         raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    problems = check_map(md, role_map, path.name)
+    parts = {r for c in s.components if c.fmu is not None and isinstance(c.config, dict) for r in c.config.get("map") or {}}
+    problems = check_map(md, role_map, path.name, parts)
     if problems:
         raise s.error(*problems[0])
     try:

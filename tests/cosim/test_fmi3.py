@@ -130,3 +130,24 @@ def test_a_hanging_fmu_component_is_named_with_its_own_watchdog(axes, tmp_path, 
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert err.startswith("cosim run: failed: drive2: hung in fmi2DoStep at t=0.5 s: exceeded "
                           "drive2.call_timeout = 1 s"), err
+
+
+def test_a_plant_of_two_fmus_is_described_by_the_same_role_map(axes):
+    """The drive (FMI 3.0: speed_ref, load, voltage, current, speed) and the mechanics (FMI 2.0: the
+    position, fed with the drive's speed in rad/s, converted to its rpm by its own map entry) give the
+    one-FMU plant's signals exactly; the NC and the sensors read the position where it lives."""
+    one = run(plant_scenario(axes[3], "cs"))
+    drive_map = {r: e for r, e in MAP.items() if r != "position"}
+    data = plant_scenario(axes[3], "cs")
+    data["plant"]["map"] = drive_map
+    data["components"] = [{"name": "mech", "fmu": str(axes[2]),
+                           "config": {"map": {"speed_ref": MAP["speed_ref"], "position": MAP["position"]}},
+                           "inputs": {"speed_ref": "plant.speed", "T_load": 0.0}}]
+    with Master.from_scenario(scenario_from_dict(data)) as master:
+        two = master.run().signals()
+        assert master.connections["nc.position"] == "mech.position"
+        assert master.connections["sensors.position"] == "mech.position"
+    assert "plant.position" not in two
+    np.testing.assert_allclose(two["mech.position"], one["plant.position"], rtol=0, atol=1e-15)
+    for name in ("plant.speed", "plant.voltage", "plant.current", "nc.x_ref", "sensors.x"):
+        np.testing.assert_allclose(two[name], one[name], rtol=0, atol=1e-15, err_msg=name)
