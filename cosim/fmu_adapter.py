@@ -257,7 +257,9 @@ class FMUComponent(ModelExchange, Component):
     def _claim(self) -> None:
         """Make the progress record name this component (several FMU components share one record)."""
         rec = self._rec
-        rec.owner, rec.component, rec.call_timeout = self._id, self.name.encode("utf-8")[:63], self.config.call_timeout
+        if not hasattr(self, "_rec_name"):
+            self._rec_name, self._rec_timeout = self.name.encode("utf-8")[:63], float(self.config.call_timeout)
+        rec.owner, rec.component, rec.call_timeout = self._id, self._rec_name, self._rec_timeout
 
     # -- Co-Simulation: the hot path ------------------------------------------------------------------
     def set_inputs(self, values: Sequence[float]) -> None:
