@@ -7,8 +7,10 @@ calls things: fmi3SetFloat64 / fmi3GetFloat64 take the number of values besides 
 references (arrays), fmi3DoStep reports a request to terminate, the log callback gets the formatted
 message, and Model Exchange asks the FMU itself for its numbers of states and event indicators.
 
-Every status-returning fmi3 function passes through the same choke point (``_check``), so fmi3Discard,
-fmi3Error and fmi3Fatal raise :class:`cosim.errors.FMIError` naming the fmi3 function.
+Every status-returning fmi3 function passes through the same choke point (``_check`` -> ``_raise``), so
+fmi3Discard, fmi3Error and fmi3Fatal raise :class:`cosim.errors.FMIError` naming the fmi3 function; the
+Co-Simulation hot path (set / doStep / get) compares the status itself and calls ``_raise`` (no Python
+errcheck callback per call: one more FMU costs its doStep plus ~2 us, benchmarks/bench_multi_fmu.py).
 
 Input hold in Co-Simulation. FMI 3.0 has no fmi3SetInputDerivatives: a first-order hold is possible
 only through intermediate update, when the FMU declares ``providesIntermediateUpdate`` and each of its
@@ -90,27 +92,41 @@ class FMU3Component(FMUComponent):
 
     # -- Co-Simulation ----------------------------------------------------------------------------
     def _start_cs(self) -> None:
-        self._do_step = self._fmu.dll.fmi3DoStep
-        self._flags = [ctypes.c_bool() for _ in range(3)]
+        dll = self._fmu.dll
+        self._hot_set, self._hot_step, self._hot_get = (self._unchecked(dll, f) for f in
+                                                        ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"))
+        self._nu_values, self._ny_values = len(self._u), len(self._y)
+        self._event, self._terminate, self._early = ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool()
         self._last_time = ctypes.c_double()
-        self._refs = [ctypes.byref(f) for f in self._flags] + [ctypes.byref(self._last_time)]
+        self._ref_event, self._ref_terminate, self._ref_early, self._ref_last = (
+            ctypes.byref(x) for x in (self._event, self._terminate, self._early, self._last_time))
 
     def step(self, n: int) -> None:
+        # the hot path tests the status itself (an int comparison) and hands a failure to the choke point's
+        # _raise: the same typed error as ``_check``, without a Python errcheck call per FMI call
         c, h, rec = self._c, self._h, self._rec
-        if rec.owner != self._id:
-            self._claim()
         rec.time = t = self._t0 + n * h
-        u, y = self._u, self._y
         rec.function = _SET
-        self._set_f64(c, self._uvr, self._nu, u, len(u))
+        if (status := self._hot_set(c, self._uvr, self._nu, self._u, self._nu_values)) > 1:
+            self._raise("fmi3SetFloat64", status)
         rec.function = _DO_STEP
-        self._do_step(c, t, h, True, *self._refs)
+        if (status := self._hot_step(c, t, h, True, self._ref_event, self._ref_terminate, self._ref_early,
+                                     self._ref_last)) > 1:
+            self._raise("fmi3DoStep", status)
         self._k = n + 1
-        if self._flags[1].value:
+        if self._terminate.value:
             self._terminated_by_fmu(t + h)
         rec.function = _GET
-        self._get_f64(c, self._yvr, self._ny, y, len(y))
+        if (status := self._hot_get(c, self._yvr, self._ny, self._y, self._ny_values)) > 1:
+            self._raise("fmi3GetFloat64", status)
         rec.function = 0
+
+    def _unchecked(self, dll: Any, name: str) -> Any:
+        """A second ctypes pointer to ``dll.name`` without the errcheck: the hot path tests its status itself."""
+        checked = getattr(dll, name)
+        f = dll._FuncPtr((name, dll))
+        f.argtypes, f.restype = checked.argtypes, checked.restype
+        return f
 
     def _step_foh(self, n: int) -> None:
         self._update_slopes(n)  # before the values: inside an NC cycle it continues the inputs' ramp

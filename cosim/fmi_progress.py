@@ -1,7 +1,7 @@
 """Which FMI function is in progress: a small record in shared memory, read by a supervising process.
 
-The FMU adapter (cosim/fmu_adapter.py) writes the function's code and the simulated time into the
-record before each FMI call and ``IDLE`` after the step's calls; a parent process that forked the run
+Each FMU component (cosim/fmu_adapter.py) has a record of its own (several FMUs, each with its own
+watchdog); it writes the function's code and the simulated time into its record before each FMI call and ``IDLE`` after the step's calls; a parent process that forked the run
 (cosim/supervise.py) reads it when the run dies by a signal or a call exceeds ``call_timeout``. A
 write is one store into a ctypes field (~40 ns), five per communication step: nothing measurable
 against a step of ~20 us.
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import mmap
+from typing import Any
 
 #: FMI 2.0 functions, in the order of the standard's sections, then FMI 3.0's; the record holds an index into it
 FUNCTIONS = (
@@ -53,31 +54,41 @@ class Record(ctypes.Structure):
         The component's watchdog, ``plant.call_timeout`` [s] (0: none set yet).
     component : bytes
         The component's name in the scenario.
-    owner : int
-        Which component wrote ``component`` and ``call_timeout`` (an id of its own): with several FMU
-        components, each one claims the record before its calls when another one had it.
     """
 
     _fields_ = [("function", ctypes.c_int32), ("_pad", ctypes.c_int32), ("time", ctypes.c_double),
-                ("call_timeout", ctypes.c_double), ("component", ctypes.c_char * 64), ("owner", ctypes.c_int64)]
+                ("call_timeout", ctypes.c_double), ("component", ctypes.c_char * 64)]
 
 
-_shared: Record | None = None
-_private = Record()
+#: records in the shared array: one per FMU component (each with its own watchdog); more run unwatched
+SLOTS = 32
+Records = Record * SLOTS
+
+_shared: Any = None
+_next = 0
 
 
-def new_shared() -> tuple[mmap.mmap, Record]:
-    """A record in an anonymous shared mapping, inherited by a forked child (the mapping keeps it alive)."""
-    buf = mmap.mmap(-1, ctypes.sizeof(Record), flags=mmap.MAP_SHARED)
-    return buf, Record.from_buffer(buf)
+def new_shared() -> tuple[mmap.mmap, Any]:
+    """``SLOTS`` records in an anonymous shared mapping, inherited by a forked child (the mapping keeps them alive)."""
+    buf = mmap.mmap(-1, ctypes.sizeof(Records), flags=mmap.MAP_SHARED)
+    return buf, Records.from_buffer(buf)
 
 
-def install(record: Record | None) -> None:
-    """Make ``record`` the one that :func:`record` returns in this process (None: private memory)."""
-    global _shared
-    _shared = record
+def install(records: Any) -> None:
+    """Make ``records`` (from :func:`new_shared`) the ones :func:`record` hands out in this process (None: private)."""
+    global _shared, _next
+    _shared, _next = records, 0
 
 
 def record() -> Record:
-    """The record FMU adapters write to: the supervisor's shared one, or private memory."""
-    return _shared if _shared is not None else _private
+    """A record of its own for an FMU component: the next free one of the supervisor's, else private memory."""
+    global _next
+    if _shared is None or _next >= SLOTS:
+        return Record()
+    _next += 1
+    return _shared[_next - 1]
+
+
+def current(records: Any) -> Record:
+    """The record with an FMI call in progress, else the first one in use (the component that ran first)."""
+    return next((r for r in records if r.function), None) or next((r for r in records if r.component), records[0])

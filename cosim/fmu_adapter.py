@@ -138,10 +138,8 @@ class FMUComponent(ModelExchange, Component):
         self._unzip = extract(cfg.fmu)
         self._fmu = fmu = self._open(md, cs)
         # the supervisor (cosim/supervise.py) reads which FMI function is in progress from this record
-        self._rec = rec = fmi_progress.record()
-        self._id = id(self)
-        self._claim()
-        rec.time = t0
+        self._rec = rec = fmi_progress.record()  # this component's own: its name and watchdog
+        rec.component, rec.call_timeout, rec.time = self.name.encode("utf-8")[:63], cfg.call_timeout, t0
         for fname, code in fmi_progress.CODE.items():
             if code and fname.startswith(self.PREFIX) and callable(getattr(fmu, fname, None)):
                 setattr(fmu, fname, _marked(rec, code, getattr(fmu, fname)))
@@ -254,12 +252,6 @@ class FMUComponent(ModelExchange, Component):
         self._set_derivatives = self._fmu.dll.fmi2SetRealInputDerivatives
         self.step = self._step_foh
 
-    def _claim(self) -> None:
-        """Make the progress record name this component (several FMU components share one record)."""
-        rec = self._rec
-        if not hasattr(self, "_rec_name"):
-            self._rec_name, self._rec_timeout = self.name.encode("utf-8")[:63], float(self.config.call_timeout)
-        rec.owner, rec.component, rec.call_timeout = self._id, self._rec_name, self._rec_timeout
 
     # -- Co-Simulation: the hot path ------------------------------------------------------------------
     def set_inputs(self, values: Sequence[float]) -> None:
@@ -272,8 +264,6 @@ class FMUComponent(ModelExchange, Component):
 
     def step(self, n: int) -> None:
         c, h, rec = self._c, self._h, self._rec
-        if rec.owner != self._id:
-            self._claim()
         rec.time = t = self._t0 + n * h
         rec.function = _SET_REAL
         self._set_real(c, self._uvr, self._nu, self._u)
@@ -316,8 +306,6 @@ class FMUComponent(ModelExchange, Component):
 
     def _step_foh(self, n: int) -> None:
         c, h, rec = self._c, self._h, self._rec
-        if rec.owner != self._id:
-            self._claim()
         rec.time = t = self._t0 + n * h
         self._update_slopes(n)  # before the values: inside an NC cycle it continues the inputs' ramp
         rec.function = _SET_REAL
@@ -362,8 +350,6 @@ class FMUComponent(ModelExchange, Component):
         if name not in self._vr:
             raise ScenarioError(f"{self.name}: the FMU has no variable {name!r}")
         vr, val = [self._vr[name]], [float(value)]
-        if self._rec.owner != self._id:
-            self._claim()
         if self.config.interface == "me":
             self._fmu.enterEventMode()
             self._set_values(vr, val)
@@ -383,8 +369,6 @@ class FMUComponent(ModelExchange, Component):
         fmu, state = self._fmu, self._state
         self._state = "terminated"
         try:
-            if fmu is not None and getattr(self, "_rec", None) is not None and self._rec.owner != self._id:
-                self._claim()
             if state == "running":
                 fmu.terminate()
             if state in ("instantiated", "running", "failed"):

@@ -130,8 +130,6 @@ class ModelExchange:
     def _step_me(self, n: int) -> None:
         fmu, solver = self._fmu, self._solver
         t, t1 = self._t0 + n * self._h, self._t0 + (n + 1) * self._h
-        if self._rec.owner != self._id:
-            self._claim()
         self._rec.time = t
         if self.input_hold == "foh" and n % self.input_period == 0:
             self._update_slopes(n)
