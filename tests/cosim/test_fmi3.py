@@ -167,3 +167,36 @@ def test_fmi3_model_exchange_ramps_the_inputs_and_oversamples_like_fmi2(axes):
         scale = max(1.0, np.abs(s2[name]).max())
         np.testing.assert_allclose(s3[name], s2[name], rtol=0, atol=1e-9 * scale, err_msg=name)
     assert np.abs(s3["plant.position"] - held["plant.position"]).max() > 1e-7
+
+
+def test_the_osp_system_and_ssp_export_carry_the_fmu_components(axes, tmp_path, feeddrive_fmu):
+    """Two FMU components beside the built-in plant: copied, each a simulator (b at its step multiple),
+    connected as `cosim run` connects them, constants as initial values; the SSP archive has them too."""
+    import zipfile
+    from xml.etree import ElementTree
+
+    from feeddrive.cosim.export.system import OSP_NS, export_system
+
+    data = {"name": "with-fmus", "step": 1e-3, "stop_time": 0.5, "plant": {"fmu": "builtin"},
+            "nc": {"program": [{"rapid": {"to": 0.01}}]},
+            "components": [{"name": "a", "fmu": str(axes[2]), "inputs": {"n_set": 60.0, "T_load": 0.0}},
+                           {"name": "b", "fmu": str(axes[3]), "config": {"step_multiple": 2},
+                            "inputs": {"n_set": "a.n_act", "T_load": 1.05}}]}
+    paths = export_system(scenario_from_dict(data), tmp_path / "sys")
+    ns = {"osp": OSP_NS}
+    root = ElementTree.parse(paths["system"]).getroot()
+    sims = {s.get("name"): s for s in root.iterfind("osp:Simulators/osp:Simulator", ns)}
+    assert set(sims) == {"nc", "plant", "sensors", "a", "b"}
+    assert (sims["a"].get("source"), sims["b"].get("source")) == ("RefAxis2.fmu", "RefAxis3.fmu")
+    assert float(sims["a"].get("stepSize")) == 1e-3 and float(sims["b"].get("stepSize")) == 2e-3
+    initial = {(s, v.get("variable")): float(v[0].get("value")) for s, sim in sims.items()
+               for v in sim.iterfind("osp:InitialValues/osp:InitialValue", ns)}
+    assert initial[("a", "n_set")] == 60.0 and initial[("b", "T_load")] == 1.05
+    links = set()
+    for c in root.iterfind("osp:Connections/osp:VariableConnection", ns):
+        a, b = c.iterfind("osp:Variable", ns)
+        links.add((a.get("simulator"), a.get("name"), b.get("simulator"), b.get("name")))
+    assert ("a", "n_act", "b", "n_set") in links and ("nc", "speed_ref", "plant", "w_ref") in links
+    assert (tmp_path / "sys" / "RefAxis3.fmu").read_bytes() == axes[3].read_bytes()
+    with zipfile.ZipFile(paths["ssp"]) as z:
+        assert {"resources/RefAxis2.fmu", "resources/RefAxis3.fmu"} <= set(z.namelist())
