@@ -190,7 +190,7 @@ def _watch(pid: int, fd: int, records: Any, timeout: float | None) -> Outcome:
             chunks.append(data)
             continue
         now = time.monotonic()
-        key = tuple((r.function, r.time) for r in records)
+        key = tuple((r.function, r.time) for r in records if r.component)  # slots in use (unused: time NaN != NaN)
         if key != seen:
             seen, seen_at = key, now
         rec = fmi_progress.current(records)
