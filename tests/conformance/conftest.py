@@ -6,12 +6,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-
-SOURCE = Path(__file__).resolve().parents[2] / ".." / "shared" / "third_party" / "Reference-FMUs"
-#: the models each FMI version builds (FMI 2.0: six; FMI 3.0: all of them and Clocks)
-MODELS = {2: ("BouncingBall", "Dahlquist", "Feedthrough", "Resource", "Stair", "VanDerPol"),
-          3: ("BouncingBall", "Dahlquist", "Feedthrough", "Resource", "Stair", "VanDerPol", "StateSpace",
-              "Roberts", "Clocks")}
+from reference_models import MODELS, SOURCE
 
 
 @pytest.fixture(scope="session")

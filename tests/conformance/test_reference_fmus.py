@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import MODELS, SOURCE
+from reference_models import MODELS, SOURCE
 
 from feeddrive.cosim.cli import main
 
