@@ -52,10 +52,12 @@ class Component(ABC):
     """Base class of all co-simulation components; see the module docstring for the call order.
 
     Subclasses set ``input_names``, ``output_names`` and ``output_units`` (tuples of str) at the
-    latest in ``setup``.
+    latest in ``setup``, and may set ``input_units``: the master then checks the unit of every output
+    connected to such an input (cosim/port_units.py; ``""`` declares nothing).
     """
 
     input_names: tuple[str, ...] = ()
+    input_units: tuple[str, ...] = ()
     output_names: tuple[str, ...] = ()
     output_units: tuple[str, ...] = ()
 

@@ -38,15 +38,14 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
-from feeddrive.cosim import fmi_progress
+from feeddrive.cosim import fmi_progress, fmu_ports
 from feeddrive.cosim.component import Component
-from feeddrive.cosim.errors import FMIError, ScenarioError, SimulationError
+from feeddrive.cosim.errors import FMIError, ScenarioError
+from feeddrive.cosim.fmu_me import MEAN_ROLES, ModelExchange
 from feeddrive.cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, PlantConfig
 
 _SET_REAL, _DO_STEP, _GET_REAL = (fmi_progress.CODE[f] for f in ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal"))
 _SET_DERIVATIVES = fmi_progress.CODE["fmi2SetRealInputDerivatives"]
-#: the roles whose exact interval means a Model Exchange plant outputs (as ``<role>_mean``)
-MEAN_ROLES = ("voltage", "voltage_ref", "current", "speed")
 STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
 _LOG_LEVEL = (logging.DEBUG, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
 
@@ -54,10 +53,11 @@ _LOG_LEVEL = (logging.DEBUG, logging.WARNING, logging.WARNING, logging.ERROR, lo
 class FMUDiscard(FMIError):
     """The FMU returned fmi2Discard: it could not complete the call (e.g. a step). The run stops."""
 
-    def __init__(self, component: str, function: str, time: float, last_log: str = "") -> None:
-        super().__init__(component, function, "fmi2Discard", time, last_log)
+    def __init__(self, component: str, function: str, time: float, last_log: str = "",
+                 status: str = "fmi2Discard") -> None:
+        super().__init__(component, function, status, time, last_log)
         log = f" ({last_log})" if last_log else ""
-        self.args = (f"{component}: {function} returned fmi2Discard at t={time:.6g} s: the FMU could not "
+        self.args = (f"{component}: {function} returned {status} at t={time:.6g} s: the FMU could not "
                      f"complete it{log}; the run stops (fixed communication step, no retry)",)
 
 
@@ -81,37 +81,18 @@ def _marked(rec: fmi_progress.Record, code: int, function: Any) -> Any:
     return call
 
 
-class _HeldInputs:
-    """fmpy's root function re-applies inputs; ours are set once per communication step."""
-
-    def apply(self, *args: Any, **kwargs: Any) -> None:
-        pass
-
-
-class _RampedInputs:
-    """First-order hold in Model Exchange: ``apply(t)`` runs before each right-hand side and root function."""
-
-    def __init__(self, plant: FMUComponent) -> None:
-        n = len(plant._foh)
-        self._plant, self._vr, self._values = plant, plant._dvr, (ctypes.c_double * n)()
-
-    def apply(self, t: float, *args: Any, **kwargs: Any) -> None:
-        p, values = self._plant, self._values
-        dt = t - p._ramp_start
-        for k, j in p._foh:
-            values[j] = p._u[k] + p._du[j] * dt
-        p._set_real(p._c, self._vr, len(values), values)
-
-
-class FMUComponent(Component):
+class FMUComponent(ModelExchange, Component):
     """An FMI 2.0 FMU as a component; ``config`` is a resolved :class:`cosim.scenario.PlantConfig`.
 
     Events: ``set_parameter(name, value)`` sets a Real parameter of the FMU (fmi2SetReal; in Model
     Exchange inside an event iteration).
     """
 
-    def __init__(self, name: str, config: PlantConfig, input_period: int = 1) -> None:
+    def __init__(self, name: str, config: PlantConfig, input_period: int = 1, own_inputs: bool = False) -> None:
         super().__init__(name, config)
+        #: the FMU's Real inputs that no role maps are ports under their own names (an FMU component; the
+        #: plant leaves them at their start values)
+        self.own_inputs = own_inputs
         #: Model Exchange: also output ``<role>_mean``, the exact mean of each measured role over the last step
         #: (a quadrature integrated by CVode with the states), for the sensors' ``mean`` sampling
         self.interval_means = config.interface == "me" and config.oversample > 1
@@ -133,11 +114,12 @@ class FMUComponent(Component):
 
     def _raise(self, function: str, status: int) -> None:
         t = self._t0 + self._k * self._h
+        self._rec.function = fmi_progress.IDLE  # the call has returned: the watchdog must not time the failure's aftermath
         self._state = "fatal" if status == 4 else "failed"
         if status == 2:
-            exc: FMIError = FMUDiscard(self.name, function, t, self.last_log)
+            exc: FMIError = FMUDiscard(self.name, function, t, self.last_log, self.STATUS[2])
         else:
-            exc = FMIError(self.name, function, STATUS[status] if status < 6 else f"status {status}", t,
+            exc = FMIError(self.name, function, self.STATUS[status] if status < len(self.STATUS) else f"status {status}", t,
                            self.last_log)
         self._failure = exc
         raise exc
@@ -154,22 +136,98 @@ class FMUComponent(Component):
         md = read_model_description(cfg.fmu)
         cs = cfg.interface == "cs"
         self._unzip = extract(cfg.fmu)
+        self._fmu = fmu = self._open(md, cs)
+        # the supervisor (cosim/supervise.py) reads which FMI function is in progress from this record
+        self._rec = rec = fmi_progress.record()  # this component's own: its name and watchdog
+        rec.component, rec.call_timeout, rec.time = self.name.encode("utf-8")[:63], cfg.call_timeout, t0
+        for fname, code in fmi_progress.CODE.items():
+            if code and fname.startswith(self.PREFIX) and callable(getattr(fmu, fname, None)):
+                setattr(fmu, fname, _marked(rec, code, getattr(fmu, fname)))
+        for fname in dir(type(fmu)):
+            if fname.startswith(self.PREFIX):
+                f = getattr(fmu.dll, fname, None)
+                if f is not None and f.restype is ctypes.c_int:
+                    f.errcheck = self._check
+        self._bind(fmu)
+        self._instantiate(md, cs, t0)
+        self._state = "instantiated"
+        variables = {v.name: v for v in md.modelVariables}
+        vr = {name: v.valueReference for name, v in variables.items()}
+        values = {**cfg.start, **cfg.parameters}
+        if values:
+            self._set_values([vr[n] for n in values], list(values.values()))
+        self._initialize(t0)
+        self._vr = vr
+
+        roles = cfg.map
+        mapped = {e.var for e in roles.values()}
+        in_roles = tuple(r for r in INPUT_ROLES if r in roles)
+        own_in = fmu_ports.own_inputs(md, mapped, cfg.interface) if self.own_inputs else []
+        self.input_names = in_roles + tuple(p for v in own_in for p in v.ports())
+        self.input_units = tuple(ROLE_UNITS[r] for r in in_roles) + tuple(v.unit for v in own_in for _ in range(v.size))
+        reserved = mapped | set(OUTPUT_ROLES + INPUT_ROLES)
+        extras, others = fmu_ports.extra_outputs(md, reserved)
+        out_roles = tuple(r for r in OUTPUT_ROLES if r in roles)
+        self.output_names = out_roles + tuple(p for v in extras + others for p in v.ports())
+        self._mean_roles = tuple(r for r in MEAN_ROLES if r in roles) if self.interval_means and not cs else ()
+        self.output_units = tuple(ROLE_UNITS[r] for r in out_roles) + tuple(
+            v.unit for v in extras + others for _ in range(v.size))
+        in_vars = [roles[r].var for r in in_roles] + [v.name for v in own_in]
+        out_vars = [roles[r].var for r in out_roles] + [v.name for v in extras]
+        n_own, n_extra = fmu_ports.total(own_in), fmu_ports.total(extras)
+        self._nu, self._ny = len(in_vars), len(out_vars)  # variables; the value arrays may hold more (arrays)
+        self._uvr = (ctypes.c_uint * self._nu)(*[vr[n] for n in in_vars])
+        starts = [float(variables[n].start or 0.0) for n in in_vars[:len(in_roles)]]
+        for v in own_in:  # an array's start is a space-separated list
+            given = str(variables[v.name].start or "").split()
+            starts += [float(x) for x in given] if len(given) == v.size else [0.0] * v.size
+        self._u = (ctypes.c_double * len(starts))(*starts)
+        self._yvr = (ctypes.c_uint * self._ny)(*[vr[n] for n in out_vars])
+        self._y = (ctypes.c_double * (len(out_roles) + n_extra))()
+        self._in_lin = [(k, *roles[r].linear()) for k, r in enumerate(in_roles)]
+        self._in_lin += [(k, 1.0, 0.0) for k in range(len(in_roles), len(in_roles) + n_own)]
+        self._out_lin = [roles[r].linear() for r in out_roles] + [(1.0, 0.0)] * n_extra
+        if all(s == 1 and o == 0 for _, s, o in self._in_lin):
+            self.set_inputs = self._set_inputs_identity
+        if all(s == 1 and o == 0 for s, o in self._out_lin):
+            self.get_outputs = self._get_outputs_identity
+        self._c = fmu.component
+        try:
+            self.input_hold = cfg.hold(md)
+        except ValueError as exc:
+            raise ScenarioError(f"{self.name}: plant.input_hold: {exc}") from None
+        if self.input_hold == "foh":
+            self._start_foh(variables, in_vars[:len(in_roles)])
+        if cs:
+            self._start_cs()
+        else:
+            self._start_me(md, t0)
+            self.step = self._step_me
+        self._get_real(self._c, self._yvr, self._ny, self._y)
+        if others:
+            read, base = fmu_ports.other_getter(fmu, self.PREFIX == "fmi3", others), self.get_outputs
+            self.get_outputs = lambda: base() + read()
+        if self._mean_roles:
+            self._start_means(roles)
+        self._state = "running"
+
+    # -- the FMI 2.0 layer (cosim/fmi3_adapter.py overrides it for FMI 3.0) -------------------------------
+    PREFIX = "fmi2"
+    STATUS = STATUS
+
+    def _open(self, md: Any, cs: bool) -> Any:
         cls = FMU2Slave if cs else FMU2Model
         kind = md.coSimulation if cs else md.modelExchange
-        self._fmu = fmu = cls(guid=md.guid, unzipDirectory=self._unzip, modelIdentifier=kind.modelIdentifier,
-                              instanceName=self.name)
-        # the supervisor (cosim/supervise.py) reads which FMI function is in progress from this record
-        self._rec = rec = fmi_progress.record()
-        rec.component = self.name.encode("utf-8")[:63]
-        rec.call_timeout, rec.time = cfg.call_timeout, t0
-        for fname, code in fmi_progress.CODE.items():
-            if code and callable(getattr(fmu, fname, None)):
-                setattr(fmu, fname, _marked(rec, code, getattr(fmu, fname)))
-        for fname in dir(cls):
-            if fname.startswith("fmi2"):
-                f = getattr(fmu.dll, fname)
-                if f.restype is ctypes.c_int:
-                    f.errcheck = self._check
+        return cls(guid=md.guid, unzipDirectory=self._unzip, modelIdentifier=kind.modelIdentifier,
+                   instanceName=self.name)
+
+    def _bind(self, fmu: Any) -> None:
+        """The ctypes functions of the hot path: ``(instance, vrs, n, values)`` set / get of Reals."""
+        self._set_real, self._get_real = fmu.dll.fmi2SetReal, fmu.dll.fmi2GetReal
+        self._set_values, self._get_dx = fmu.setReal, getattr(fmu, "getDerivatives", None)
+        self._new_discrete_states = getattr(fmu, "newDiscreteStates", None)
+
+    def _instantiate(self, md: Any, cs: bool, t0: float) -> None:
         self._callbacks = cb = fmi2CallbackFunctions()
         cb.logger = fmi2CallbackLoggerTYPE(self._on_log)
         cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
@@ -178,59 +236,22 @@ class FMUComponent(Component):
 
         addLoggerProxy(ctypes.byref(cb))  # formats the variadic message in C
         try:
-            fmu.instantiate(callbacks=cb, loggingOn=True)  # some FMUs (pythonfmu) report errors only then
+            self._fmu.instantiate(callbacks=cb, loggingOn=True)  # some FMUs (pythonfmu) report errors only then
         except Exception:  # fmpy raises a bare Exception when fmi2Instantiate returns NULL
             raise FMIError(self.name, "fmi2Instantiate", "NULL", t0, self.last_log) from None
-        self._state = "instantiated"
-        variables = {v.name: v for v in md.modelVariables}
-        vr = {name: v.valueReference for name, v in variables.items()}
-        values = {**cfg.start, **cfg.parameters}
-        if values:
-            fmu.setReal([vr[n] for n in values], list(values.values()))
-        fmu.setupExperiment(startTime=t0)
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        self._vr = vr
 
-        roles = cfg.map
-        self.input_names = tuple(r for r in INPUT_ROLES if r in roles)
-        mapped = {e.var for e in roles.values()}
-        extras = [v for v in md.modelVariables if v.causality == "output" and v.type == "Real"
-                  and v.name not in mapped and v.name not in OUTPUT_ROLES + INPUT_ROLES]
-        out_roles = tuple(r for r in OUTPUT_ROLES if r in roles)
-        self.output_names = out_roles + tuple(v.name for v in extras)
-        self._mean_roles = tuple(r for r in MEAN_ROLES if r in roles) if self.interval_means and not cs else ()
-        self.output_units = tuple(ROLE_UNITS[r] for r in out_roles) + tuple(v.unit or "" for v in extras)
-        in_vars = [roles[r].var for r in self.input_names]
-        out_vars = [roles[r].var for r in out_roles] + [v.name for v in extras]
-        self._nu, self._ny = len(in_vars), len(out_vars)
-        self._uvr = (ctypes.c_uint * self._nu)(*[vr[n] for n in in_vars])
-        self._u = (ctypes.c_double * self._nu)(*[float(variables[n].start or 0.0) for n in in_vars])
-        self._yvr = (ctypes.c_uint * self._ny)(*[vr[n] for n in out_vars])
-        self._y = (ctypes.c_double * self._ny)()
-        self._in_lin = [(k, *roles[r].linear()) for k, r in enumerate(self.input_names)]
-        self._out_lin = [roles[r].linear() for r in out_roles] + [(1.0, 0.0)] * len(extras)
-        if all(s == 1 and o == 0 for _, s, o in self._in_lin):
-            self.set_inputs = self._set_inputs_identity
-        if all(s == 1 and o == 0 for s, o in self._out_lin):
-            self.get_outputs = self._get_outputs_identity
-        self._c = fmu.component
-        self._set_real, self._get_real = fmu.dll.fmi2SetReal, fmu.dll.fmi2GetReal
-        try:
-            self.input_hold = cfg.hold(md)
-        except ValueError as exc:
-            raise ScenarioError(f"{self.name}: plant.input_hold: {exc}") from None
-        if self.input_hold == "foh":
-            self._start_foh(variables, in_vars)
-        if cs:
-            self._do_step = fmu.dll.fmi2DoStep
-        else:
-            self._start_me(md, t0)
-            self.step = self._step_me
-        self._get_real(self._c, self._yvr, self._ny, self._y)
-        if self._mean_roles:
-            self._start_means(roles)
-        self._state = "running"
+    def _initialize(self, t0: float) -> None:
+        self._fmu.setupExperiment(startTime=t0)
+        self._fmu.enterInitializationMode()
+        self._fmu.exitInitializationMode()
+
+    def _start_cs(self) -> None:
+        self._do_step = self._fmu.dll.fmi2DoStep
+
+    def _start_cs_foh(self) -> None:
+        self._set_derivatives = self._fmu.dll.fmi2SetRealInputDerivatives
+        self.step = self._step_foh
+
 
     # -- Co-Simulation: the hot path ------------------------------------------------------------------
     def set_inputs(self, values: Sequence[float]) -> None:
@@ -262,8 +283,7 @@ class FMUComponent(Component):
         self._u_prev: list[float] | None = None  # the values of the previous step, from the first step on
         self._ramp_start = self._t0  # Model Exchange: t_n of the current ramp
         if self.config.interface == "cs":
-            self._set_derivatives = self._fmu.dll.fmi2SetRealInputDerivatives
-            self.step = self._step_foh
+            self._start_cs_foh()
 
     def _update_slopes(self, n: int) -> None:
         """``du <- (u_n - u_(n-r)) / (r h)`` for the continuous inputs (0 at the first step), at the start of
@@ -325,121 +345,6 @@ class FMUComponent(Component):
         self._state = "failed"
         raise NonFiniteOutput(self.name, role_or_var, variable, y[bad], self._t0 + self._k * self._h)
 
-    # -- Model Exchange: exact interval means ------------------------------------------------------------
-    def _start_means(self, roles: Any) -> None:
-        """``<role>_mean`` outputs: CVode integrates q' = y with the states, q reset at each step."""
-        lin = [roles[r].linear() for r in self._mean_roles]
-        self.output_names += tuple(f"{r}_mean" for r in self._mean_roles)
-        self.output_units += tuple(ROLE_UNITS[r] for r in self._mean_roles)
-        self._mean_lin = lin
-        self._means = [s * y + o for (s, o), y in zip(lin, self._y)]  # at t0: the instantaneous values
-        base = self.get_outputs
-        self.get_outputs = lambda: base() + self._means
-
-    # -- Model Exchange: CVode over each communication step --------------------------------------------
-    def _start_me(self, md: Any, t0: float) -> None:
-        from fmpy.sundials import CVodeSolver
-
-        class _CVode(CVodeSolver):
-            def f(self, t, y, ydot, user_data):  # noqa: ANN001 - ctypes callback
-                try:
-                    self.input.apply(t)  # fmpy applies inputs in the root function only
-                    return super().f(t, y, ydot, user_data)
-                except FMIError:  # recorded by the choke point; -1 makes CVode stop
-                    return -1
-
-        fmu = self._fmu
-        self._next_event = self._event_iteration()
-        fmu.enterContinuousTimeMode()
-        self._completed_needed = md.modelExchange.needsCompletedIntegratorStep
-        nx = md.numberOfContinuousStates
-        get_x, set_x, get_dx, nominals = (fmu.getContinuousStates, fmu.setContinuousStates, fmu.getDerivatives,
-                                          fmu.getNominalsOfContinuousStates)
-        if self.interval_means:  # quadrature states q' = y of the measured roles, after the FMU's states
-            names = [self.config.map[r].var for r in MEAN_ROLES if r in self.config.map]
-            nq = len(names)
-            qvr = (ctypes.c_uint * nq)(*[self._vr[n] for n in names])
-            ybuf = (ctypes.c_double * nq)()
-            self._q = [0.0] * nq
-
-            def get_x(px, n, _get=fmu.getContinuousStates):  # noqa: ANN001 - ctypes callback arguments
-                _get(px, nx)
-                for j, q in enumerate(self._q):
-                    px[nx + j] = q
-
-            def set_x(px, n, _set=fmu.setContinuousStates):  # noqa: ANN001
-                _set(px, nx)
-
-            def get_dx(pdx, n, _get=fmu.getDerivatives):  # noqa: ANN001
-                _get(pdx, nx)
-                self._get_real(self._c, qvr, nq, ybuf)
-                for j in range(nq):
-                    pdx[nx + j] = ybuf[j]
-
-            def nominals(p, n, _get=fmu.getNominalsOfContinuousStates):  # noqa: ANN001
-                _get(p, nx)
-                for j in range(nq):
-                    p[nx + j] = 1.0
-
-            nx_total = nx + nq
-        else:
-            nx_total = nx
-        self._nx = nx
-        self._solver = _CVode(nx=nx_total, nz=md.numberOfEventIndicators,
-                              get_x=get_x, set_x=set_x,
-                              get_dx=get_dx, get_z=fmu.getEventIndicators,
-                              get_nominals=nominals, set_time=fmu.setTime,
-                              input=_RampedInputs(self) if self.input_hold == "foh" else _HeldInputs(),
-                              startTime=t0, maxStep=self._h,
-                              relativeTolerance=self.config.tolerance)
-
-    def _event_iteration(self) -> float | None:
-        """fmi2NewDiscreteStates until converged; returns the next time event or None."""
-        while True:
-            info = self._fmu.newDiscreteStates()
-            if info[1]:
-                raise SimulationError(f"{self.name}: the FMU requested termination at "
-                                      f"t={self._t0 + self._k * self._h:.6g} s")
-            if not info[0]:
-                return info[5] if info[4] else None
-
-    def _step_me(self, n: int) -> None:
-        fmu, solver = self._fmu, self._solver
-        t, t1 = self._t0 + n * self._h, self._t0 + (n + 1) * self._h
-        self._rec.time = t
-        if self.input_hold == "foh" and n % self.input_period == 0:
-            self._update_slopes(n)
-            self._ramp_start = t
-        self._set_real(self._c, self._uvr, self._nu, self._u)
-        means = self._mean_roles
-        if means:
-            self._q = [0.0] * len(self._q)
-        solver.reset(t)  # the inputs' value or slope changes at each step: restart at the discontinuity
-        while t < t1 - 1e-9 * self._h:
-            t_stop = t1 if self._next_event is None else min(t1, self._next_event)
-            try:
-                state_event, _, t = solver.step(t, t_stop)
-            except RuntimeError as exc:
-                if self._failure is not None:
-                    raise self._failure from None
-                raise SimulationError(f"{self.name}: {exc}") from None
-            fmu.setTime(t)
-            if means:  # the integrals so far (an event restarts CVode from them)
-                px, nx = solver.px, self._nx
-                self._q = [px[nx + j] for j in range(len(self._q))]
-            step_event = self._completed_needed and fmu.completedIntegratorStep()[0]
-            time_event = self._next_event is not None and t >= self._next_event - 1e-9 * self._h
-            if state_event or step_event or time_event:
-                fmu.enterEventMode()
-                self._next_event = self._event_iteration()
-                fmu.enterContinuousTimeMode()
-                solver.reset(t)
-        self._k = n + 1
-        self._get_real(self._c, self._yvr, self._ny, self._y)
-        if means:
-            inv_h = 1.0 / self._h
-            self._means = [sc * q * inv_h + o for (sc, o), q in zip(self._mean_lin, self._q)]
-
     # -- events, report, terminate ---------------------------------------------------------------------
     def set_parameter(self, name: str, value: Any) -> None:
         if name not in self._vr:
@@ -447,11 +352,11 @@ class FMUComponent(Component):
         vr, val = [self._vr[name]], [float(value)]
         if self.config.interface == "me":
             self._fmu.enterEventMode()
-            self._fmu.setReal(vr, val)
+            self._set_values(vr, val)
             self._next_event = self._event_iteration()
             self._fmu.enterContinuousTimeMode()
         else:
-            self._fmu.setReal(vr, val)
+            self._set_values(vr, val)
 
     def report(self) -> dict:
         cfg = self.config

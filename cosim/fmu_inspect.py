@@ -38,6 +38,45 @@ def model_description(path: Path) -> Any:
         raise ValueError(f"invalid modelDescription.xml: {' '.join(str(exc).split())}") from None
 
 
+#: the variable types of FMI 2.0 and 3.0 that carry the master's signals (floats)
+REAL_TYPES = ("Real", "Float64")
+
+
+def interpolates_inputs(md: Any) -> bool:
+    """Whether a Co-Simulation FMU can follow a first-order hold of its inputs.
+
+    FMI 2.0: ``canInterpolateInputs`` (the master passes the slopes with fmi2SetRealInputDerivatives).
+    FMI 3.0 has no input derivatives: ``providesIntermediateUpdate`` and every continuous Float64 input
+    declaring ``intermediateUpdate`` (the master sets the ramped values when the FMU asks, inside fmi3DoStep).
+    """
+    cs = md.coSimulation
+    if cs is None:
+        return False
+    if not md.fmiVersion.startswith("3"):
+        return bool(cs.canInterpolateInputs)
+    inputs = [v for v in md.modelVariables if v.causality == "input" and v.type == "Float64"
+              and v.variability == "continuous"]
+    return bool(cs.providesIntermediateUpdate) and bool(inputs) and all(v.intermediateUpdate for v in inputs)
+
+
+def runnable(md: Any, interface: str, name: str) -> tuple[str, str] | None:
+    """Why the master cannot run an FMU through ``interface`` (``cs`` / ``me``): (key, one-line reason), or None.
+
+    The master runs Co-Simulation and Model Exchange without clocks: an FMI 3.0 FMU with only Scheduled
+    Execution, or with Clock variables (their model partitions would never be activated), is refused.
+    """
+    if md.coSimulation is None and md.modelExchange is None:
+        return ("fmu", f"{name} supports only Scheduled Execution (FMI 3.0 clocks); the master runs "
+                       "Co-Simulation and Model Exchange FMUs")
+    clocks = [v.name for v in md.modelVariables if v.type == "Clock"]
+    if clocks:
+        return ("fmu", f"{name} has clocks ({', '.join(clocks)}); the master runs FMUs without clocked partitions")
+    if (md.coSimulation if interface == "cs" else md.modelExchange) is None:
+        kind = {"cs": "Co-Simulation", "me": "Model Exchange"}[interface]
+        return ("interface", f"{name} does not support {kind}; expected interface {'me' if interface == 'cs' else 'cs'}")
+    return None
+
+
 def sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
@@ -68,7 +107,8 @@ def check_archive(path: Path, model_identifier: str | None = None) -> None:
         if name.startswith(("/", "\\")) or ".." in parts or (parts and parts[0].endswith(":")):
             raise ValueError(f"archive entry {name!r} points outside the FMU; expected relative paths only")
     if model_identifier is not None:
-        binary = f"binaries/{fmpy.platform}/{model_identifier}{fmpy.sharedLibraryExtension}"
+        platform = fmpy.platform_tuple if fmi_version(path).startswith("3") else fmpy.platform  # x86_64-linux
+        binary = f"binaries/{platform}/{model_identifier}{fmpy.sharedLibraryExtension}"
         if binary not in names:
             have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
             raise ValueError(f"no binary for this platform: expected {binary} in the FMU"

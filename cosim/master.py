@@ -34,6 +34,7 @@ from tqdm import tqdm
 from feeddrive.cosim.component import Component, load_component_class
 from feeddrive.cosim.errors import InputError, ScenarioError, SimulationError, format_path
 from feeddrive.cosim.nc import SETTLING
+from feeddrive.cosim.port_units import mismatch
 from feeddrive.cosim.recorder import Recorder
 
 #: preferred source components of each standard component's inputs
@@ -54,10 +55,16 @@ def event_step(time: float, t0: float, h: float) -> int:
     return max(0, math.ceil((time - t0) / h - 1e-9))
 
 
-def default_connections(ports: Mapping[str, tuple[Sequence[str], Sequence[str]]]) -> dict[str, str | float]:
-    """Default wiring of the standard components present in ``ports`` (name -> (inputs, outputs))."""
+def default_connections(ports: Mapping[str, tuple[Sequence[str], Sequence[str]]],
+                        plant_parts: Sequence[str] = ()) -> dict[str, str | float]:
+    """Default wiring of the standard components present in ``ports`` (name -> (inputs, outputs)).
+
+    ``plant_parts``: FMU components that map some of the plant's roles (a plant split into several FMUs);
+    the NC and the sensors read a role from the plant or, where the plant lacks it, from such a part.
+    """
     wiring: dict[str, str | float] = {}
     for dst, sources in DEFAULT_SOURCES.items():
+        sources = tuple(x for s in sources for x in ((s, *plant_parts) if s == "plant" else (s,)))
         for port in ports.get(dst, ((), ()))[0]:
             src = next((f"{s}.{port}" for s in sources if s in ports and port in ports[s][1]), None)
             fallback = DEFAULT_FALLBACKS.get(f"{dst}.{port}")
@@ -100,13 +107,15 @@ class Master:
         Finest ticks per recording step (``hf = step / oversample``), >= 1.
     rates : mapping of str to int, optional
         Component name -> ticks per step of that component; default ``oversample`` (the recording step).
+    plant_parts : sequence of str
+        FMU components mapping some of the plant's roles (see :func:`default_connections`).
     """
 
     def __init__(self, components: Sequence[tuple[str, Component]], *, step: float, n_steps: int,
                  t0: float = 0.0, connections: Mapping[str, str | float] | None = None,
                  events: Iterable[tuple[float, str, Any]] = (), record: str | Sequence[str] = "all",
                  error: ErrorFactory | None = None, oversample: int = 1,
-                 rates: Mapping[str, int] | None = None) -> None:
+                 rates: Mapping[str, int] | None = None, plant_parts: Sequence[str] = ()) -> None:
         self.components = dict(components)
         if len(self.components) != len(components):
             raise InputError("component names must be unique")
@@ -120,6 +129,7 @@ class Master:
         if bad:
             raise InputError(f"rates: expected component names with integer tick counts >= 1, got {bad}")
         self.user_connections = dict(connections or {})
+        self.plant_parts = tuple(plant_parts)
         self.events = list(events)
         self.record = record
         self._error = error or _scenario_error
@@ -131,20 +141,28 @@ class Master:
     @classmethod
     def from_scenario(cls, scenario: Any) -> Master:
         """The standard components of a :class:`cosim.scenario.Scenario`, plus its user components."""
-        from feeddrive.cosim.fmu_adapter import FMUComponent
+        from feeddrive.cosim.fmu_factory import fmu_component
         from feeddrive.cosim.nc import NCComponent
         from feeddrive.cosim.sensors import SensorsComponent
 
         m = scenario.plant.oversample
-        cycle = scenario.nc_cycle_ticks()
-        nc = NCComponent("nc", scenario.nc)
-        plant = FMUComponent("plant", scenario.plant, input_period=cycle)
-        comps: list[tuple[str, Component]] = [
-            ("nc", nc), ("plant", plant),
-            ("sensors", SensorsComponent("sensors", scenario.sensors, oversample=m, exact_means=plant.interval_means))]
+        comps: list[tuple[str, Component]] = []
+        rates: dict[str, int] = {}
+        if scenario.nc is not None:  # the drive; without nc: a system of components only
+            cycle = scenario.nc_cycle_ticks()
+            nc = NCComponent("nc", scenario.nc)
+            plant = fmu_component("plant", scenario.plant, input_period=cycle)
+            comps += [("nc", nc), ("plant", plant), ("sensors", SensorsComponent(
+                "sensors", scenario.sensors, oversample=m, exact_means=plant.interval_means))]
+            rates |= {"nc": cycle, "plant": 1, "sensors": 1}
         specs = [(("monitor", "class"), scenario.monitor)] if scenario.monitor is not None else []
         specs += [(("components", k, "class"), spec) for k, spec in enumerate(scenario.components)]
         for where, spec in specs:
+            if spec.fmu is not None:  # an FMU component: its own ports, step multiple and watchdog
+                comps.append((spec.name, fmu_component(spec.name, spec.config, own_inputs=True)))
+                part = bool(spec.config.map) and scenario.nc is not None  # a part of the plant: the plant's rate
+                rates[spec.name] = spec.config.step_multiple or (1 if part else m)
+                continue
             try:
                 cls_ = load_component_class(spec.class_, where="class")
             except ScenarioError as exc:
@@ -153,14 +171,18 @@ class Master:
                 comps.append((spec.name, cls_(spec.name, spec.config)))
             except (ValueError, TypeError) as exc:  # the component refuses its config
                 raise scenario.error(where[:-1] + ("config",), f"{spec.class_}: {exc}") from None
+        parts = [s.name for s in scenario.components if s.fmu is not None and s.config.map]
+        if parts and scenario.nc is not None:  # a plant split into FMUs: its parts step with it, before the sensors
+            k = [n for n, _ in comps].index("plant") + 1
+            comps = comps[:k] + [c for c in comps if c[0] in parts] + [c for c in comps[k:] if c[0] not in parts]
         connections = dict(scenario.connections)
         for spec in scenario.components:
             connections.update({f"{spec.name}.{port}": src for port, src in spec.inputs.items()})
         stop = scenario.stop_time if scenario.stop_time is not None else nc.duration() + SETTLING
         return cls(comps, step=scenario.step, n_steps=event_step(stop, 0.0, scenario.step),
                    connections=connections, events=[(e.time, e.target, e.value) for e in scenario.events],
-                   record=scenario.record, error=scenario.error, oversample=m,
-                   rates={"nc": cycle, "plant": 1, "sensors": 1})
+                   record=scenario.record, error=scenario.error, oversample=m, rates=rates,
+                   plant_parts=parts)
 
     @property
     def stop_time(self) -> float:
@@ -214,7 +236,7 @@ class Master:
             if port not in ports.get(comp, ((), ()))[0]:
                 raise self._error(("connections", dst), f"no input {dst!r}; inputs are: "
                                   f"{', '.join(f'{n}.{p}' for n, (i, _) in ports.items() for p in i)}")
-        self.connections = default_connections(ports) | self.user_connections
+        self.connections = default_connections(ports, self.plant_parts) | self.user_connections
         constants: list[float] = []
         self._getters: list[Callable] = []
         for n, c in self.components.items():
@@ -229,6 +251,10 @@ class Master:
                     if src not in index:
                         raise self._error(("connections", dst), f"unknown source {src!r}; outputs are: "
                                           f"{', '.join(names)}")
+                    declared = tuple(getattr(c, "input_units", ()))
+                    problem = mismatch(units[index[src]], declared[len(idx)] if len(declared) > len(idx) else "")
+                    if problem:
+                        raise self._error(("connections", dst), f"{src} -> {dst}: {problem}")
                     idx.append(index[src])
                 else:
                     idx.append(self.n_signals + len(constants))

@@ -216,7 +216,7 @@ def report_header(scenario: Scenario) -> dict[str, Any]:
     return {"scenario": scenario.name, "axis": scenario.axis.name, "drive_chain": scenario.axis.model_dump(),
             "parameter_units": parameter_units("motor", scenario.axis.kind), "source": scenario.source,
             "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,
-                      "interface": scenario.plant.interface}}
+                      "interface": scenario.plant.interface} if scenario.nc is not None else None}
 
 
 def with_history(scenario: Scenario, db: Path, replace: bool = False) -> Scenario | None:

@@ -28,9 +28,10 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
+from feeddrive.cosim import fmu_inspect
 from feeddrive.cosim.axis import Axis, resolve_drive_chain
 from feeddrive.cosim.errors import ScenarioError
-from feeddrive.cosim.fmu_inspect import check_archive, fmi_version, model_description, sha256
+from feeddrive.cosim.fmu_inspect import REAL_TYPES, check_archive, fmi_version, model_description, runnable, sha256
 from feeddrive.cosim.nc import SETTLING, NCConfig, drive_chain_nominal, plan_program
 from feeddrive.cosim.sensors import EVENT_FIELDS, SensorsConfig
 from feeddrive.cosim.unit_map import INPUT_ROLES as INPUT_ROLES
@@ -114,19 +115,28 @@ class PlantConfig(_Strict):
             the message says what was expected.
         """
         # Model Exchange: the master integrates and interpolates the inputs itself
-        can = self.interface == "me" or (md.coSimulation is not None and bool(md.coSimulation.canInterpolateInputs))
+        can = self.interface == "me" or fmu_inspect.interpolates_inputs(md)
         if self.input_hold == "foh" and not can:
-            raise ValueError("input_hold foh is not available: the FMU does not declare canInterpolateInputs; "
-                             "expected zoh, no input_hold, or interface me")
+            raise ValueError("input_hold foh is not available: the FMU does not declare canInterpolateInputs "
+                             "(FMI 2.0) or intermediate update of its inputs (FMI 3.0); expected zoh, no "
+                             "input_hold, or interface me")
         return self.input_hold or ("foh" if can else "zoh")
+
+
+class FMUConfig(PlantConfig):
+    """An FMU component's ``config`` (cosim/fmu_components.py): the keys of ``plant:`` and its step multiple."""
+
+    step_multiple: int | None = Field(None, ge=1, description="communication step of the FMU in ticks of the "
+                                      "master's finest step (step / plant.oversample); default: the recording step")
 
 
 class ComponentSpec(_Strict):
     """A user component: ``class: package.module:ClassName``; ``inputs`` maps its ports to sources."""
 
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
-    class_: str = Field(alias="class")
-    config: dict[str, Any] = {}
+    class_: str | None = Field(None, alias="class")
+    fmu: str | None = None  # an FMU component instead of a class (cosim/fmu_components.py)
+    config: Any = {}
     inputs: dict[str, str | float] = {}
 
 
@@ -147,7 +157,7 @@ class Scenario(_Strict):
     stop_time: float | None = Field(None, gt=0, description="[s]; default: NC program duration + 0.3 s")
     plant: PlantConfig = PlantConfig()
     sensors: SensorsConfig = Field(default_factory=SensorsConfig)
-    nc: NCConfig
+    nc: NCConfig | None = None  # None: a system of components only (cosim/fmu_components.py)
     monitor: Any = None  # ComponentSpec or None, built by the loader from the ``monitor:`` section
     components: list[ComponentSpec] = []
     connections: dict[str, str | float] = {}
@@ -250,7 +260,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     lines = dict(lines or {})
     if not isinstance(data, dict):
         raise located_error(source, lines, (), f"expected a mapping of scenario keys, got {type(data).__name__}")
-    data = _drive_chain(dict(data), source, lines)
+    given, data = dict(data), _drive_chain(dict(data), source, lines)
     base_dir = Path(base_dir or ".").resolve()
     data["monitor"] = _monitor_spec(data.get("monitor"), data, base_dir, source, lines)
     try:
@@ -260,6 +270,11 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     scenario._source = source
     scenario._lines = lines
     scenario._base_dir = base_dir
+    from feeddrive.cosim import fmu_components
+
+    if scenario.nc is None:
+        fmu_components.check_components_only(scenario, given)
+        return scenario.model_copy(update={"components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
     # the master runs ceil(stop / step) steps: a longer step would be one step past the stop time, no motion sampled
     if scenario.stop_time is not None:
         stop, what = scenario.stop_time, "stop_time"
@@ -279,7 +294,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     plant, md = _resolve_plant(scenario)
     _check_drive_chain(scenario, md)
     _check_events(scenario, md)
-    return scenario.model_copy(update={"plant": plant})
+    return scenario.model_copy(update={"plant": plant, "components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
 
 
 def _drive_chain(data: dict, source: str, lines: dict) -> dict:
@@ -385,8 +400,8 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         version = fmi_version(path)
     except ValueError as exc:
         raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    if version != "2.0":
-        raise s.error(("plant", "fmu"), f"{path.name} is an FMI {version or '(unknown)'} FMU; expected FMI 2.0")
+    if version not in ("2.0", "3.0"):
+        raise s.error(("plant", "fmu"), f"{path.name} is an FMI {version or '(unknown)'} FMU; expected FMI 2.0 or 3.0")
     try:
         check_archive(path)
     except ValueError as exc:
@@ -399,16 +414,17 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         md = model_description(path)
     except ValueError as exc:
         raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    if (md.coSimulation if p.interface == "cs" else md.modelExchange) is None:
-        kind = {"cs": "Co-Simulation", "me": "Model Exchange"}[p.interface]
-        raise s.error(("plant", "interface"), f"{path.name} does not support {kind}; expected interface "
-                                              f"{'me' if p.interface == 'cs' else 'cs'}")
+    problem = runnable(md, p.interface, path.name)
+    if problem:
+        raise s.error(("plant", "fmu" if problem[0] == "fmu" else "interface"), problem[1])
     try:
         check_archive(path, (md.coSimulation if p.interface == "cs" else md.modelExchange).modelIdentifier)
     except ValueError as exc:
         raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
+    parts = {r for c in s.components if c.fmu is not None and isinstance(c.config, dict)
+             for r in c.config.get("map") or {}}
     conversions: dict[str, Conversion] = {}
-    problems = check_map(md, role_map, path.name, s.axis.kind, conversions)
+    problems = check_map(md, role_map, path.name, s.axis.kind, conversions, parts)
     if problems:
         raise s.error(*problems[0])
     role_map = {r: e.model_copy(update={"scale": conversions[r].scale, "offset": conversions[r].offset})
@@ -422,8 +438,8 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     for key, want in (("parameters", ("parameter",)), ("start", None)):
         for name in getattr(p, key):
             v = variables.get(name)
-            if v is None or (want and v.causality not in want) or v.type != "Real":
-                kinds = ", ".join(n for n, x in variables.items() if x.type == "Real"
+            if v is None or (want and v.causality not in want) or v.type not in REAL_TYPES:
+                kinds = ", ".join(n for n, x in variables.items() if x.type in REAL_TYPES
                                   and (not want or x.causality in want))
                 raise s.error(("plant", key, name), f"{path.name} has no Real "
                               f"{'parameter' if want else 'variable'} {name!r}; expected one of: {kinds}")
@@ -438,7 +454,7 @@ def _check_drive_chain(s: Scenario, md: Any) -> None:
     variables = {v.name: v for v in md.modelVariables}
     for fmu_name, key in (("pitch", "pitch"), ("belt_ratio", "ratio")):
         v = variables.get(fmu_name)
-        if v is None or v.causality != "parameter" or v.type != "Real" or s.axis.kind != "linear":
+        if v is None or v.causality != "parameter" or v.type not in REAL_TYPES or s.axis.kind != "linear":
             continue
         value = s.plant.parameters.get(fmu_name, v.start)
         ours = getattr(s.axis, key)
@@ -471,9 +487,9 @@ def _check_events(s: Scenario, md: Any) -> None:
                                                    f"{', '.join(sorted(names))}")
         if comp == "plant":
             v = variables.get(param)
-            if v is None or v.causality != "parameter" or v.variability != "tunable" or v.type != "Real":
+            if v is None or v.causality != "parameter" or v.variability != "tunable" or v.type not in REAL_TYPES:
                 tunable = [n for n, x in variables.items() if x.causality == "parameter"
-                           and x.variability == "tunable" and x.type == "Real"]
+                           and x.variability == "tunable" and x.type in REAL_TYPES]
                 raise s.error(("events", k, "target"), f"{param!r} is not a tunable Real parameter of the plant "
                                                        f"FMU; expected one of: {', '.join(tunable)}")
             if not isinstance(ev.value, float):

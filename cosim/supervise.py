@@ -110,7 +110,8 @@ def supervise(target: Callable[..., Any], *args: Any, timeout: float | None = No
         at a fatal signal.
     """
     mapping, rec = fmi_progress.new_shared()
-    rec.function, rec.time, rec.call_timeout = fmi_progress.IDLE, float("nan"), 0.0
+    for r in rec:
+        r.function, r.time, r.call_timeout = fmi_progress.IDLE, float("nan"), 0.0
     read_fd, write_fd = os.pipe()
     for stream in (sys.stdout, sys.stderr):
         stream.flush()
@@ -143,7 +144,7 @@ def supervise(target: Callable[..., Any], *args: Any, timeout: float | None = No
             pass
 
 
-def _child(target: Callable[..., Any], args: tuple, rec: fmi_progress.Record, fd: int,
+def _child(target: Callable[..., Any], args: tuple, rec: Any, fd: int,
            log_path: str | Path | None) -> None:  # pragma: no cover - runs in the child
     code = 0
     try:
@@ -181,7 +182,7 @@ def _portable(exc: BaseException) -> BaseException:
         return InputError(text) if isinstance(exc, ValueError) else SimulationError(text)
 
 
-def _watch(pid: int, fd: int, rec: fmi_progress.Record, timeout: float | None) -> Outcome:
+def _watch(pid: int, fd: int, records: Any, timeout: float | None) -> Outcome:
     start = seen_at = time.monotonic()
     seen: tuple = ()
     chunks: list[bytes] = []
@@ -195,9 +196,10 @@ def _watch(pid: int, fd: int, rec: fmi_progress.Record, timeout: float | None) -
             chunks.append(data)
             continue
         now = time.monotonic()
-        key = (rec.function, rec.time)
+        key = tuple((r.function, r.time) for r in records if r.component)  # slots in use (unused: time NaN != NaN)
         if key != seen:
             seen, seen_at = key, now
+        rec = fmi_progress.current(records)
         if rec.function and rec.call_timeout and now - seen_at > rec.call_timeout:
             limit = f"{rec.component.decode('utf-8', 'replace')}.call_timeout = {rec.call_timeout:g} s"
         elif timeout is not None and now - start > timeout:
@@ -214,6 +216,7 @@ def _watch(pid: int, fd: int, rec: fmi_progress.Record, timeout: float | None) -
             threading.Thread(target=os.waitpid, args=(pid, 0), daemon=True).start()
             return Outcome("ok", value=value) if kind == "ok" else Outcome("error", error=value)
     _, status = os.waitpid(pid, 0)
+    rec = fmi_progress.current(records)
     where = {"component": rec.component.decode("utf-8", "replace"), "function": fmi_progress.FUNCTIONS[rec.function]
              if 0 <= rec.function < len(fmi_progress.FUNCTIONS) else f"FMI function #{rec.function}",
              "time": rec.time if rec.time == rec.time else None}

@@ -212,12 +212,15 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
 
 
 def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "linear",
-              conversions: dict[str, Conversion] | None = None) -> list[tuple[tuple, str]]:
+              conversions: dict[str, Conversion] | None = None, elsewhere: Any = ()) -> list[tuple[tuple, str]]:
     """Problems of a role map against an FMU's model description, as ``(key path, message)`` pairs; the
-    units of each entry are checked (``cosim.unit_map.convert``) and, given ``conversions``, filled in."""
+    units of each entry are checked (``cosim.unit_map.convert``) and, given ``conversions``, filled in.
+    ``elsewhere``: roles that FMU components map (a plant split into several FMUs)."""
+    from feeddrive.cosim.fmu_inspect import REAL_TYPES
+
     variables = {v.name: v for v in md.modelVariables}
     problems: list[tuple[tuple, str]] = []
-    missing = [r for r in REQUIRED_ROLES if r not in role_map]
+    missing = [r for r in REQUIRED_ROLES if r not in role_map and r not in elsewhere]
     if missing:
         problems.append((("plant", "map"), f"roles {', '.join(missing)} are not mapped; expected entries "
                          f"{{role: {{var: <FMU variable>}}}} for {', '.join(REQUIRED_ROLES)}"))
@@ -225,12 +228,12 @@ def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "
         v = variables.get(entry.var)
         path = ("plant", "map", role, "var")
         want = "input" if role in INPUT_ROLES else "output"
-        candidates = [n for n, x in variables.items() if x.causality == want and x.type == "Real"]
+        candidates = [n for n, x in variables.items() if x.causality == want and x.type in REAL_TYPES]
         if v is None:
             problems.append((path, f"FMU {fmu_name!r} has no variable {entry.var!r}; its Real {want}s are: "
                              f"{', '.join(candidates) or 'none'}"))
-        elif v.type != "Real":
-            problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real"))
+        elif v.type not in REAL_TYPES:
+            problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real (FMI 3.0: Float64)"))
         elif role in INPUT_ROLES and v.causality != "input":
             problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an input"))
         elif role not in INPUT_ROLES and v.causality not in ("output", "local"):

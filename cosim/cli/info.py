@@ -15,7 +15,7 @@ from feeddrive.cosim.errors import InputError, ScenarioError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("fmu", metavar="FMU_OR_DATA",
-                        help="path of an FMI 2.0 .fmu file, 'builtin', or a recording (.csv, .mat, .parquet, .txt)")
+                        help="path of an FMI 2.0 or 3.0 .fmu file, 'builtin', or a recording (.csv, .mat, .parquet, .txt)")
     parser.add_argument("--time", default=None, metavar="NAME",
                         help="recording: the time column or variable (default: found by name)")
     parser.add_argument("--rate", type=float, default=None, metavar="HZ",
@@ -36,6 +36,7 @@ def main(args: argparse.Namespace) -> int:
                              "map to cosim estimate or cosim monitor")
         print("\n".join(describe(open_source(args.fmu), args.time, args.rate)))
         return 0
+    from feeddrive.cosim.fmu_ports import unit_of
     from feeddrive.cosim.scenario import (
         INPUT_ROLES,
         ROLE_UNITS,
@@ -55,8 +56,8 @@ def main(args: argparse.Namespace) -> int:
             raise InputError(f"{path}: no such FMU file (expected the path of an .fmu, or 'builtin')")
     try:
         version = fmi_version(path)
-        if version != "2.0":
-            raise ValueError(f"an FMI {version or '(unknown)'} FMU; expected FMI 2.0")
+        if version not in ("2.0", "3.0"):
+            raise ValueError(f"an FMI {version or '(unknown)'} FMU; expected FMI 2.0 or 3.0")
         md = model_description(path)
     except ValueError as exc:
         raise InputError(f"{path}: {exc}") from None
@@ -67,7 +68,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"  feeddrive {exported['kind']} of scenario {exported.get('scenario', '?')}, step_size "
               f"{exported['step']:g} s (resources/component.json); needs Python with feeddrive-monitor installed")
     rows = [("name", "type", "causality", "variability", "unit", "start", "description")]
-    rows += [(v.name, v.type, v.causality, v.variability, v.unit or "", "" if v.start is None else str(v.start),
+    rows += [(v.name, v.type, v.causality, v.variability, unit_of(v), "" if v.start is None else str(v.start),
               " ".join((v.description or "").split())) for v in md.modelVariables]
     widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
     for r in rows:

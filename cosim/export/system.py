@@ -3,7 +3,9 @@
 ``export_system`` writes into one folder::
 
     FeedDrive.fmu (the plant, copied)   FeedDriveNC.fmu   FeedDriveSensors.fmu   FeedDriveMonitor.fmu
-    OspSystemStructure.xml   simulators nc, plant, sensors, monitor; the scenario's step as BaseStepSize;
+    OspSystemStructure.xml   simulators nc, plant, sensors, monitor and the FMU components (``fmu:``,
+                             copied as they are, each with its ``step_multiple`` as its stepSize);
+                             the scenario's step as BaseStepSize;
                              the plant's parameters and start values and the monitor's history file as
                              initial values; every connection of ``cosim run`` (its default wiring plus
                              the scenario's ``connections``; a constant source becomes an initial value)
@@ -24,6 +26,7 @@ import json
 import shutil
 import zipfile
 from pathlib import Path
+from typing import Any
 from xml.dom import minidom
 from xml.etree.ElementTree import Element, SubElement, tostring
 
@@ -60,9 +63,12 @@ def wiring(scenario: Scenario) -> tuple[list[tuple[str, str, str, str]], dict[st
         User components (``components:``), or a plant map with a scale or offset (OSP connections are
         plain assignments).
     """
-    if scenario.components:
-        raise ExportError(f"{scenario.source}: components: user components ({scenario.components[0].name}, ...) "
-                          "cannot be exported; expected only nc, plant, sensors and monitor")
+    classes = [c.name for c in scenario.components if c.fmu is None]
+    if classes:
+        raise ExportError(f"{scenario.source}: components: user components ({classes[0]}, ...) cannot be exported; "
+                          "expected nc, plant, sensors, monitor and FMU components (fmu:)")
+    if scenario.nc is None:
+        raise ExportError(f"{scenario.source}: no nc: a system of components only is not exported; expected a drive")
     # the exported system runs every FMU at the one BaseStepSize: one rate only
     if scenario.plant.oversample != 1:
         raise ExportError(f"{scenario.source}: plant.oversample: {scenario.plant.oversample}; the exported system "
@@ -70,20 +76,27 @@ def wiring(scenario: Scenario) -> tuple[list[tuple[str, str, str, str]], dict[st
     if scenario.nc.cycle is not None and abs(scenario.nc.cycle - scenario.step) > 1e-9 * scenario.step:
         raise ExportError(f"{scenario.source}: nc.cycle: {scenario.nc.cycle:g} s; the exported system steps the NC "
                           f"at `step` = {scenario.step:g} s, expected no nc.cycle")
-    role_map = scenario.plant.map
-    for role, entry in role_map.items():
-        if entry.scale != 1.0 or entry.offset != 0.0:
-            raise ExportError(f"{scenario.source}: plant.map.{role}: scale {entry.scale:g} and offset "
-                              f"{entry.offset:g}; an OSP connection cannot convert units, expected scale 1 and "
-                              "offset 0 (or an FMU in SI units)")
+    maps = {"plant": scenario.plant.map} | {c.name: c.config.map for c in scenario.components}
+    for comp, role_map in maps.items():
+        for role, entry in role_map.items():
+            if entry.scale != 1.0 or entry.offset != 0.0:
+                key = "plant" if comp == "plant" else f"components[{comp}].config"
+                raise ExportError(f"{scenario.source}: {key}.map.{role}: scale {entry.scale:g} and offset "
+                                  f"{entry.offset:g}; an OSP connection cannot convert units, expected scale 1 and "
+                                  "offset 0 (or an FMU in SI units)")
     ports = {n: (tuple(c.input_names), tuple(c.output_names)) for n, c in COMPONENTS.items()}
-    ports["plant"] = (tuple(r for r in INPUT_ROLES if r in role_map), tuple(r for r in OUTPUT_ROLES if r in role_map))
+    ports["plant"] = (tuple(r for r in INPUT_ROLES if r in maps["plant"]),
+                      tuple(r for r in OUTPUT_ROLES if r in maps["plant"]))
+    ports |= {c.name: fmu_ports(c) for c in scenario.components}
     if scenario.monitor is None:
         del ports["monitor"]
-    connections = default_connections(ports) | dict(scenario.connections)
+    parts = [c.name for c in scenario.components if c.config.map]
+    connections = default_connections(ports, parts) | dict(scenario.connections)
+    connections |= {f"{c.name}.{port}": src for c in scenario.components for port, src in c.inputs.items()}
 
     def variable(comp: str, port: str) -> str:
-        return role_map[port].var if comp == "plant" else port
+        role_map = maps.get(comp, {})
+        return role_map[port].var if port in role_map else port
 
     links, constants = [], {}
     for dst, src in connections.items():
@@ -99,6 +112,22 @@ def wiring(scenario: Scenario) -> tuple[list[tuple[str, str, str, str]], dict[st
         else:
             constants.setdefault(d_comp, {})[variable(d_comp, d_port)] = float(src)
     return links, constants
+
+
+def fmu_ports(spec: Any) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """An FMU component's (inputs, outputs) as ``cosim run`` names them, from its model description."""
+    from feeddrive.cosim import fmu_ports as ports
+    from feeddrive.cosim.fmu_inspect import model_description
+
+    md = model_description(Path(spec.config.fmu))
+    role_map = spec.config.map
+    mapped = {e.var for e in role_map.values()}
+    own = ports.own_inputs(md, mapped, spec.config.interface)
+    extras, others = ports.extra_outputs(md, mapped | set(OUTPUT_ROLES + INPUT_ROLES))
+    if any(v.is_array for v in own + extras + others):
+        raise ExportError(f"{spec.config.fmu}: array variables are not exported (OSP connects scalars)")
+    return (tuple(r for r in INPUT_ROLES if r in role_map) + tuple(v.name for v in own),
+            tuple(r for r in OUTPUT_ROLES if r in role_map) + tuple(v.name for v in extras + others))
 
 
 def osp_events(scenario: Scenario) -> list[dict]:
@@ -143,28 +172,40 @@ def export_system(scenario: Scenario, out_dir: str | Path, *, ssp: bool = True, 
     plant_dst = out_dir / plant_src.name
     if plant_src.stem in {KINDS[k][0] for k in KINDS}:
         raise ExportError(f"{scenario.source}: plant.fmu: {plant_src.name} clashes with an exported FMU's name")
-    in_the_way = [p for p in (out_dir / SYSTEM_FILE, out_dir / SCENARIO_FILE, plant_dst) if p.exists()]
+    fmus = {c.name: Path(c.config.fmu) for c in scenario.components}  # FMU components, copied as they are
+    names = [plant_src.name] + [p.name for p in fmus.values()]
+    clash = next((n for n in names if names.count(n) > 1 or Path(n).stem in {KINDS[k][0] for k in KINDS}), None)
+    if clash:
+        raise ExportError(f"{scenario.source}: {clash} is used twice or clashes with an exported FMU's name")
+    in_the_way = [p for p in (out_dir / SYSTEM_FILE, out_dir / SCENARIO_FILE, plant_dst,
+                              *(out_dir / p.name for p in fmus.values())) if p.exists()]
     if in_the_way and not overwrite:
         raise ExportError(f"{in_the_way[0]} exists; choose another --out folder or allow overwriting (--overwrite)")
     out_dir.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {"plant": plant_dst}
     shutil.copyfile(plant_src, plant_dst)
+    for name, src in fmus.items():
+        paths[name] = out_dir / src.name
+        shutil.copyfile(src, paths[name])
     for kind in kinds:
         paths[kind] = build_component_fmu(kind, scenario, out_dir, overwrite=overwrite)
     initial = {"plant": dict(scenario.plant.parameters) | dict(scenario.plant.start)}
+    initial |= {c.name: dict(c.config.parameters) | dict(c.config.start) for c in scenario.components}
     for comp, values in constants.items():
         initial.setdefault(comp, {}).update(values)
     strings = {"monitor": {"db": section(scenario, "monitor")["db"]}} if "monitor" in kinds else {}
     sources = {name: p.name for name, p in paths.items()}
-    order = ["nc", "plant", "sensors", "monitor"]
+    order = ["nc", "plant", "sensors", "monitor", *fmus]
     sims = [n for n in order if n in sources]
+    multiple = {c.name: c.config.step_multiple or 1 for c in scenario.components}  # OSP: stepSize per simulator
     root = Element("OspSystemStructure", xmlns=OSP_NS, version="0.1")
     SubElement(root, "StartTime").text = "0.0"
     SubElement(root, "BaseStepSize").text = repr(scenario.step)
     SubElement(root, "Algorithm").text = "fixedStep"
     simulators = SubElement(root, "Simulators")
     for name in sims:
-        sim = SubElement(simulators, "Simulator", name=name, source=sources[name], stepSize=repr(scenario.step))
+        sim = SubElement(simulators, "Simulator", name=name, source=sources[name],
+                         stepSize=repr(scenario.step * multiple.get(name, 1)))
         values = [(v, "Real", x) for v, x in initial.get(name, {}).items()]
         values += [(v, "String", x) for v, x in strings.get(name, {}).items()]
         if values:

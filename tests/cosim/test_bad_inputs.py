@@ -152,8 +152,8 @@ def _no_description(out: Path, lib: Path) -> None:
 ARCHIVES = {
     "not-a-zip": (_not_a_zip, "not an FMU (a zip file with a modelDescription.xml)"),
     "no-model-description": (_no_description, "not an FMU (a zip file with a modelDescription.xml)"),
-    "fmi-1.0": (lambda out, lib: build(out, fmi_version="1.0", library=lib), "is an FMI 1.0 FMU; expected FMI 2.0"),
-    "fmi-3.0": (lambda out, lib: build(out, fmi_version="3.0", library=lib), "is an FMI 3.0 FMU; expected FMI 2.0"),
+    "fmi-1.0": (lambda out, lib: build(out, fmi_version="1.0", library=lib), "is an FMI 1.0 FMU; expected FMI 2.0 or 3.0"),
+    "fmi-4.0": (lambda out, lib: build(out, fmi_version="4.0", library=lib), "is an FMI 4.0 FMU; expected FMI 2.0 or 3.0"),
     "no-binary-for-platform": (lambda out, lib: build(out, platform="aarch64-darwin", library=lib),
                                f"no binary for this platform: expected binaries/{fmpy.platform}/faulty"),
     "dot-dot-entry": (lambda out, lib: build(out, library=lib, extra={"resources/../../evil.txt": b"x"}),

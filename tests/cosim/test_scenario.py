@@ -94,13 +94,13 @@ def test_each_mistake_gets_its_own_message_with_file_and_line(tmp_path, feeddriv
     assert re.search(pattern, message), message
 
 
-def test_non_fmi2_fmu_is_refused(tmp_path):
-    fmu = tmp_path / "fmi3.fmu"
+def test_fmi1_fmu_is_refused(tmp_path):
+    fmu = tmp_path / "fmi1.fmu"
     with zipfile.ZipFile(fmu, "w") as z:
-        z.writestr("modelDescription.xml", '<?xml version="1.0"?><fmiModelDescription fmiVersion="3.0" '
-                                           'modelName="m" instantiationToken="x"/>')
-    message = error_of(write(tmp_path, BASE.replace("fmu: builtin", "fmu: fmi3.fmu")))
-    assert "plant.fmu: fmi3.fmu is an FMI 3.0 FMU; expected FMI 2.0" in message
+        z.writestr("modelDescription.xml", '<?xml version="1.0"?><fmiModelDescription fmiVersion="1.0" '
+                                           'modelName="m" guid="x"/>')
+    message = error_of(write(tmp_path, BASE.replace("fmu: builtin", "fmu: fmi1.fmu")))
+    assert "plant.fmu: fmi1.fmu is an FMI 1.0 FMU; expected FMI 2.0 or 3.0" in message
     (tmp_path / "junk.fmu").write_text("not a zip")
     message = error_of(write(tmp_path, BASE.replace("fmu: builtin", "fmu: junk.fmu")))
     assert "plant.fmu:" in message and "not an FMU" in message
