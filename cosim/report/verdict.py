@@ -70,7 +70,10 @@ def motion_verdict(m: Mapping, statuses: Mapping[str, str] | None = None) -> dic
     own = m.get("verdict")
     if isinstance(own, str) and own:
         kind = _kind_of(own)
-        return {"kind": kind, "text": own, "css": KINDS[kind]}
+        # the monitor's own verdict decides the kind; the keys give the detail when they agree with it
+        derived_kind, derived = _derive(m, statuses or {})
+        text = derived if derived_kind == kind and len(derived) > len(own) else own
+        return {"kind": kind, "text": text, "css": KINDS[kind]}
     if isinstance(own, Mapping) and own.get("text"):
         kind = own.get("kind") if own.get("kind") in KINDS else _kind_of(own["text"])
         return {"kind": kind, "text": str(own["text"]), "css": KINDS[kind]}

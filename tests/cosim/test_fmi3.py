@@ -85,7 +85,7 @@ def test_cosim_info_lists_an_fmi3_fmu_and_checks_the_map(axes, tmp_path, capsys)
     assert main(["info", str(axes[3]), "--map", str(path)]) == 0
     out = capsys.readouterr().out
     assert "FMI 3.0, Co-Simulation + Model Exchange" in out
-    assert "position [m] <- pos_mm [mm]  scale 0.001" in out and "map OK" in out
+    assert "position [m] <- pos_mm [mm] x 0.001" in out and "map OK" in out
 
 
 def components(axes: dict, multiple: int, source: str = "a.n_act") -> dict:

@@ -428,7 +428,8 @@ def test_the_master_gets_the_same_estimates_from_fmi3(tmp_path, fmi3_fmu, feeddr
         if "FMI 3" in str(exc):
             pytest.skip(f"the master does not run FMI 3.0 plants yet: {exc}")
         raise
-    second = _estimates({"fmu": "builtin"}, tmp_path / "fmi2")
+    # FMI 3.0 Co-Simulation has no input derivatives: the FMI 2.0 twin holds its inputs too
+    second = _estimates({"fmu": "builtin", "input_hold": "zoh"}, tmp_path / "fmi2")
     assert len(third) == len(second) >= 1
     for p3, p2 in zip(third, second):
         assert p3.keys() == p2.keys()
