@@ -143,4 +143,4 @@ def test_summary_names_the_sensor_fault(tmp_path, feeddrive_fmu, capsys):
     # the motion's first line is its verdict, which names the fault
     assert any(ln.startswith("  motion 2: sensor fault: Im1 gain 1.03, offset 0.2 A") for ln in lines)
     assert lines.index(next(ln for ln in lines if ln.startswith("  motion 2:"))) < lines.index(
-        next(ln for ln in lines if "sensor fault:" in ln))
+        next(ln for ln in lines if ln.strip().startswith("sensor fault:")))
