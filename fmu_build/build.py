@@ -124,8 +124,8 @@ def cache_key(sources: Sources) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-#: ``builtin_fmu(motor=...)``: the built-in plants' model functions (each called with its variant's flags)
-MOTORS = {"dc": feed_drive, "pmsm": pmsm_drive}
+#: ``builtin_fmu(motor=...)``: the built-in plants' motors
+MOTORS = ("dc", "pmsm")
 
 
 def _generated(backlash: bool, fmi_version: int = 2, motor: str = "dc") -> tuple[Model, Sources]:
@@ -137,7 +137,8 @@ def _generated(backlash: bool, fmi_version: int = 2, motor: str = "dc") -> tuple
     check_fmi_version(fmi_version)
     c_files = (Path(codegen.WRAPPER_SOURCE if fmi_version == 2 else codegen.WRAPPER3_SOURCE), *codegen.CORE_SOURCES)
     stamps = tuple((path, path.stat().st_mtime_ns) for path in c_files)
-    return _generate(MOTORS[motor], backlash, fmi_version, stamps)
+    # the model function is looked up at each call, so the memo sees a replaced function as another model
+    return _generate(feed_drive if motor == "dc" else pmsm_drive, backlash, fmi_version, stamps)
 
 
 @functools.lru_cache(maxsize=8)
