@@ -305,9 +305,9 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
 def _drive_chain(data: dict, source: str, lines: dict) -> dict:
     """The scenario with its axis's drive chain stated once (``cosim.axis.resolve_drive_chain``)."""
     plant = data.get("plant")
-    builtin = (plant.get("fmu", "builtin") if isinstance(plant, dict) else "builtin") in BUILTIN_PLANTS
+    fmu = plant.get("fmu", "builtin") if isinstance(plant, dict) else "builtin"
     try:
-        return resolve_drive_chain(data, builtin, drive_chain_nominal(),
+        return resolve_drive_chain(data, fmu in BUILTIN_PLANTS, drive_chain_nominal(str(fmu)),
                                    lambda key, message: located_error(source, lines, key, message))
     except ValidationError as exc:
         raw = data.get("axis")

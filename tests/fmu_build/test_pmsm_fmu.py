@@ -13,7 +13,7 @@ from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 from scipy.linalg import expm
 
-from feeddrive.cosim.scenario import PMSM_MAP, load_scenario
+from feeddrive.cosim.scenario import PMSM_MAP, load_scenario, scenario_from_dict
 from feeddrive.fmu_build import FMUBuildInputError, builtin_fmu
 from feeddrive.models import pmsm_drive
 
@@ -121,3 +121,13 @@ def test_cosim_run_of_the_pmsm_example_follows_the_nc(pmsm_fmu, tmp_path):
     assert np.max(np.abs(w)) == pytest.approx(0.3 / 0.01 * 2 * np.pi, rel=0.05)
     i_d = np.array([float(r["plant.i_d [A]"]) for r in rows])
     assert np.max(np.abs(i_d)) < 1.0
+
+
+def test_an_axis_without_pitch_takes_the_pmsm_models_screw(pmsm_fmu):
+    """The drive chain stated nowhere is the plant model's own (10 mm), not the DC model's 20 mm."""
+    data = {"name": "p", "axis": "X", "step": 1e-4, "plant": {"fmu": "builtin-pmsm"},
+            "nc": {"program": [{"dwell": {"time": 0.05}}]}}
+    s = scenario_from_dict(data)
+    assert s.axis.pitch == s.plant.parameters["pitch"] == s.nc.pitch == s.sensors.encoder.pitch == 0.01
+    dc = scenario_from_dict(data | {"plant": {"fmu": "builtin"}})
+    assert dc.axis.pitch == dc.plant.parameters["pitch"] == 0.02
