@@ -91,12 +91,13 @@ def describe_validation_error(exc: ValidationError, where: str) -> str:
     return f"{path}: {text}{more}"
 
 
-@lru_cache(maxsize=1)
-def drive_chain_nominal() -> tuple[float, float]:
-    """``(pitch [m], belt_ratio [1])``: the design values of ``models.feed_drive()``."""
-    from feeddrive.models import feed_drive
+@lru_cache(maxsize=4)
+def drive_chain_nominal(plant: str = "builtin") -> tuple[float, float]:
+    """``(pitch [m], belt_ratio [1])``: the design values of ``models.feed_drive()``, or of
+    ``models.pmsm_drive()`` for ``plant = "builtin-pmsm"`` (a 10 mm screw)."""
+    from feeddrive.models import feed_drive, pmsm_drive
 
-    nominal = feed_drive().nominal(("design",))
+    nominal = (pmsm_drive if plant == "builtin-pmsm" else feed_drive)().nominal(("design",))
     return nominal["pitch"], nominal["belt_ratio"]
 
 

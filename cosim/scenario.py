@@ -44,6 +44,9 @@ from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error,
 Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
 BUILTIN_MAP = {"speed_ref": "w_ref", "load": "Tl", "voltage": "u", "voltage_ref": "u_ref", "current": "i",
                "speed": "w", "position": "x"}
+#: The PMSM plant's roles: the DC pipeline's voltage and current are the q axis for now. The monitor's DC model is
+#: biased on it (its one K cannot be both k_T = 1.5 p psi_f and k_E = p psi_f; issue 25 items 3-4 remove the bias).
+PMSM_MAP = BUILTIN_MAP | {"voltage": "u_q", "voltage_ref": "u_q_ref", "current": "i_q"}
 STANDARD_COMPONENTS = ("nc", "plant", "sensors", "monitor")
 DEFAULT_MONITOR = "feeddrive.cosim.monitor:Monitor"
 
@@ -78,8 +81,10 @@ class MapEntry(_Strict):
 
 
 #: ``plant.fmu`` values naming a built-in plant: the paper's model, and its variant with backlash in the
-#: drive chain (``models.feed_drive(backlash=True)``), which provokes a model mismatch in the monitor.
-BUILTIN_PLANTS = ("builtin", "builtin-backlash")
+#: drive chain (``models.feed_drive(backlash=True)``), which provokes a model mismatch in the monitor; and the PMSM
+#: servo drive (``models.pmsm_drive()``). Each with its default role map.
+BUILTIN_MAPS = {"builtin": BUILTIN_MAP, "builtin-backlash": BUILTIN_MAP, "builtin-pmsm": PMSM_MAP}
+BUILTIN_PLANTS = tuple(BUILTIN_MAPS)
 
 
 class PlantConfig(_Strict):
@@ -246,7 +251,7 @@ def load_plant_map(path: str | Path) -> tuple[dict[str, MapEntry], Callable[[Key
     axis = data.get("axis") if isinstance(data, dict) else None
     rotary = isinstance(axis, dict) and axis.get("kind") == "rotary"  # the built-in x is then in rad
     defaults = {r: MapEntry(var=v, unit="rad" if rotary and r == "position" else None)
-                for r, v in BUILTIN_MAP.items()} if plant.fmu in BUILTIN_PLANTS else {}
+                for r, v in BUILTIN_MAPS.get(plant.fmu, {}).items()}
     return defaults | dict(plant.map), lambda key, message: located_error(str(path), lines, key, message)
 
 
@@ -300,9 +305,9 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
 def _drive_chain(data: dict, source: str, lines: dict) -> dict:
     """The scenario with its axis's drive chain stated once (``cosim.axis.resolve_drive_chain``)."""
     plant = data.get("plant")
-    builtin = (plant.get("fmu", "builtin") if isinstance(plant, dict) else "builtin") in BUILTIN_PLANTS
+    fmu = plant.get("fmu", "builtin") if isinstance(plant, dict) else "builtin"
     try:
-        return resolve_drive_chain(data, builtin, drive_chain_nominal(),
+        return resolve_drive_chain(data, fmu in BUILTIN_PLANTS, drive_chain_nominal(str(fmu)),
                                    lambda key, message: located_error(source, lines, key, message))
     except ValidationError as exc:
         raw = data.get("axis")
@@ -386,15 +391,16 @@ def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     if p.fmu in BUILTIN_PLANTS:
         from feeddrive.fmu_build import builtin_fmu
 
-        path = Path(builtin_fmu(backlash=p.fmu == "builtin-backlash")).resolve()
+        path = Path(builtin_fmu(backlash=p.fmu == "builtin-backlash",
+                                motor="pmsm" if p.fmu == "builtin-pmsm" else "dc")).resolve()
         # the built-in x is the table travel in the unit of its pitch: rad on a rotary axis, whatever it declares
         role_map = {r: MapEntry(var=v, unit="rad" if r == "position" and s.axis.kind == "rotary" else None)
-                    for r, v in BUILTIN_MAP.items()} | dict(p.map)
+                    for r, v in BUILTIN_MAPS[p.fmu].items()} | dict(p.map)
     else:
         path = (s.base_dir / Path(p.fmu).expanduser()).resolve()
         role_map = dict(p.map)
         if not path.is_file():
-            raise s.error(("plant", "fmu"), f"FMU file not found: {path} (expected 'builtin', 'builtin-backlash' or the path of an "
+            raise s.error(("plant", "fmu"), f"FMU file not found: {path} (expected {', '.join(map(repr, BUILTIN_PLANTS))} or the path of an "
                                             ".fmu, relative to the scenario file)")
     try:
         version = fmi_version(path)

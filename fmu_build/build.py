@@ -15,9 +15,9 @@ from typing import Any
 import fmpy
 
 from feeddrive.fmu_build.codegen import DEFAULT_CS_SUBSTEP, Sources, generate
-from feeddrive.fmu_build.errors import CompilerError, FMUBuildError
+from feeddrive.fmu_build.errors import CompilerError, FMUBuildError, FMUBuildInputError
 from feeddrive.fmu_build.model_description import check_fmi_version
-from feeddrive.models import Model, feed_drive
+from feeddrive.models import Model, feed_drive, pmsm_drive
 
 #: Flags for the shared library. Hidden visibility exports only the fmi2 (fmi3) functions.
 CFLAGS = ("-O2", "-fPIC", "-shared", "-fvisibility=hidden")
@@ -124,7 +124,11 @@ def cache_key(sources: Sources) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-def _generated(backlash: bool, fmi_version: int = 2) -> tuple[Model, Sources]:
+#: ``builtin_fmu(motor=...)``: the built-in plants' motors
+MOTORS = ("dc", "pmsm")
+
+
+def _generated(backlash: bool, fmi_version: int = 2, motor: str = "dc") -> tuple[Model, Sources]:
     """The model and its generated sources, generated once per process and input (~60 ms each: every
     scenario load needs the cache key). The memo's key is what they are made of: the model function,
     the variant, the FMI version and the C source files (wrapper and core) with their modification times."""
@@ -133,16 +137,18 @@ def _generated(backlash: bool, fmi_version: int = 2) -> tuple[Model, Sources]:
     check_fmi_version(fmi_version)
     c_files = (Path(codegen.WRAPPER_SOURCE if fmi_version == 2 else codegen.WRAPPER3_SOURCE), *codegen.CORE_SOURCES)
     stamps = tuple((path, path.stat().st_mtime_ns) for path in c_files)
-    return _generate(feed_drive, backlash, fmi_version, stamps)
+    # the model function is looked up at each call, so the memo sees a replaced function as another model
+    return _generate(feed_drive if motor == "dc" else pmsm_drive, backlash, fmi_version, stamps)
 
 
 @functools.lru_cache(maxsize=8)
 def _generate(model_function: Any, backlash: bool, fmi_version: int, c_files: tuple) -> tuple[Model, Sources]:
-    model = model_function(backlash=backlash)
+    model = model_function(backlash=True) if backlash else model_function()
     return model, generate(model, fmi_version=fmi_version)
 
 
-def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, fmi_version: int = 2) -> Path:
+def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, fmi_version: int = 2,
+                motor: str = "dc") -> Path:
     """The built-in feed-drive plant FMU, built once and cached.
 
     The cache is ``<cache_dir>/<hash>/FeedDrive.fmu`` with ``cache_dir`` defaulting to
@@ -160,13 +166,20 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, 
     fmi_version : {2, 3}
         FMI version of the FMU. The hash covers it (the API layer and the XML differ), so the two
         versions are cached side by side.
+    motor : {"dc", "pmsm"}
+        The motor: the paper's DC drive (``models.feed_drive``, model ``FeedDrive``) or the PMSM servo
+        drive (``models.pmsm_drive``, model ``PMSMFeedDrive``). Both go through the same generic wrapper.
 
     Returns
     -------
     pathlib.Path
-        Path of the cached ``FeedDrive.fmu``.
+        Path of the cached ``<model name>.fmu``.
     """
-    model, sources = _generated(backlash, fmi_version)
+    if motor not in MOTORS:
+        raise FMUBuildInputError(f"motor {motor!r}: expected one of {', '.join(MOTORS)}")
+    if backlash and motor != "dc":
+        raise FMUBuildInputError(f"backlash: only the DC drive has a backlash variant, not motor {motor!r}")
+    model, sources = _generated(backlash, fmi_version, motor)
     root = Path(cache_dir or os.environ.get("FEEDDRIVE_CACHE") or Path.home() / ".cache" / "feeddrive")
     target = root / cache_key(sources) / f"{model.name}.fmu"
     if target.is_file():

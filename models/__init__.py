@@ -5,5 +5,6 @@
 """
 from feeddrive.models.base import Equation, Model, Variable
 from feeddrive.models.feed_drive import feed_drive
+from feeddrive.models.pmsm import pmsm_drive
 
-__all__ = ["Equation", "Model", "Variable", "feed_drive"]
+__all__ = ["Equation", "Model", "Variable", "feed_drive", "pmsm_drive"]
