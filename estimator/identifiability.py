@@ -22,7 +22,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-import statsmodels.api as sm
 from scipy import stats
 
 #: Smallest ratio of the two time constants for the second lag to matter to L.
@@ -61,11 +60,10 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
         return None
     scale = np.linalg.norm(X, axis=0)
     scale[scale == 0] = 1.0
-    # Newey-West covariance over ``block`` lags: the filtered residue is correlated over the filter's memory,
-    # and a short record (REGBOT: 0.35 s) holds too few batches for batch means
-    fit = sm.OLS(y, X / scale).fit(cov_type="HAC", cov_kwds={"maxlags": max(1, int(block))})
-    theta = fit.params / scale
-    t = float(fit.tvalues[-1])
+    Xs = X / scale
+    theta, *_ = np.linalg.lstsq(Xs, y, rcond=None)
+    t = _newey_west_t(Xs, y - Xs @ theta, max(1, int(block)), theta)
+    theta = theta / scale
     R, L, M = theta[names.index("R")], theta[names.index("L")], theta[-1]
     if not (R > 0 and np.isfinite(M) and np.isfinite(t)):
         return None
@@ -88,3 +86,20 @@ def lag_reason(test: Mapping | None, R: float) -> str | None:
             f"(a sensor filter) or of the amplifier, and u, i, w cannot tell which; L is either {R * small:.3g} or "
             f"{R * big:.3g} H (R = {R:.3g}), the first-order fit's {R * (big + small):.3g} H is neither; "
             f"R and K from the fit with the lag")
+
+
+def _newey_west_t(X: np.ndarray, e: np.ndarray, lags: int, theta: np.ndarray) -> float:
+    """t statistic of the last coefficient with the Newey-West (Bartlett) covariance over ``lags`` lags.
+
+    The filtered residue is correlated over the filter's memory, and a short record (REGBOT: 0.35 s) holds
+    too few batches for batch means. The score autocovariances come from one FFT (O(n log n), not O(n lags)).
+    """
+    n, p = X.shape
+    S = X * e[:, None]
+    F = np.fft.rfft(S, 2 * n, axis=0)
+    gam = np.fft.irfft(F[:, :, None].conj() * F[:, None, :], 2 * n, axis=0)[:lags + 1]  # gam[l] = sum S_k^T S_k+l
+    w = 1.0 - np.arange(lags + 1) / (lags + 1)
+    omega = gam[0] + np.einsum("l,lab->ab", w[1:], gam[1:] + gam[1:].transpose(0, 2, 1))
+    G = np.linalg.pinv(X.T @ X)
+    var = float((G @ omega @ G)[-1, -1]) * n / (n - p)
+    return float(theta[-1] / np.sqrt(var)) if var > 0 else float("nan")
