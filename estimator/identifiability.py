@@ -84,8 +84,8 @@ def lag_reason(test: Mapping | None, R: float) -> str | None:
     return (f"the current lags the voltage through two time constants, {big * 1e3:.3g} ms and {small * 1e3:.3g} ms "
             f"(d2i/dt2 term t = {test['t']:.3g} > {q:.3g}): one is L/R, the other a lag of the current measurement "
             f"(a sensor filter) or of the amplifier, and u, i, w cannot tell which; L is either {R * small:.3g} or "
-            f"{R * big:.3g} H (R = {R:.3g}), the first-order fit's {R * (big + small):.3g} H is neither; "
-            f"R and K from the fit with the lag")
+            f"{R * big:.3g} H (R = {R:.3g}), the first-order fit's {R * (big + small):.3g} H is neither (kept in the fit, "
+            f"as a lumped term, for R and K)")
 
 
 def _newey_west_t(X: np.ndarray, e: np.ndarray, lags: int, theta: np.ndarray) -> float:
