@@ -56,7 +56,7 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
     if not {"R", "L"} <= set(names):
         return None
     X = np.column_stack([Phi, np.gradient(Di, h)])
-    if len(y) <= X.shape[1] + 2 * max(1, int(block)):
+    if len(y) <= X.shape[1] + 2 * max(1, int(block)) or not np.all(np.isfinite(X)) or not np.all(np.isfinite(y)):
         return None
     scale = np.linalg.norm(X, axis=0)
     scale[scale == 0] = 1.0

@@ -132,7 +132,10 @@ def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped
     Di = _signals_for(p, reg).get("Di")
     if Di is None:
         return
-    test = second_lag(y[rows], Phi[rows], tuple(reg.names), Di[rows], p.h, p.block)
+    try:
+        test = second_lag(y[rows], Phi[rows], tuple(reg.names), Di[rows], p.h, p.block)
+    except (np.linalg.LinAlgError, ValueError):  # a test that cannot run refuses nothing, never a traceback
+        return
     why = lag_reason(test, float(fit.theta[reg.names.index("R")]))
     if why:
         refused["L"] = why
