@@ -127,6 +127,7 @@ def make_baseline(sets: Sequence[Mapping[str, Any]]) -> dict[str, tuple[float, f
     Parameters
     ----------
     sets : sequence of mapping name -> {value, std} (or ``(value, std)`` or an object with them)
+        A parameter missing from some sets (refused there) is averaged over the sets that hold it.
 
     Returns
     -------
@@ -136,10 +137,12 @@ def make_baseline(sets: Sequence[Mapping[str, Any]]) -> dict[str, tuple[float, f
     """
     if not sets:
         raise EstimatorInputError("make_baseline: no parameter sets given")
-    names = set.intersection(*(set(s) for s in sets))
+    # each parameter from the sets that give it: a motion that refused L (one parameter at a time) still
+    # counts for R and K, and does not erase L from the baseline
+    names = set.union(*(set(s) for s in sets))
     out = {}
     for name in sorted(names):
-        v, s = np.array([_value_std(p[name], name) for p in sets]).T
+        v, s = np.array([_value_std(p[name], name) for p in sets if name in p]).T
         n = v.size
         spread = float(np.std(v, ddof=1) / np.sqrt(n)) if n > 1 else 0.0
         out[name] = (float(v.mean()), max(float(np.sqrt(np.sum(s**2)) / n), spread))

@@ -10,6 +10,9 @@ and names the others with the rule that refuses them and its numbers:
   and 95th percentiles) for ``ft w`` to be told from ``Cd sign(w)``: ft and Cd refused;
 * ``sample period``: the electrical time constant ``L/R`` (its 95 % upper bound) is shorter than
   ``MIN_TAU_SAMPLES`` sample periods: L refused, R and K from the quasi-static equation ``u = R i + K w``;
+* ``second lag``: the current follows the voltage through two time constants of comparable size (a sensor's
+  low-pass on the current): L/R is one of them and the data cannot tell which (identifiability.py): L refused,
+  kept in the fit as a lumped term, R and K given;
 * ``excitation``: the estimator's rules, per parameter: too few (fast) samples in its equation, a weak
   direction of the column-scaled regressor (condition number above ``max_condition``), and, for every
   parameter, a 95 % interval wider than ``+-1.96 max_relative_std`` of its value (the printed interval
@@ -38,6 +41,7 @@ from feeddrive.estimator.estimate import (
     instrumental_variables,
     prepare,
 )
+from feeddrive.estimator.identifiability import lag_reason, second_lag
 from feeddrive.estimator.motion import PHYSICAL, EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
 
@@ -118,6 +122,26 @@ def _tau_rule(fit, reg, h: float, fixed: dict, refused: dict) -> bool:
     return False
 
 
+def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped: set) -> None:
+    """L refused (and kept in the fit as a lumped term) when the current shows a second lag (identifiability.py)."""
+    if reg.equation != "electrical" or "L" in refused or not {"R", "L"} <= set(reg.names):
+        return
+    rows = p.rows[reg.equation]
+    if not rows.any() or not rows[np.argmax(rows):len(rows) - np.argmax(rows[::-1])].all():
+        return  # the d2i/dt2 column needs contiguous samples
+    Di = _signals_for(p, reg).get("Di")
+    if Di is None:
+        return
+    try:
+        test = second_lag(y[rows], Phi[rows], tuple(reg.names), Di[rows], p.h, p.block)
+    except (np.linalg.LinAlgError, ValueError):  # a test that cannot run refuses nothing, never a traceback
+        return
+    why = lag_reason(test, float(fit.theta[reg.names.index("R")]))
+    if why:
+        refused["L"] = why
+        lumped.add("L")
+
+
 def _fit_ls(data: MotionData, options: EstimationOptions):
     """LS with the refusals and the re-fits; returns (Prepared, MethodResult or None, fixed, refused, lumped)."""
     fixed: dict[str, float] = {}
@@ -154,6 +178,7 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
             if _tau_rule(fit, reg, p.h, fixed, refused):
                 again = True
                 continue
+            _lag_rule(p, reg, y, Phi, fit, refused, lumped)
             fits[reg.equation] = fit
         if again:
             continue

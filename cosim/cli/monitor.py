@@ -215,6 +215,8 @@ def table(results: list[dict]) -> str:
         for name, p in r["parameters"].items():
             lines.append(f"  {name:3} {p['value']:12.6g} {p.get('unit', ''):10} 95 % CI "
                          f"[{p['ci95'][0]:.6g}, {p['ci95'][1]:.6g}]")
+        for name, why in (r.get("refused") or {}).items():
+            lines.append(f"  {name:3} refused: {why}")
         for name, value in r.get("known", {}).items():
             lines.append(f"  {name:3} {value:12.6g} {UNITS.get(name, ''):10} known (--known)")
         if r["mismatch"]:

@@ -115,3 +115,11 @@ def test_bad_input_is_named():
         make_baseline([])
     with pytest.raises(EstimatorInputError, match="alpha"):
         DiagnosisOptions(alpha=0.0)
+
+
+def test_baseline_and_drifts_with_a_refused_parameter():
+    """A motion that refused L (monitor, one parameter at a time) still counts for R; L from the others."""
+    base = make_baseline([{"R": (0.6, 0.003), "L": (0.004, 1e-5)}, {"R": (0.62, 0.003)}])
+    assert base["L"] == (0.004, 1e-5) and base["R"][0] == pytest.approx(0.61)
+    d = {x.parameter: x for x in drifts({"R": (0.9, 0.003)}, base)}
+    assert set(d) == {"R"} and d["R"].significant and d["R"].relative_change == pytest.approx(0.9 / 0.61 - 1)

@@ -1,0 +1,105 @@
+"""Is L the motor's? The current's second lag test (issue 22, REGBOT).
+
+The electrical equation ``u = R i + L di/dt + K w`` is first order. When the recorded current reaches the
+logger through a further first-order lag ``tau_f`` (a sensor's or an ADC's low-pass, an averaging current
+measurement), the current obeys
+
+    u = R i_m + (L + R tau_f) di_m/dt + L tau_f d2i_m/dt2 + K w
+
+and the first-order fit gives ``L + R tau_f`` with a tight interval: on the REGBOT logs (course L/R 2 ms,
+a current filtered over ~15 ms) it is 14 times the motor's L. The data determine only the two time
+constants' sum ``a1`` and product ``a2`` (the roots of ``s^2 - a1 s + a2``): which one is the motor's
+``L/R`` and which one the lag cannot be told from ``u, i, w`` alone, so L is refused, with both
+candidates. R and K are still determined (the lag's ``L`` term is kept in the fit, as a lumped term).
+
+The rule: the electrical regression augmented with ``d2i/dt2`` gives a coefficient whose Newey-West
+t statistic exceeds the two-sided 5 % normal quantile, real time constants, and the smaller of them at least
+``MIN_LAG_RATIO`` of the larger (below it the first-order L is within that fraction of one candidate,
+the lag is negligible). The built-in plant (no sensor lag) gives |t| < 1 at 10 kHz, and so do the synthetic records at 1 kHz.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from scipy import stats
+
+#: Smallest ratio of the two time constants for the second lag to matter to L.
+MIN_LAG_RATIO = 0.1
+
+
+def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.ndarray, h: float, block: int
+               ) -> dict | None:
+    """The electrical fit with a ``d2i/dt2`` column, and the two time constants it implies.
+
+    Parameters
+    ----------
+    y : ndarray, shape (n,)
+        The electrical equation's output on its usable rows.
+    Phi : ndarray, shape (n, p)
+        Its regressors (columns ``names``; R and L among them).
+    names : tuple of str
+    Di : ndarray, shape (n,)
+        The filtered current's derivative [A/s] on the same rows (contiguous samples).
+    h : float
+        Sample period [s].
+    block : int
+        Lags of the Newey-West covariance [samples] (the estimator's block).
+
+    Returns
+    -------
+    dict or None
+        ``{"t": t statistic of the d2i/dt2 coefficient (Newey-West), "taus": (larger, smaller) [s] or None when
+        complex, "R": R of the augmented fit [Ohm]}``; None when the test cannot run (too few batches,
+        R or L not fitted, R not positive).
+    """
+    if not {"R", "L"} <= set(names):
+        return None
+    X = np.column_stack([Phi, np.gradient(Di, h)])
+    if len(y) <= X.shape[1] + 2 * max(1, int(block)) or not np.all(np.isfinite(X)) or not np.all(np.isfinite(y)):
+        return None
+    scale = np.linalg.norm(X, axis=0)
+    scale[scale == 0] = 1.0
+    Xs = X / scale
+    theta, *_ = np.linalg.lstsq(Xs, y, rcond=None)
+    t = _newey_west_t(Xs, y - Xs @ theta, max(1, int(block)), theta)
+    theta = theta / scale
+    R, L, M = theta[names.index("R")], theta[names.index("L")], theta[-1]
+    if not (R > 0 and np.isfinite(M) and np.isfinite(t)):
+        return None
+    a1, a2 = L / R, M / R
+    disc = a1 * a1 - 4 * a2
+    taus = None if disc < 0 else ((a1 + np.sqrt(disc)) / 2, (a1 - np.sqrt(disc)) / 2)
+    return {"t": t, "taus": taus, "R": float(R)}
+
+
+def lag_reason(test: Mapping | None, R: float) -> str | None:
+    """The refusal of L when ``second_lag`` found a second lag that matters (module docstring), else None."""
+    if test is None or test["taus"] is None:
+        return None
+    big, small = test["taus"]
+    q = float(stats.norm.ppf(0.975))
+    if not (test["t"] > q and small > 0 and small >= MIN_LAG_RATIO * big):
+        return None
+    return (f"the current lags the voltage through two time constants, {big * 1e3:.3g} ms and {small * 1e3:.3g} ms "
+            f"(d2i/dt2 term t = {test['t']:.3g} > {q:.3g}): one is L/R, the other a lag of the current measurement "
+            f"(a sensor filter) or of the amplifier, and u, i, w cannot tell which; L is either {R * small:.3g} or "
+            f"{R * big:.3g} H (R = {R:.3g}), the first-order fit's {R * (big + small):.3g} H is neither (kept in the fit, "
+            f"as a lumped term, for R and K)")
+
+
+def _newey_west_t(X: np.ndarray, e: np.ndarray, lags: int, theta: np.ndarray) -> float:
+    """t statistic of the last coefficient with the Newey-West (Bartlett) covariance over ``lags`` lags.
+
+    The filtered residue is correlated over the filter's memory, and a short record (REGBOT: 0.35 s) holds
+    too few batches for batch means. The score autocovariances come from one FFT (O(n log n), not O(n lags)).
+    """
+    n, p = X.shape
+    S = X * e[:, None]
+    F = np.fft.rfft(S, 2 * n, axis=0)
+    gam = np.fft.irfft(F[:, :, None].conj() * F[:, None, :], 2 * n, axis=0)[:lags + 1]  # gam[l] = sum S_k^T S_k+l
+    w = 1.0 - np.arange(lags + 1) / (lags + 1)
+    omega = gam[0] + np.einsum("l,lab->ab", w[1:], gam[1:] + gam[1:].transpose(0, 2, 1))
+    G = np.linalg.pinv(X.T @ X)
+    var = float((G @ omega @ G)[-1, -1]) * n / (n - p)
+    return float(theta[-1] / np.sqrt(var)) if var > 0 else float("nan")
