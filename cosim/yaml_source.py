@@ -79,6 +79,8 @@ def read_yaml(path: Path, kind: str = "scenario", error: type[ValueError] = Scen
             # PyYAML's "found character that cannot start any token" (its C loader does not say which)
             raise error(f"{where}: a tab character (column {mark.column + 1}): YAML indents with spaces; "
                         "replace the tab by spaces") from None
+        if "nesting depth" in problem:  # PyYAML >= 6.0.3 has its own depth limit, met before ours
+            raise error(f"{where}: YAML nested too deeply; expected at most {MAX_DEPTH} levels") from None
         raise error(f"{where}: invalid YAML: {problem}") from None
     except error:
         raise
