@@ -10,7 +10,8 @@ A figure is drawn only when its signals were recorded.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+import multiprocessing
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -86,6 +87,54 @@ def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str |
             fig.suptitle(f"{title} high-speed motion {k}: redundant current sensors")
             written.append(_save(fig, out_dir / f"motion_{k}_currents.png"))
     return written
+
+
+def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]]) -> list[Path]:
+    """Run figure-drawing ``jobs`` at the same time; returns their files, in the order of ``jobs``.
+
+    Each job after the first is drawn in a forked child process (it inherits the data and the imported
+    matplotlib, so nothing is pickled but the list of files it wrote) while this process draws the first:
+    the figures are the same as drawn one after the other. Without ``fork`` (not POSIX) the jobs run here
+    in turn; a child that dies without a result has its job drawn again here. An exception of a job is
+    raised here.
+    """
+    methods = multiprocessing.get_all_start_methods()
+    ctx = multiprocessing.get_context("fork") if len(jobs) > 1 and "fork" in methods else None
+    children = []
+    for job in jobs[1:] if ctx is not None else ():
+        receive, send = ctx.Pipe(duplex=False)
+        child = ctx.Process(target=_draw_child, args=(job, send), daemon=True)
+        child.start()
+        send.close()
+        children.append((job, child, receive))
+    written = list(jobs[0]()) if jobs else []
+    for job in jobs[1:] if ctx is None else ():
+        written += job()
+    for job, child, receive in children:
+        try:
+            status, value = receive.recv()
+        except EOFError:  # the child died: draw its figures here
+            status, value = "ok", job()
+        finally:
+            receive.close()
+            child.join()
+        if status != "ok":
+            raise value
+        written += value
+    return written
+
+
+def _draw_child(job: Callable[[], list[Path]], send) -> None:  # noqa: ANN001 - multiprocessing Connection
+    """Body of a drawing child: ``("ok", files)`` or ``("error", exception)`` into the pipe ``send``."""
+    try:
+        send.send(("ok", list(job())))
+    except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it
+        try:
+            send.send(("error", exc))
+        except Exception:  # noqa: BLE001 - an exception that cannot be pickled
+            send.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+    finally:
+        send.close()
 
 
 def _legend_outside(ax: plt.Axes) -> None:
