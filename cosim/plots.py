@@ -133,8 +133,9 @@ def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]], processes: int |
     The jobs are dealt round-robin to ``processes`` groups (default: the number of CPUs). The first group
     is drawn in this process, each other one in a forked child process, which inherits the data and the
     imported matplotlib: nothing is pickled but the lists of files written, and the figures are the same
-    as drawn one after the other. Without ``fork`` (not POSIX) the jobs run here in turn; a child that dies
-    without a result has its jobs drawn again here. An exception of a job is raised here.
+    as drawn one after the other. Without ``fork`` (not POSIX) or in a daemonic process the jobs run here
+    in turn; a child that dies without a result has its jobs drawn again here. An exception of a job is
+    raised here.
 
     Parameters
     ----------
@@ -144,8 +145,8 @@ def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]], processes: int |
         Processes drawing at once, this one included.
     """
     k = max(1, min(len(jobs), processes or os.cpu_count() or 1))
-    if "fork" not in multiprocessing.get_all_start_methods():
-        k = 1
+    if "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
+        k = 1  # a daemonic process (a multiprocessing.Pool or Dask worker of a campaign) may have no children
     groups = [list(range(i, len(jobs), k)) for i in range(k)]
 
     def draw(group: list[int]) -> list[list[Path]]:

@@ -82,6 +82,20 @@ def test_draw_concurrently_raises_a_childs_error_and_redraws_for_a_dead_child(tm
     assert int((tmp_path / "f1.txt").read_text()) == parent  # drawn again here
 
 
+def _draw_in_a_daemon(folder: Path) -> None:
+    draw_concurrently([_writer(folder, k) for k in range(3)], processes=2)
+
+
+@needs_fork
+def test_a_daemonic_process_draws_its_figures_itself(tmp_path):
+    """A campaign's Pool or Dask worker is daemonic and may not fork: its figures are drawn in turn, no error."""
+    worker = multiprocessing.get_context("fork").Process(target=_draw_in_a_daemon, args=(tmp_path,), daemon=True)
+    worker.start()
+    worker.join(120)
+    assert worker.exitcode == 0
+    assert {int((tmp_path / f"f{k}.txt").read_text()) for k in range(3)} == {worker.pid}
+
+
 @needs_fork
 def test_a_figure_drawn_in_a_child_is_the_figure_drawn_here(tmp_path):
     """The run's figures, drawn by a forked child, are byte for byte those drawn in this process."""
