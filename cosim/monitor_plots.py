@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -18,6 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from feeddrive.cosim.plots import draw_concurrently, envelope  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
 
@@ -31,7 +33,7 @@ def plot_motion(trace, path: Path) -> Path:
     t = trace.t
     if trace.signals.get("Im1") is not None and trace.signals.get("Im2") is not None:
         r = np.asarray(trace.signals["Im1"]) - np.asarray(trace.signals["Im2"])
-        axes[0].plot(t, r, lw=0.3, color="0.6", label="r = Im1 - Im2")
+        axes[0].plot(*envelope(t, r), lw=0.3, color="0.6", label="r = Im1 - Im2")
     else:  # one current sensor or a torque signal: the pair is not checked, and the panel says so
         why = trace.result.get("not_checked", {}).get("current", "not checked")
         axes[0].text(0.5, 0.5, f"current residue: {why}", transform=axes[0].transAxes, ha="center", va="center")
@@ -45,14 +47,14 @@ def plot_motion(trace, path: Path) -> Path:
         _legend_outside(axes[0])
     if mm is not None:
         cur, speed = mm.checks["current"], mm.checks["speed"]
-        axes[1].plot(t, cur.simulated + cur.residue, label="measured (filtered)")
-        axes[1].plot(t, cur.simulated, "--", label="simulated from the estimated model")
+        axes[1].plot(*envelope(t, cur.simulated + cur.residue), label="measured (filtered)")
+        axes[1].plot(*envelope(t, cur.simulated), "--", label="simulated from the estimated model")
         axes[1].set_ylabel("current [A]")
-        axes[2].plot(t, speed.simulated + speed.residue, label="measured (filtered)")
-        axes[2].plot(t, speed.simulated, "--", label="simulated on each constant-sign segment")
+        axes[2].plot(*envelope(t, speed.simulated + speed.residue), label="measured (filtered)")
+        axes[2].plot(*envelope(t, speed.simulated), "--", label="simulated on each constant-sign segment")
         axes[2].set_ylabel("speed [rad/s]")
         for ax, check, unit, color in ((axes[3], speed, "rad/s", "C3"), (axes[3].twinx(), cur, "A", "C0")):
-            ax.plot(t, check.residue, color=color, lw=0.6, label=f"{check.signal} residue [{unit}]")
+            ax.plot(*envelope(t, check.residue), color=color, lw=0.6, label=f"{check.signal} residue [{unit}]")
             if np.isfinite(check.noise_std):
                 ax.axhline(check.noise_std, color=color, ls=":", lw=0.8)
                 ax.axhline(-check.noise_std, color=color, ls=":", lw=0.8)
@@ -139,10 +141,17 @@ def plot_monitor(traces: Sequence, motions: Sequence[dict], folder: Path, thresh
     (``MonitorPipeline.thresholds()``).
     """
     folder.mkdir(parents=True, exist_ok=True)
-    paths = [plot_motion(tr, folder / f"monitor_motion{tr.motion}.png") for tr in traces]
-    paths += [plot_correlation(tr, folder / f"monitor_correlation{tr.motion}.png") for tr in traces
-              if tr.mismatch is not None]
+    # one job per figure, drawn at the same time in forked processes (cosim.plots.draw_concurrently)
+    jobs = [functools.partial(_one, plot_motion, tr, folder / f"monitor_motion{tr.motion}.png") for tr in traces]
+    jobs += [functools.partial(_one, plot_correlation, tr, folder / f"monitor_correlation{tr.motion}.png")
+             for tr in traces if tr.mismatch is not None]
     if any(m.get("parameters") for m in motions):
         axis = motions[-1].get("axis")
-        paths.append(plot_trends(motions, folder / "monitor_trends.png", f"axis {axis}" if axis else "", thresholds))
-    return paths
+        jobs.append(functools.partial(_one, plot_trends, motions, folder / "monitor_trends.png",
+                                      f"axis {axis}" if axis else "", thresholds))
+    return draw_concurrently(jobs)
+
+
+def _one(draw, *args) -> list[Path]:  # noqa: ANN001 - a figure function returning its file
+    """``[draw(*args)]``: a figure function as a job of draw_concurrently."""
+    return [draw(*args)]

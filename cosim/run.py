@@ -19,6 +19,7 @@ The monitor's history (SQLite) is ``monitor.db`` of the scenario; without it, ``
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import json
 import os
 import platform
@@ -135,12 +136,14 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
         signals = recorder.signals()
         if plots:
-            from feeddrive.cosim.plots import plot_run
+            from feeddrive.cosim.plots import draw_concurrently, plot_run
 
-            paths["plots"] = plot_run(recorder.time, signals, out_dir / "plots", title=scenario.name)
-            for comp in master.components.values():  # components that draw their own figures (the monitor)
-                if callable(getattr(comp, "write_plots", None)):
-                    paths["plots"] += comp.write_plots(out_dir / "plots")
+            # the run's figures and those of components that draw their own (the monitor), drawn at the
+            # same time in forked processes: matplotlib's layout and PNG rendering were half of the command
+            jobs = [lambda: plot_run(recorder.time, signals, out_dir / "plots", title=scenario.name)]
+            jobs += [functools.partial(comp.write_plots, out_dir / "plots") for comp in master.components.values()
+                     if callable(getattr(comp, "write_plots", None))]
+            paths["plots"] = draw_concurrently(jobs)
     except BaseException as exc:
         rec = master.recorder
         report |= {"status": "failed", "error": f"{type(exc).__name__}: {exc}",

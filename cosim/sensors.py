@@ -55,7 +55,6 @@ from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
-from scipy import signal
 
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import ScenarioError
@@ -178,6 +177,8 @@ def antialias_sos(order: int, cutoff_hz: float, h: float) -> np.ndarray:
     The analog prototype is discretised by the bilinear transform pre-warped at the cut-off (scipy's
     digital ``butter``): at the plant's fine step the difference to the analog filter is negligible.
     """
+    from scipy import signal  # here, not at the top: scipy.signal costs ~2 s of start-up (cosim --version)
+
     return signal.butter(order, cutoff_hz, fs=1.0 / h, output="sos")
 
 
