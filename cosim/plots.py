@@ -142,9 +142,11 @@ def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]], processes: int |
     jobs : sequence of callables
         Each draws its figures and returns the list of files it wrote.
     processes : int or None
-        Processes drawing at once, this one included.
+        Processes drawing at once, this one included (default: ``$FEEDDRIVE_PLOT_PROCESSES``, else the
+        number of CPUs; a campaign sets 1, its runs already use every CPU).
     """
-    k = max(1, min(len(jobs), processes or os.cpu_count() or 1))
+    default = int(os.environ.get("FEEDDRIVE_PLOT_PROCESSES", "0") or 0)
+    k = max(1, min(len(jobs), processes or default or os.cpu_count() or 1))
     if "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
         k = 1  # a daemonic process (a multiprocessing.Pool or Dask worker of a campaign) may have no children
     groups = [list(range(i, len(jobs), k)) for i in range(k)]

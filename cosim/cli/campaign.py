@@ -25,6 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    import os
+
+    # the runs use every CPU already: each draws its figures in turn, not in forked processes of its own
+    os.environ.setdefault("FEEDDRIVE_PLOT_PROCESSES", "1")
     from feeddrive.cosim.campaign import load_campaign, run_campaign
     from feeddrive.cosim.progress import enabled
 
