@@ -37,12 +37,12 @@ from feeddrive.cosim.nc import describe_validation_error
 from feeddrive.estimator.adequacy import check_adequacy
 from feeddrive.estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
 from feeddrive.estimator.errors import EstimatorInputError, HistoryError, NotEnoughExcitation
-from feeddrive.estimator.estimate import EstimationOptions, MotionData
+from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.history import History
 from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
 from feeddrive.estimator.motion import SAMPLING_DELAY
-from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.physical import physical_flags
 from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
 #: NC state of a high-speed motion without machining
@@ -262,7 +262,7 @@ class MonitorPipeline:
         result: dict[str, Any] = {"motion": int(motion), "start": start, "end": start + (n - 1) * h,
                                   "method": self.config.method, "validated": False, "measurements_valid": None,
                                   "reference": None, "parameters": {}, "sensor_faults": [], "gain_ratio": None,
-                                  "residues": {}, "refused": {}, "mismatch": None, "adequacy": None, "diagnosis": [], "notes": [],
+                                  "residues": {}, "mismatch": None, "adequacy": None, "diagnosis": [], "notes": [],
                                   "error": None, "verdict": None,
                                   "not_checked": checks.not_checked(checks.present(signals), "torque" in signals)}
         if self.config.known:
@@ -334,9 +334,8 @@ class MonitorPipeline:
         except EstimatorInputError as exc:
             result["not_checked"]["model (own residue)"] = f"not checked: {exc}"
         try:
-            est = estimate_parameters(  # one parameter at a time: the refused ones listed with their reason
-                MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
-                replace(self.estimation_options, offset=offset), dict(cfg.bounds))
+            est = estimate_motion(MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
+                                  replace(self.estimation_options, offset=offset))
         except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
             # this motion cannot be used (the next may); ValueError: a non-finite simulation of the instruments
             result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
@@ -345,12 +344,12 @@ class MonitorPipeline:
                 result["notes"].append("not validated: model mismatch (the residue check), which may be why the "
                                        "estimation was refused")
             return adequacy is not None and adequacy.mismatch
-        params, units = est.parameters, parameter_units("motor")  # the monitor's signals: u, i, w [rad/s]
+        params = est.parameters
+        units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
                                 for k, p in params.items()}
-        result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error),
-                   "refused": dict(est.refused), "method_used": est.method_used}  # a fallback is stated
-        flags = dict(est.flags)
+        result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
+        flags = physical_flags(est, dict(cfg.bounds))
         if flags:  # outside the physical range or the user's bounds: reported, never validated
             result["flags"] = flags
         values = {k: p.value for k, p in params.items()} | known
