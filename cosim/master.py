@@ -14,6 +14,14 @@ of the components before it and at t_n of those after it (see cosim/component.py
 compiled once into index getters on ``Y``; constants (a source given as a number) live at the end
 of ``Y``. Time is ``t0 + n h`` with an integer n.
 
+Two loops, the same results bit for bit (tests/cosim/test_fastloop.py). The fast path (``Master.loop`` says
+which ran and why; report.json has it as ``loop``): when the plant is an FMI 2.0 Co-Simulation FMU with Real
+outputs and the standard sensors follow it at the finest rate (cosim/fastloop/fine.py ``plan``), the two
+step in compiled blocks (cosim/fastloop/fineloop.c) from one tick at which a Python component steps, an
+event lands or a row is recorded to the next; the NC, the monitor and the user components step in Python
+at their rates in between, the recorder takes the rows. Otherwise (Model Exchange, FMI 3.0, other sensors,
+a plant split into FMUs, no C compiler, ``FEEDDRIVE_FASTLOOP=0``) every tick runs the Python loop.
+
 Default wiring of the standard components (by port name; a scenario's ``connections`` override it)::
 
     plant.speed_ref, plant.load           <- nc
@@ -31,6 +39,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from feeddrive.cosim import fastloop
 from feeddrive.cosim.component import Component, load_component_class
 from feeddrive.cosim.errors import InputError, ScenarioError, SimulationError, format_path
 from feeddrive.cosim.nc import SETTLING
@@ -137,6 +146,8 @@ class Master:
         self.recorder: Recorder | None = None
         self._ready = False
         self._terminated: set[str] = set()
+        #: which loop stepped the plant and the sensors, and why (set by ``run``; see cosim/fastloop)
+        self.loop = "not run"
 
     @classmethod
     def from_scenario(cls, scenario: Any) -> Master:
@@ -239,8 +250,9 @@ class Master:
         self.connections = default_connections(ports, self.plant_parts) | self.user_connections
         constants: list[float] = []
         self._getters: list[Callable] = []
+        self._input_index: dict[str, list[int]] = {}  # each component's inputs' indices in Y (the fast path reads them)
         for n, c in self.components.items():
-            idx = []
+            idx = self._input_index[n] = []
             for port in c.input_names:
                 dst = f"{n}.{port}"
                 src = self.connections.get(dst)
@@ -293,6 +305,9 @@ class Master:
         comps = list(self.components.values())
         Y = [0.0] * self.n_signals + self._constants
         schedule, period = self._schedule()
+        fine, self.loop = fastloop.plan(self)
+        fast = self._fast_tables(schedule, period) if fine is not None else None
+        where: list[Any] = [0, None]  # the fast path's tick and component, for the error message
         for c in comps:
             a, b = self._slices[c]
             Y[a:b] = c.get_outputs()
@@ -309,24 +324,32 @@ class Master:
                       leave=False, desc="co-simulation", bar_format="{desc}: {percentage:3.0f}%|{bar}| "
                       "{n:.2f}/{total:.2f} s [{elapsed}<{remaining}, {rate_fmt}]") as bar:
                 for k0 in range(0, ticks, BLOCK * m):
-                    for k in range(k0, min(k0 + BLOCK * m, ticks)):
-                        while k == next_event:
-                            _, name, param, value = events[e]
-                            c = self.components[name]
-                            c.set_parameter(param, value)
-                            e += 1
-                            next_event = events[e][0] if e < len(events) else -1
-                        for c, set_inputs, getter, step, get_outputs, a, b, d in schedule[k % period]:
-                            set_inputs(getter(Y))
-                            step(k // d)
-                            Y[a:b] = get_outputs()
-                        if m == 1 or (k + 1) % m == 0:
-                            rows.append(rec(Y))
+                    k1 = min(k0 + BLOCK * m, ticks)
+                    if fine is not None:  # the plant and the sensors in compiled blocks
+                        e, next_event = self._fast_block(fine, fast, k0, k1, Y, rows, e, next_event, where)
+                        k = k1 - 1
+                    else:
+                        for k in range(k0, k1):
+                            while k == next_event:
+                                _, name, param, value = events[e]
+                                c = self.components[name]
+                                c.set_parameter(param, value)
+                                e += 1
+                                next_event = events[e][0] if e < len(events) else -1
+                            for c, set_inputs, getter, step, get_outputs, a, b, d in schedule[k % period]:
+                                set_inputs(getter(Y))
+                                step(k // d)
+                                Y[a:b] = get_outputs()
+                            if m == 1 or (k + 1) % m == 0:
+                                rows.append(rec(Y))
                     recorder.extend(rows)
                     rows.clear()
                     bar.update((k + 1 - k0) // m)
             recorder.extend(rows)  # the t0 row when there are no steps
         except BaseException as exc:
+            if fine is not None:
+                fine.sync()
+                k, c = where
             recorder.extend(rows)
             if signals_path is not None:
                 recorder.write_csv(signals_path)
@@ -336,9 +359,69 @@ class Master:
             name = next((k for k, v in self.components.items() if v is c), "?")
             raise SimulationError(f"{name}: {type(exc).__name__}: {exc} (in step {max(k, 0) // m} from t="
                                   f"{self.t0 + max(k, 0) * self.hf:.6g} s)") from exc
+        if fine is not None:
+            fine.sync()
         if signals_path is not None:
             recorder.write_csv(signals_path)
         return recorder
+
+    # -- the fast path: plant and sensors in compiled blocks (cosim/fastloop) ----------------------------
+    def _fast_tables(self, schedule: list[list[tuple]], period: int) -> tuple:
+        """Per tick residue modulo ``P = lcm(period, m)``: the entries before the plant and after the sensors,
+        whether a row is recorded, and the ticks from there to the end of the block (a tick after which a
+        Python component steps or a row is recorded, or before one at which a Python component steps)."""
+        names = list(self.components)
+        i_plant, i_sensors = names.index("plant"), names.index("sensors")
+        order = {c: j for j, c in enumerate(self.components.values())}
+        P = math.lcm(period, self.m)
+        pre = [[x for x in schedule[r % period] if order[x[0]] < i_plant] for r in range(P)]
+        post = [[x for x in schedule[r % period] if order[x[0]] > i_sensors] for r in range(P)]
+        is_rec = [self.m == 1 or (r + 1) % self.m == 0 for r in range(P)]
+        ends = [bool(post[t] or is_rec[t] or pre[(t + 1) % P]) for t in range(P)]
+        span = [0] * P
+        nxt = next(t for t in range(P) if ends[t]) + P  # the first end, one period later
+        for r in range(P - 1, -1, -1):
+            nxt = r if ends[r] else nxt
+            span[r] = nxt - r + 1
+        return pre, post, is_rec, span, P
+
+    def _fast_block(self, fine: Any, fast: tuple, k: int, k1: int, Y: list, rows: list, e: int, next_event: int,
+                    where: list) -> tuple[int, int]:
+        """Ticks k .. k1 - 1 with the plant and the sensors in compiled blocks; returns the events' state."""
+        pre, post, is_rec, span, P = fast
+        events, rec = self._events, self._rec_get
+        plant, sensors = fine.plant, fine.sensors
+        set_plant, get_plant = plant.set_inputs, self._getters[list(self.components).index("plant")]
+        run, out = fine.run, fine.out
+        a, b = self._slices[plant][0], self._slices[sensors][1]
+        while k < k1:
+            where[0] = k
+            while k == next_event:
+                _, name, param, value = events[e]
+                where[1] = c = self.components[name]
+                c.set_parameter(param, value)
+                if c is sensors:
+                    fine.noise_changed()
+                e += 1
+                next_event = events[e][0] if e < len(events) else -1
+            r = k % P
+            if pre[r]:
+                _step_entries(pre[r], Y, k, where)
+            n = min(span[r], k1 - k)
+            if k < next_event < k + n:
+                n = next_event - k
+            where[1] = plant
+            set_plant(get_plant(Y))
+            run(k, n, 1)
+            Y[a:b] = out
+            k += n
+            where[0] = last = k - 1
+            r = last % P
+            if post[r]:
+                _step_entries(post[r], Y, last, where)
+            if is_rec[r]:
+                rows.append(rec(Y))
+        return e, next_event
 
     def _schedule(self) -> tuple[list[list[tuple]], int]:
         """Per tick residue ``k % period``: the components that step at tick k, in stepping order.
@@ -381,6 +464,15 @@ class Master:
                 c.terminate()
             except Exception:  # noqa: BLE001 - the contract says terminate must not raise; keep going
                 pass
+
+
+def _step_entries(entries: list[tuple], Y: list, k: int, where: list) -> None:
+    """Step the schedule's ``entries`` at tick k in order (``where[1]``: the component stepping)."""
+    for c, set_inputs, getter, step, get_outputs, a, b, d in entries:
+        where[1] = c
+        set_inputs(getter(Y))
+        step(k // d)
+        Y[a:b] = get_outputs()
 
 
 def _getter(idx: Sequence[int]) -> Callable[[list], tuple]:
