@@ -387,40 +387,54 @@ class Master:
 
     def _fast_block(self, fine: Any, fast: tuple, k: int, k1: int, Y: list, rows: list, e: int, next_event: int,
                     where: list) -> tuple[int, int]:
-        """Ticks k .. k1 - 1 with the plant and the sensors in compiled blocks; returns the events' state."""
+        """Ticks k .. k1 - 1 with the plant and the sensors in compiled blocks; returns the events' state.
+
+        On a failure ``where`` gets the tick and the component (for the master's error message)."""
         pre, post, is_rec, span, P = fast
         events, rec = self._events, self._rec_get
         plant, sensors = fine.plant, fine.sensors
         set_plant, get_plant = plant.set_inputs, self._getters[list(self.components).index("plant")]
-        run, out = fine.run, fine.out
+        crun, state, out = fine.crun, fine.address, fine.out
         a, b = self._slices[plant][0], self._slices[sensors][1]
-        while k < k1:
-            where[0] = k
-            while k == next_event:
-                _, name, param, value = events[e]
-                where[1] = c = self.components[name]
-                c.set_parameter(param, value)
-                if c is sensors:
-                    fine.noise_changed()
-                e += 1
-                next_event = events[e][0] if e < len(events) else -1
-            r = k % P
-            if pre[r]:
-                _step_entries(pre[r], Y, k, where)
-            n = min(span[r], k1 - k)
-            if k < next_event < k + n:
-                n = next_event - k
-            where[1] = plant
-            set_plant(get_plant(Y))
-            run(k, n, 1)
-            Y[a:b] = out
-            k += n
-            where[0] = last = k - 1
-            r = last % P
-            if post[r]:
-                _step_entries(post[r], Y, last, where)
-            if is_rec[r]:
-                rows.append(rec(Y))
+        c = None
+        try:
+            while k < k1:
+                if k == next_event:
+                    plant._k = k  # the time of an event's failure (FMUComponent._raise)
+                    while k == next_event:
+                        _, name, param, value = events[e]
+                        c = self.components[name]
+                        c.set_parameter(param, value)
+                        if c is sensors:
+                            fine.noise_changed()
+                        e += 1
+                        next_event = events[e][0] if e < len(events) else -1
+                r = k % P
+                for c, set_inputs, getter, step, get_outputs, ya, yb, d in pre[r]:
+                    set_inputs(getter(Y))
+                    step(k // d)
+                    Y[ya:yb] = get_outputs()
+                n = span[r]
+                if k + n > k1:
+                    n = k1 - k
+                if k < next_event < k + n:
+                    n = next_event - k
+                c = plant
+                set_plant(get_plant(Y))
+                if crun(state, k, n, 1):  # stopped inside: new noise rows (then go on), or a failure (raises)
+                    fine.resume(k, n)
+                Y[a:b] = out[:]
+                k += n
+                r = (k - 1) % P
+                for c, set_inputs, getter, step, get_outputs, ya, yb, d in post[r]:
+                    set_inputs(getter(Y))
+                    step((k - 1) // d)
+                    Y[ya:yb] = get_outputs()
+                if is_rec[r]:
+                    rows.append(rec(Y))
+        except BaseException:
+            where[:] = [k, c]
+            raise
         return e, next_event
 
     def _schedule(self) -> tuple[list[list[tuple]], int]:
@@ -464,15 +478,6 @@ class Master:
                 c.terminate()
             except Exception:  # noqa: BLE001 - the contract says terminate must not raise; keep going
                 pass
-
-
-def _step_entries(entries: list[tuple], Y: list, k: int, where: list) -> None:
-    """Step the schedule's ``entries`` at tick k in order (``where[1]``: the component stepping)."""
-    for c, set_inputs, getter, step, get_outputs, a, b, d in entries:
-        where[1] = c
-        set_inputs(getter(Y))
-        step(k // d)
-        Y[a:b] = get_outputs()
 
 
 def _getter(idx: Sequence[int]) -> Callable[[list], tuple]:

@@ -38,7 +38,7 @@ class _Fine(ctypes.Structure):
         ("zst", _d * (MAX_FILTERS * MAX_SECTIONS * 2)), ("lp", _d * 5), ("kinds", _i * 5), ("any_kind", _i),
         ("true_index", _l * 5), ("true_const", _d * 5), ("rows", _p), ("krow", _l), ("block", _l),
         ("gains", _d * 6), ("q", _d), ("conv", _d), ("inv_wh", _d), ("buffer", _p), ("window", _l),
-        ("jbuf", _l), ("have_buffer", _i), ("out", _p), ("tick", _l), ("function", _i), ("status", _i),
+        ("jbuf", _l), ("have_buffer", _i), ("out", _p), ("tick", _l), ("function", _i), ("status", _i), ("status_code", _i),
     ]
 
 
@@ -95,8 +95,10 @@ class FineLoop:
 
     def __init__(self, lib: Any, master: Any, plant: Any, sensors: Any) -> None:
         self.plant, self.sensors = plant, sensors
-        self._run = lib.fine_run
+        #: ``fine_run(address, k, n, hold)``: the compiled loop, its state's address (the master calls it directly)
+        self.crun = lib.fine_run
         self.s = s = _Fine()
+        self.address = ctypes.addressof(s)
         self._keep: list[Any] = []
         fmu = plant._fmu
         code = fmi_progress.CODE
@@ -175,21 +177,26 @@ class FineLoop:
 
     def run(self, k: int, n: int, hold: int) -> None:
         """Step ticks k .. k + n - 1 (``hold``: the plant's inputs were set since the last call)."""
+        if self.crun(self.address, k, n, hold):
+            self.resume(k, n)
+
+    def resume(self, k: int, n: int) -> None:
+        """After ``fine_run`` stopped at ``s.tick`` inside ticks k .. k + n - 1: draw new noise rows and go on,
+        or raise the failure as the Python loop would."""
         s = self.s
         while True:
-            status = self._run(_addr(s), k, n, hold)
-            if status == DONE:
-                self.plant._k = k + n  # the time of an event's failure (FMUComponent._raise)
-                return
-            self._failure(status, k + n)
-            # a new block of noise rows: drawn by the sensors as the Python loop would, then go on
-            self.sensors._k = s.krow
+            status = s.status_code
+            self._failure(status)
+            self.sensors._k = s.krow  # a new block of noise rows: drawn by the sensors as the Python loop would
             self.sensors._new_block()
             self.noise_changed(reset=True)
             n -= s.tick - k
-            k, hold = s.tick, 0
+            k = s.tick
+            if not self.crun(self.address, k, n, 0):
+                self.plant._k = k + n
+                return
 
-    def _failure(self, status: int, end: int) -> None:
+    def _failure(self, status: int) -> None:
         s, plant = self.s, self.plant
         if status == FMI_ERROR:
             plant._k = s.tick

@@ -79,6 +79,7 @@ typedef struct {
     /* where the block stopped */
     long tick;
     int function, status;
+    int status_code;       /* what fine_run returned */
 } fine_t;
 
 enum { FINE_DONE = 0, FINE_FMI_ERROR = 1, FINE_NON_FINITE = 2, FINE_NEED_ROWS = 3 };
@@ -127,7 +128,14 @@ static void measure(fine_t *s, const double *tr) {
 
 /* Step ticks n = first .. first + count - 1; returns FINE_DONE, or where and why it stopped in s->tick.
  * hold: the plant's inputs were just set (plant._u): hold them over the ticks, until the next call with hold. */
+static int run(fine_t *s, long first, long count, int hold);
+
 int fine_run(fine_t *s, long first, long count, int hold) {
+    s->status_code = run(s, first, count, hold);
+    return s->status_code;
+}
+
+static int run(fine_t *s, long first, long count, int hold) {
     long end = first + count;
     if (hold)
         for (long i = 0; i < s->nu; i++) s->base[i] = s->u[i];
