@@ -125,3 +125,20 @@ def test_model_exchange_and_the_switch_take_the_python_loop(monkeypatch, feeddri
     with Master.from_scenario(scenario_from_dict(data)) as master:
         master.run()
         assert master.loop == "python loop: FEEDDRIVE_FASTLOOP=0"
+
+
+def test_a_supervised_run_takes_the_compiled_loop_and_writes_the_same_csv(monkeypatch, feeddrive_fmu, tmp_path):
+    """Containment (``cosim run``: a forked child with the shared progress record) keeps the fast path."""
+    import json
+
+    from feeddrive.cosim.run import run_scenario
+    from feeddrive.cosim.supervise import run_supervised
+
+    scenario = scenario_from_dict(example("nc_cycle.yaml", stop_time=0.2, monitor=None))
+    run_supervised(scenario, tmp_path / "child", plots=False)
+    report = json.loads((tmp_path / "child" / "report.json").read_text())
+    assert report["status"] == "ok" and report["loop"] == COMPILED
+    monkeypatch.setenv("FEEDDRIVE_FASTLOOP", "0")
+    run_scenario(scenario, tmp_path / "python", plots=False)
+    assert json.loads((tmp_path / "python" / "report.json").read_text())["loop"] == "python loop: FEEDDRIVE_FASTLOOP=0"
+    assert (tmp_path / "child" / "signals.csv").read_bytes() == (tmp_path / "python" / "signals.csv").read_bytes()
