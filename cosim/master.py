@@ -282,6 +282,7 @@ class Master:
                     raise self._error(("record", k), f"unknown signal {name!r}; expected one of: {', '.join(names)}")
                 rec.append(index[name])
         self._rec_get = _getter(rec)
+        self._rec_index = rec
         self.recorder = Recorder([names[j] for j in rec], [units[j] for j in rec], self.n_steps + 1, self.t0, self.h)
         order = list(self.components)
         self._events = []
@@ -377,20 +378,25 @@ class Master:
         pre = [[x for x in schedule[r % period] if order[x[0]] < i_plant] for r in range(P)]
         post = [[x for x in schedule[r % period] if order[x[0]] > i_sensors] for r in range(P)]
         is_rec = [self.m == 1 or (r + 1) % self.m == 0 for r in range(P)]
-        ends = [bool(post[t] or is_rec[t] or pre[(t + 1) % P]) for t in range(P)]
+        ends = [bool(post[t] or pre[(t + 1) % P]) for t in range(P)]
+        if not any(ends):  # nothing in Python at all: blocks of one period
+            ends[P - 1] = True
         span = [0] * P
         nxt = next(t for t in range(P) if ends[t]) + P  # the first end, one period later
         for r in range(P - 1, -1, -1):
             nxt = r if ends[r] else nxt
             span[r] = nxt - r + 1
-        return pre, post, is_rec, span, P
+        # blocks from r that hold a recording tick before their last one: the compiled loop records those rows
+        inside = [any(is_rec[(r + j) % P] for j in range(span[r] - 1)) for r in range(P)]
+        return pre, post, is_rec, span, P, inside
 
     def _fast_block(self, fine: Any, fast: tuple, k: int, k1: int, Y: list, rows: list, e: int, next_event: int,
                     where: list) -> tuple[int, int]:
         """Ticks k .. k1 - 1 with the plant and the sensors in compiled blocks; returns the events' state.
 
         On a failure ``where`` gets the tick and the component (for the master's error message)."""
-        pre, post, is_rec, span, P = fast
+        pre, post, is_rec, span, P, inside = fast
+        recorder = self.recorder
         events, rec = self._events, self._rec_get
         plant, sensors = fine.plant, fine.sensors
         set_plant, get_plant = plant.set_inputs, self._getters[list(self.components).index("plant")]
@@ -409,7 +415,7 @@ class Master:
                             fine.noise_changed()
                         e += 1
                         next_event = events[e][0] if e < len(events) else -1
-                r = k % P
+                r0 = r = k % P
                 for c, set_inputs, getter, step, get_outputs, ya, yb, d in pre[r]:
                     set_inputs(getter(Y))
                     step(k // d)
@@ -423,6 +429,8 @@ class Master:
                 set_plant(get_plant(Y))
                 if crun(state, k, n, 1):  # stopped inside: new noise rows (then go on), or a failure (raises)
                     fine.resume(k, n)
+                if inside[r0]:
+                    fine.take_rows(Y, rows, recorder)
                 Y[a:b] = out[:]
                 k += n
                 r = (k - 1) % P
@@ -434,6 +442,8 @@ class Master:
                     rows.append(rec(Y))
         except BaseException:
             where[:] = [k, c]
+            if fine.s.rec_rows:  # the rows recorded in the block before its failure
+                fine.take_rows(Y, rows, recorder)
             raise
         return e, next_event
 

@@ -38,7 +38,8 @@ class _Fine(ctypes.Structure):
         ("zst", _d * (MAX_FILTERS * MAX_SECTIONS * 2)), ("lp", _d * 5), ("kinds", _i * 5), ("any_kind", _i),
         ("true_index", _l * 5), ("true_const", _d * 5), ("rows", _p), ("krow", _l), ("block", _l),
         ("gains", _d * 6), ("q", _d), ("conv", _d), ("inv_wh", _d), ("buffer", _p), ("window", _l),
-        ("jbuf", _l), ("have_buffer", _i), ("out", _p), ("tick", _l), ("function", _i), ("status", _i), ("status_code", _i),
+        ("jbuf", _l), ("have_buffer", _i), ("out", _p),
+        ("rec_buf", _p), ("rec_m", _l), ("n_rec", _l), ("rec_rows", _l), ("rec_cap", _l), ("rec_src", _p), ("tick", _l), ("function", _i), ("status", _i), ("status_code", _i),
     ]
 
 
@@ -131,6 +132,35 @@ class FineLoop:
         self.out = (_d * (ny + 8))()
         s.out = _addr(self.out)
         self._load_sensors(master, a)
+        self._load_recorder(master, a)
+
+    def _load_recorder(self, master: Any, a: int) -> None:
+        """Recorded columns from the block (``rec_src``) and from the rest of the bus (``static``)."""
+        import numpy as np
+
+        from feeddrive.cosim.master import BLOCK
+
+        s, width = self.s, self.plant._ny + 8
+        cols = master._rec_index
+        self._rec_src = (_l * max(len(cols), 1))(*[i - a if a <= i < a + width else -1 for i in cols])
+        #: recorded columns not from the block, and their index in the master's bus Y
+        self.static_cols = [j for j, i in enumerate(cols) if not a <= i < a + width]
+        self.static_src = [cols[j] for j in self.static_cols]
+        self.rec_buf = np.empty((BLOCK, max(len(cols), 1)))
+        s.rec_buf, s.rec_m, s.n_rec, s.rec_cap = self.rec_buf.ctypes.data, master.m, len(cols), BLOCK
+        s.rec_src = _addr(self._rec_src)
+
+    def take_rows(self, Y: list, rows: list, recorder: Any) -> None:
+        """Hand the rows the block recorded to ``recorder`` after ``rows`` (the master's, in order), the columns
+        from outside the block taken from ``Y`` (constant over the block: no Python component stepped in it)."""
+        s = self.s
+        block = self.rec_buf[:s.rec_rows]
+        s.rec_rows = 0
+        if self.static_cols:
+            block[:, self.static_cols] = [Y[i] for i in self.static_src]
+        recorder.extend(rows)
+        rows.clear()
+        recorder.extend(block)
 
     def _load_sensors(self, master: Any, a: int) -> None:
         sn, s = self.sensors, self.s

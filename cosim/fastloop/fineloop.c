@@ -76,6 +76,10 @@ typedef struct {
     long window, jbuf;
     int have_buffer;
     double *out;           /* plant outputs (ny) then the 8 sensor outputs */
+    /* recorder: rows at the recording ticks inside the block (the last tick's row is the master's) */
+    double *rec_buf;       /* rec_cap rows of n_rec columns */
+    long rec_m, n_rec, rec_rows, rec_cap;
+    const long *rec_src;   /* each recorded column's index in out, or -1 (filled by the master) */
     /* where the block stopped */
     long tick;
     int function, status;
@@ -201,6 +205,12 @@ static int run(fine_t *s, long first, long count, int hold) {
             s->lp[s->filt_channel[f]] = x;
         }
         if ((n + 1) % s->m == 0) measure(s, tr);
+        if (s->n_rec && (n + 1) % s->rec_m == 0 && n < end - 1 && s->rec_rows < s->rec_cap) {
+            double *row = s->rec_buf + s->rec_rows * s->n_rec;
+            for (long j = 0; j < s->n_rec; j++)
+                if (s->rec_src[j] >= 0) row[j] = s->out[s->rec_src[j]];
+            s->rec_rows++;
+        }
     }
     s->tick = end;
     return FINE_DONE;

@@ -97,9 +97,13 @@ def test_filters_instant_sampling_events_and_noise_blocks(monkeypatch, feeddrive
     assert big.any() and np.median(i1[late][big] / i2[late][big]) == pytest.approx(1.2, rel=0.02)
 
 
-def test_an_fmu_failure_in_a_compiled_block_is_the_python_loops(monkeypatch, feeddrive_fmu, tmp_path):
-    """An FMU that fails inside a block: the same error, time and rows as the Python loop."""
+@pytest.mark.parametrize("cycle", [None, 2.0e-3])
+def test_an_fmu_failure_in_a_compiled_block_is_the_python_loops(monkeypatch, feeddrive_fmu, tmp_path, cycle):
+    """An FMU that fails inside a block (with an NC cycle of 20 steps: after rows the block recorded itself):
+    the same error, time and rows as the Python loop."""
     data = example("tool_change.yaml", stop_time=0.3, monitor=None)
+    if cycle:
+        data["nc"] = data["nc"] | {"cycle": cycle}
     data["events"] = [{"time": 0.2503, "target": "plant.L", "value": 1e-9}]  # the RK4 step blows up
     seen = []
     for flag in ("0", "1"):
