@@ -146,3 +146,20 @@ def test_a_supervised_run_takes_the_compiled_loop_and_writes_the_same_csv(monkey
     run_scenario(scenario, tmp_path / "python", plots=False)
     assert json.loads((tmp_path / "python" / "report.json").read_text())["loop"] == "python loop: FEEDDRIVE_FASTLOOP=0"
     assert (tmp_path / "child" / "signals.csv").read_bytes() == (tmp_path / "python" / "signals.csv").read_bytes()
+
+
+def test_without_a_c_compiler_the_python_loop_runs_and_says_why(monkeypatch, feeddrive_fmu, tmp_path):
+    from feeddrive.cosim.fastloop import build
+
+    data = example("tool_change.yaml", stop_time=0.01, monitor=None)
+    scenario = scenario_from_dict(data)  # the built-in FMU, from the cache
+    monkeypatch.setattr(build, "_cache_root", lambda: tmp_path)  # no compiled loop there yet
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    build.library.cache_clear()
+    try:
+        with Master.from_scenario(scenario) as master:
+            rec = master.run()
+        assert master.loop == f"python loop: no C compiler {str(tmp_path / 'no-such-cc')!r} (set $CC)"
+        assert rec.n == 101
+    finally:
+        build.library.cache_clear()  # the next run builds with the real compiler again
