@@ -163,3 +163,59 @@ def test_without_a_c_compiler_the_python_loop_runs_and_says_why(monkeypatch, fee
         assert rec.n == 101
     finally:
         build.library.cache_clear()  # the next run builds with the real compiler again
+
+
+NAN_AXIS = '''
+import math
+
+from pythonfmu import Fmi2Causality, Fmi2Slave, Real
+
+
+class NanAxis(Fmi2Slave):
+    """An ideal speed-controlled axis whose current output turns NaN from t = 0.0025 s on."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.w_ref = self.Tl = self.u = self.i = self.w = self.x = 0.0
+        for name in ("w_ref", "Tl"):
+            self.register_variable(Real(name, causality=Fmi2Causality.input))
+        for name in ("u", "i", "w", "x"):
+            self.register_variable(Real(name, causality=Fmi2Causality.output))
+
+    def do_step(self, t, dt):
+        self.w = self.w_ref
+        self.x += self.w_ref * dt * 0.02 / (2 * math.pi * 3.0)
+        self.u = 0.1 * self.w
+        self.i = math.nan if t + dt > 0.0025 else 0.0
+        return True
+'''
+
+
+def test_a_non_finite_output_in_a_compiled_block_is_the_python_loops(monkeypatch, tmp_path):
+    """A pythonfmu plant (the FMU calls back into Python from the compiled loop) whose output turns NaN."""
+    import textwrap
+
+    from pythonfmu.builder import FmuBuilder
+
+    from feeddrive.cosim.fmu_adapter import NonFiniteOutput
+
+    script = tmp_path / "nan_axis.py"
+    script.write_text(textwrap.dedent(NAN_AXIS))
+    fmu = FmuBuilder.build_FMU(script, dest=tmp_path)
+    data = {"name": "nan", "step": 1.0e-3, "stop_time": 0.01,
+            "plant": {"fmu": str(fmu), "interface": "cs", "map": {
+                "speed_ref": {"var": "w_ref"}, "load": {"var": "Tl"}, "voltage": {"var": "u"},
+                "current": {"var": "i"}, "speed": {"var": "w"}, "position": {"var": "x"}}},
+            "sensors": {"seed": 1}, "nc": {"program": [{"rapid": {"to": 0.001}}]}}
+    seen = []
+    for flag in ("0", "1"):
+        monkeypatch.setenv("FEEDDRIVE_FASTLOOP", flag)
+        with Master.from_scenario(scenario_from_dict(data)) as master:
+            with pytest.raises(NonFiniteOutput) as info:
+                master.run()
+            seen.append((master.loop, str(info.value), master.recorder.data[:master.recorder.n].copy()))
+    assert seen[1][0] == COMPILED
+    assert seen[1][1] == seen[0][1] == ("plant: fmi2GetReal returned nan for current (FMU variable i) at t=0.003 s; "
+                                        "expected a finite number")
+    np.testing.assert_array_equal(seen[1][2], seen[0][2])
+    assert len(seen[1][2]) == 3  # t = 0, 0.001, 0.002 s
