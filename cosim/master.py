@@ -369,8 +369,9 @@ class Master:
     # -- the fast path: plant and sensors in compiled blocks (cosim/fastloop) ----------------------------
     def _fast_tables(self, schedule: list[list[tuple]], period: int) -> tuple:
         """Per tick residue modulo ``P = lcm(period, m)``: the entries before the plant and after the sensors,
-        whether a row is recorded, and the ticks from there to the end of the block (a tick after which a
-        Python component steps or a row is recorded, or before one at which a Python component steps)."""
+        whether a row is recorded, the ticks from there to the end of the block (a tick after which a Python
+        component steps, or before one at which a Python component steps) and whether the compiled loop records
+        rows in such a block (a recording tick before its last one, whose row the master records)."""
         names = list(self.components)
         i_plant, i_sensors = names.index("plant"), names.index("sensors")
         order = {c: j for j, c in enumerate(self.components.values())}
@@ -386,8 +387,7 @@ class Master:
         for r in range(P - 1, -1, -1):
             nxt = r if ends[r] else nxt
             span[r] = nxt - r + 1
-        # blocks from r that hold a recording tick before their last one: the compiled loop records those rows
-        inside = [any(is_rec[(r + j) % P] for j in range(span[r] - 1)) for r in range(P)]
+        inside = [self.m - 1 - r % self.m < span[r] - 1 for r in range(P)]  # the next recording tick is inside
         return pre, post, is_rec, span, P, inside
 
     def _fast_block(self, fine: Any, fast: tuple, k: int, k1: int, Y: list, rows: list, e: int, next_event: int,
