@@ -30,6 +30,7 @@ from fmpy.fmi3 import FMU3Model, FMU3Slave
 from feeddrive.cosim import fmi_progress
 from feeddrive.cosim.errors import FMIError, SimulationError
 from feeddrive.cosim.fmu_adapter import FMUComponent
+from feeddrive.cosim.fmu_inspect import with_intermediate_update
 
 _SET, _DO_STEP, _GET = (fmi_progress.CODE[f] for f in ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"))
 
@@ -41,6 +42,7 @@ class FMU3Component(FMUComponent):
     STATUS = ("fmi3OK", "fmi3Warning", "fmi3Discard", "fmi3Error", "fmi3Fatal")
 
     def _open(self, md: Any, cs: bool) -> Any:
+        with_intermediate_update(md, self._unzip)  # before the hold is decided (fmpy does not read it)
         cls = FMU3Slave if cs else FMU3Model
         kind = md.coSimulation if cs else md.modelExchange
         return cls(guid=md.guid, unzipDirectory=self._unzip, modelIdentifier=kind.modelIdentifier,
@@ -145,7 +147,7 @@ class FMU3Component(FMUComponent):
             values, dt = self._dvalues, t - self._t0 - self._k * self._h
             for k, j in self._foh:
                 values[j] = self._u[k] + self._du[j] * dt
-            self._set_f64(self._c, self._dvr, len(values), values, len(values))
+            self._set_f64(self._c, self._dvr, len(self._dvr), values, len(values))
         except FMIError:  # recorded by the choke point; re-raised after fmi3DoStep returns
             pass
 

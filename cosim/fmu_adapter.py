@@ -196,8 +196,8 @@ class FMUComponent(ModelExchange, Component):
             self.input_hold = cfg.hold(md)
         except ValueError as exc:
             raise ScenarioError(f"{self.name}: plant.input_hold: {exc}") from None
-        if self.input_hold == "foh":
-            self._start_foh(variables, in_vars[:len(in_roles)])
+        if self.input_hold == "foh":  # the roles and an FMU component's own inputs (an array: several values)
+            self._start_foh(variables, in_vars, [1] * len(in_roles) + [v.size for v in own_in])
         if cs:
             self._start_cs()
         else:
@@ -274,12 +274,14 @@ class FMUComponent(ModelExchange, Component):
         self._get_real(c, self._yvr, self._ny, self._y)
         rec.function = 0
 
-    def _start_foh(self, variables: dict, in_vars: list[str]) -> None:
+    def _start_foh(self, variables: dict, in_vars: list[str], sizes: list[int]) -> None:
+        starts = [sum(sizes[:k]) for k in range(len(sizes))]  # index of each variable's first value in _u
         cont = [k for k, name in enumerate(in_vars) if variables[name].variability == "continuous"]
-        self._foh = [(k, j) for j, k in enumerate(cont)]  # (input index, derivative index)
+        values = [starts[k] + i for k in cont for i in range(sizes[k])]
+        self._foh = [(k, j) for j, k in enumerate(values)]  # (value index, derivative index)
         self._dvr = (ctypes.c_uint * len(cont))(*[self._uvr[k] for k in cont])
-        self._du = (ctypes.c_double * len(cont))()
-        self._order = (ctypes.c_int * len(cont))(*[1] * len(cont))
+        self._du = (ctypes.c_double * len(values))()
+        self._order = (ctypes.c_int * len(values))(*[1] * len(values))
         self._u_prev: list[float] | None = None  # the values of the previous step, from the first step on
         self._ramp_start = self._t0  # Model Exchange: t_n of the current ramp
         if self.config.interface == "cs":

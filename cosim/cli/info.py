@@ -73,6 +73,10 @@ def main(args: argparse.Namespace) -> int:
     widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
     for r in rows:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
+    from feeddrive.cosim.fmu_inspect import input_handling
+
+    for line in input_handling(md):
+        print(f"  {line}")
     missing = _missing_binary(path, md)
     if missing:  # the variables are worth reading all the same (to write a map); running it is not possible
         print(f"cosim info: warning: {path}: {missing}; cosim run refuses it (exit 2)", file=sys.stderr)
