@@ -41,6 +41,7 @@ from fmpy.fmi2 import (
 from feeddrive.cosim import fmi_progress, fmu_ports
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import FMIError, ScenarioError
+from feeddrive.cosim.fmu_components import convert_links
 from feeddrive.cosim.fmu_me import MEAN_ROLES, ModelExchange
 from feeddrive.cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, PlantConfig
 
@@ -187,6 +188,7 @@ class FMUComponent(ModelExchange, Component):
         self._in_lin = [(k, *roles[r].linear()) for k, r in enumerate(in_roles)]
         self._in_lin += [(k, 1.0, 0.0) for k in range(len(in_roles), len(in_roles) + n_own)]
         self._out_lin = [roles[r].linear() for r in out_roles] + [(1.0, 0.0)] * n_extra
+        self.input_units, self._in_lin = convert_links(self.input_names, self.input_units, self._in_lin, cfg._links)
         if all(s == 1 and o == 0 for _, s, o in self._in_lin):
             self.set_inputs = self._set_inputs_identity
         if all(s == 1 and o == 0 for s, o in self._out_lin):
