@@ -178,8 +178,6 @@ def _output_unit(s: Any, fmus: dict, descriptions: dict, source: str) -> str | N
 
 def _link_units(s: Any, specs: list, descriptions: dict) -> None:
     """Each FMU component's input links (``config._links``), their units compared and converted with pint."""
-    import pint
-
     from feeddrive.cosim.unit_map import _affine
 
     fmus = {spec.name: spec for spec in specs if spec.fmu is not None}
@@ -197,6 +195,8 @@ def _link_units(s: Any, specs: list, descriptions: dict) -> None:
             su = _output_unit(s, fmus, descriptions, src) if isinstance(src, str) else None
             scale, offset = 1.0, 0.0
             if su and unit and su != unit:
+                import pint  # only here: its import is not free
+
                 try:
                     scale, offset = _affine(su, None, unit)  # x_fmu = scale * source + offset
                 except pint.errors.DimensionalityError:

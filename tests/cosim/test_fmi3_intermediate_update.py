@@ -38,9 +38,22 @@ def run(fmu: Path, **config) -> tuple[dict[str, np.ndarray], dict]:
         return signals, master.components["ri"].report()
 
 
-def test_the_master_sets_the_ramped_input_inside_each_step(fmus):
+def test_the_master_sets_the_ramped_input_inside_each_step(fmus, monkeypatch):
+    from feeddrive.cosim import fmi_progress
+    from feeddrive.cosim.fmi3_adapter import FMU3Component
+
+    seen = []  # the supervisor's record while the FMU asks (inside fmi3DoStep): function and time t_n
+    original = FMU3Component._intermediate_update
+
+    def spy(self, env, t, *args):  # noqa: ANN001
+        seen.append((self._rec.function, self._rec.time, t))
+        return original(self, env, t, *args)
+    monkeypatch.setattr(FMU3Component, "_intermediate_update", spy)
     s, report = run(fmus[True])
     assert report["input_hold"] == "foh"
+    calls = [(f, tn, t) for f, tn, t in seen if f]  # the framework also calls it after each substep (no request)
+    assert {f for f, _, _ in calls} == {fmi_progress.CODE["fmi3DoStep"]}
+    assert all(0 < t - tn <= H * (1 + 1e-9) for _, tn, t in calls) and len(seen) == 8 * N
     t = np.arange(N + 1) * H
     r = A + B * t
     dx = np.diff(s["ri.x"])
