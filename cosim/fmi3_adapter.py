@@ -10,7 +10,7 @@ message, and Model Exchange asks the FMU itself for its numbers of states and ev
 Every status-returning fmi3 function passes through the same choke point (``_check`` -> ``_raise``), so
 fmi3Discard, fmi3Error and fmi3Fatal raise :class:`cosim.errors.FMIError` naming the fmi3 function; the
 Co-Simulation hot path (set / doStep / get) compares the status itself and calls ``_raise`` (no Python
-errcheck callback per call: one more FMU costs its doStep plus 1.2 to 1.6 us, benchmarks/bench_multi_fmu.py).
+errcheck callback per call: one more FMU costs its doStep plus 0.8 to 1.6 us, benchmarks/bench_multi_fmu.py).
 
 Input hold in Co-Simulation. FMI 3.0 has no fmi3SetInputDerivatives: a first-order hold is possible
 only through intermediate update, when the FMU declares ``providesIntermediateUpdate`` and each of its
