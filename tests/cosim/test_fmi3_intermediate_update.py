@@ -14,6 +14,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "plants"))
 from ramp_integrator import build  # noqa: E402
+from ref_axis import build as build_axis  # noqa: E402
 
 from feeddrive.cosim.cli import main  # noqa: E402
 from feeddrive.cosim.master import Master  # noqa: E402
@@ -121,3 +122,23 @@ def test_cosim_info_states_the_input_handling(fmus, capsys):
             "seen s h / 2 low on average over the step (FMI 3.0 has no input derivatives and the FMU provides "
             "no intermediate update)") in out
     assert "Model Exchange inputs: first-order hold by the master inside CVode" in out
+
+
+def test_an_fmi2_component_in_model_exchange_gets_the_ramp_on_its_own_inputs(tmp_path):
+    """The first-order hold of an FMU component's own inputs (not roles), here RefAxis FMI 2.0 in Model
+    Exchange: pos_mm' = n_set / 60 * pitch_mm integrates the ramped n_set, B H^2 / 2 more per step than held."""
+    fmu = build_axis(tmp_path / "RefAxis2.fmu", 2)
+
+    def position(hold: str) -> np.ndarray:
+        data = {"name": "ramp2", "step": H, "stop_time": N * H, "components": [
+            {"name": "ax", "fmu": str(fmu), "config": {"interface": "me", "input_hold": hold, "tolerance": 1e-11},
+             "inputs": {"n_set": "ramp.r", "T_load": 0.0}},
+            {"name": "ramp", "class": "ramp_integrator:Ramp", "config": {"start": A, "slope": B, "unit": "rpm"}}]}
+        with Master.from_scenario(scenario_from_dict(data)) as master:
+            return master.run().signals()["ax.pos_mm"]
+
+    ramped, held = position("foh"), position("zoh")
+    r = A + B * np.arange(N + 1) * H
+    k = 20.0 / 60.0  # mm per second per rpm (pitch 20 mm)
+    np.testing.assert_allclose(np.diff(held), k * H * r[:-1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.diff(ramped)[1:], k * (H * r[1:-1] + B * H**2 / 2), rtol=0, atol=2e-10)

@@ -108,3 +108,16 @@ def test_cosim_info_lists_the_links_of_an_fmu_component(fmus, tmp_path, capsys):
     assert "  w [rad/s] <- a.n_act [rpm] x 0.10472" in out and "  v [m/s] <- 0.0 (a constant)" in out
     assert main(["info", str(fmus["axis2"]), "--map", str(path)]) == 0
     assert "  n_set [rpm] <- ri.w_last [rad/s] x 9.5493" in capsys.readouterr().out
+
+
+def test_the_export_refuses_a_converted_connection(fmus, tmp_path, feeddrive_fmu):
+    """An OSP connection is a plain assignment: an input converted from its source's unit is not exported."""
+    from feeddrive.cosim.export.system import ExportError, export_system
+
+    data = {"name": "converted", "step": 1e-3, "stop_time": 0.5, "plant": {"fmu": "builtin"},
+            "nc": {"program": [{"rapid": {"to": 0.01}}]},
+            "components": [{"name": "twin", "fmu": str(fmus["axis2"]),
+                            "inputs": {"n_set": "nc.speed_ref", "T_load": 0.0}}]}
+    with pytest.raises(ExportError, match=r"components\[twin\]\.inputs\.n_set: nc\.speed_ref \[rad/s\] into \[rpm\] "
+                                          r"is converted \(x 9\.5493\); an OSP connection cannot convert units"):
+        export_system(scenario_from_dict(data), tmp_path / "sys")
