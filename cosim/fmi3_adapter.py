@@ -122,9 +122,9 @@ class FMU3Component(FMUComponent):
         self._set_args = (c, self._uvr, self._nu, self._u, len(self._u))
         self._get_args = (c, self._yvr, self._ny, self._y, len(self._y))
         self._step_tail = (True, self._ref_event, self._ref_terminate, self._ref_early, self._ref_last)
-        record = memoryview(self._rec).cast("B")
-        self._rec_function = record[:4].cast("i")  # Record.function (int32 at offset 0)
-        self._rec_time = record[8:16].cast("d")  # Record.time (double at offset 8)
+        record, fields = memoryview(self._rec).cast("B"), fmi_progress.Record
+        self._rec_function = record[fields.function.offset:][:4].cast("i")  # Record.function (int32)
+        self._rec_time = record[fields.time.offset:][:8].cast("d")  # Record.time (double)
         self._y_view = memoryview(self._y).cast("B").cast("d")
         if self.get_outputs == self._get_outputs_identity:  # no unit conversion of the outputs
             self.get_outputs = self._get_outputs_view
