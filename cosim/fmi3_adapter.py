@@ -10,7 +10,7 @@ message, and Model Exchange asks the FMU itself for its numbers of states and ev
 Every status-returning fmi3 function passes through the same choke point (``_check`` -> ``_raise``), so
 fmi3Discard, fmi3Error and fmi3Fatal raise :class:`cosim.errors.FMIError` naming the fmi3 function; the
 Co-Simulation hot path (set / doStep / get) compares the status itself and calls ``_raise`` (no Python
-errcheck callback per call: one more FMU costs its doStep plus ~2 us, benchmarks/bench_multi_fmu.py).
+errcheck callback per call: one more FMU costs its doStep plus 0.8 to 1.6 us, benchmarks/bench_multi_fmu.py).
 
 Input hold in Co-Simulation. FMI 3.0 has no fmi3SetInputDerivatives: a first-order hold is possible
 only through intermediate update, when the FMU declares ``providesIntermediateUpdate`` and each of its
@@ -30,8 +30,24 @@ from fmpy.fmi3 import FMU3Model, FMU3Slave
 from feeddrive.cosim import fmi_progress
 from feeddrive.cosim.errors import FMIError, SimulationError
 from feeddrive.cosim.fmu_adapter import FMUComponent
+from feeddrive.cosim.fmu_inspect import with_intermediate_update
 
 _SET, _DO_STEP, _GET = (fmi_progress.CODE[f] for f in ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"))
+
+
+def _view_setter(view: memoryview) -> Any:
+    """``values -> None`` writing the 1 to 3 input values into ``view`` (a memoryview of the ctypes array) by
+    unpacking: cheaper per step than a ctypes slice assignment."""
+    if len(view) == 1:
+        def set_inputs(values: Any) -> None:
+            view[0] = values[0]
+    elif len(view) == 2:
+        def set_inputs(values: Any) -> None:
+            view[0], view[1] = values
+    else:
+        def set_inputs(values: Any) -> None:
+            view[0], view[1], view[2] = values
+    return set_inputs
 
 
 class FMU3Component(FMUComponent):
@@ -41,6 +57,7 @@ class FMU3Component(FMUComponent):
     STATUS = ("fmi3OK", "fmi3Warning", "fmi3Discard", "fmi3Error", "fmi3Fatal")
 
     def _open(self, md: Any, cs: bool) -> Any:
+        with_intermediate_update(md, self._unzip)  # before the hold is decided (fmpy does not read it)
         cls = FMU3Slave if cs else FMU3Model
         kind = md.coSimulation if cs else md.modelExchange
         return cls(guid=md.guid, unzipDirectory=self._unzip, modelIdentifier=kind.modelIdentifier,
@@ -95,31 +112,51 @@ class FMU3Component(FMUComponent):
         dll = self._fmu.dll
         self._hot_set, self._hot_step, self._hot_get = (self._unchecked(dll, f) for f in
                                                         ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"))
-        self._nu_values, self._ny_values = len(self._u), len(self._y)
         self._event, self._terminate, self._early = ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool()
         self._last_time = ctypes.c_double()
         self._ref_event, self._ref_terminate, self._ref_early, self._ref_last = (
             ctypes.byref(x) for x in (self._event, self._terminate, self._early, self._last_time))
+        # the per-step cost (benchmarks/bench_multi_fmu.py): the calls' arguments packed once, the progress
+        # record written through memoryviews (cheaper than ctypes field descriptors), the outputs read as one list
+        c = self._c
+        self._set_args = (c, self._uvr, self._nu, self._u, len(self._u))
+        self._get_args = (c, self._yvr, self._ny, self._y, len(self._y))
+        self._step_tail = (True, self._ref_event, self._ref_terminate, self._ref_early, self._ref_last)
+        record, fields = memoryview(self._rec).cast("B"), fmi_progress.Record
+        self._rec_function = record[fields.function.offset:][:4].cast("i")  # Record.function (int32)
+        self._rec_time = record[fields.time.offset:][:8].cast("d")  # Record.time (double)
+        self._y_view = memoryview(self._y).cast("B").cast("d")
+        if self.get_outputs == self._get_outputs_identity:  # no unit conversion of the outputs
+            self.get_outputs = self._get_outputs_view
+        if self.set_inputs == self._set_inputs_identity and 1 <= len(self._u) <= 3:
+            self.set_inputs = _view_setter(memoryview(self._u).cast("B").cast("d"))
+        self._terminate_view = memoryview(self._terminate).cast("B")
+
+    def _get_outputs_view(self) -> list[float]:
+        y = self._y_view.tolist()
+        total = sum(y)
+        if total - total != 0:  # NaN or an infinity somewhere
+            self._non_finite(y)
+        return y
 
     def step(self, n: int) -> None:
         # the hot path tests the status itself (an int comparison) and hands a failure to the choke point's
         # _raise: the same typed error as ``_check``, without a Python errcheck call per FMI call
-        c, h, rec = self._c, self._h, self._rec
-        rec.time = t = self._t0 + n * h
-        rec.function = _SET
-        if (status := self._hot_set(c, self._uvr, self._nu, self._u, self._nu_values)) > 1:
+        function, h = self._rec_function, self._h
+        self._rec_time[0] = t = self._t0 + n * h
+        function[0] = _SET
+        if (status := self._hot_set(*self._set_args)) > 1:
             self._raise("fmi3SetFloat64", status)
-        rec.function = _DO_STEP
-        if (status := self._hot_step(c, t, h, True, self._ref_event, self._ref_terminate, self._ref_early,
-                                     self._ref_last)) > 1:
+        function[0] = _DO_STEP
+        if (status := self._hot_step(self._c, t, h, *self._step_tail)) > 1:
             self._raise("fmi3DoStep", status)
         self._k = n + 1
-        if self._terminate.value:
+        if self._terminate_view[0]:
             self._terminated_by_fmu(t + h)
-        rec.function = _GET
-        if (status := self._hot_get(c, self._yvr, self._ny, self._y, self._ny_values)) > 1:
+        function[0] = _GET
+        if (status := self._hot_get(*self._get_args)) > 1:
             self._raise("fmi3GetFloat64", status)
-        rec.function = 0
+        function[0] = 0
 
     def _unchecked(self, dll: Any, name: str) -> Any:
         """A second ctypes pointer to ``dll.name`` without the errcheck: the hot path tests its status itself."""
@@ -145,7 +182,7 @@ class FMU3Component(FMUComponent):
             values, dt = self._dvalues, t - self._t0 - self._k * self._h
             for k, j in self._foh:
                 values[j] = self._u[k] + self._du[j] * dt
-            self._set_f64(self._c, self._dvr, len(values), values, len(values))
+            self._set_f64(self._c, self._dvr, len(self._dvr), values, len(values))
         except FMIError:  # recorded by the choke point; re-raised after fmi3DoStep returns
             pass
 

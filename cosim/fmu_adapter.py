@@ -41,6 +41,7 @@ from fmpy.fmi2 import (
 from feeddrive.cosim import fmi_progress, fmu_ports
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import FMIError, ScenarioError
+from feeddrive.cosim.fmu_components import convert_links
 from feeddrive.cosim.fmu_me import MEAN_ROLES, ModelExchange
 from feeddrive.cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, PlantConfig
 
@@ -187,6 +188,7 @@ class FMUComponent(ModelExchange, Component):
         self._in_lin = [(k, *roles[r].linear()) for k, r in enumerate(in_roles)]
         self._in_lin += [(k, 1.0, 0.0) for k in range(len(in_roles), len(in_roles) + n_own)]
         self._out_lin = [roles[r].linear() for r in out_roles] + [(1.0, 0.0)] * n_extra
+        self.input_units, self._in_lin = convert_links(self.input_names, self.input_units, self._in_lin, cfg._links)
         if all(s == 1 and o == 0 for _, s, o in self._in_lin):
             self.set_inputs = self._set_inputs_identity
         if all(s == 1 and o == 0 for s, o in self._out_lin):
@@ -196,8 +198,8 @@ class FMUComponent(ModelExchange, Component):
             self.input_hold = cfg.hold(md)
         except ValueError as exc:
             raise ScenarioError(f"{self.name}: plant.input_hold: {exc}") from None
-        if self.input_hold == "foh":
-            self._start_foh(variables, in_vars[:len(in_roles)])
+        if self.input_hold == "foh":  # the roles and an FMU component's own inputs (an array: several values)
+            self._start_foh(variables, in_vars, [1] * len(in_roles) + [v.size for v in own_in])
         if cs:
             self._start_cs()
         else:
@@ -274,12 +276,14 @@ class FMUComponent(ModelExchange, Component):
         self._get_real(c, self._yvr, self._ny, self._y)
         rec.function = 0
 
-    def _start_foh(self, variables: dict, in_vars: list[str]) -> None:
+    def _start_foh(self, variables: dict, in_vars: list[str], sizes: list[int]) -> None:
+        starts = [sum(sizes[:k]) for k in range(len(sizes))]  # index of each variable's first value in _u
         cont = [k for k, name in enumerate(in_vars) if variables[name].variability == "continuous"]
-        self._foh = [(k, j) for j, k in enumerate(cont)]  # (input index, derivative index)
+        values = [starts[k] + i for k in cont for i in range(sizes[k])]
+        self._foh = [(k, j) for j, k in enumerate(values)]  # (value index, derivative index)
         self._dvr = (ctypes.c_uint * len(cont))(*[self._uvr[k] for k in cont])
-        self._du = (ctypes.c_double * len(cont))()
-        self._order = (ctypes.c_int * len(cont))(*[1] * len(cont))
+        self._du = (ctypes.c_double * len(values))()
+        self._order = (ctypes.c_int * len(values))(*[1] * len(values))
         self._u_prev: list[float] | None = None  # the values of the previous step, from the first step on
         self._ramp_start = self._t0  # Model Exchange: t_n of the current ramp
         if self.config.interface == "cs":

@@ -16,18 +16,29 @@ when it has one. A plant split into several FMUs maps each role where it lives: 
 roles, a component's ``map`` the others (e.g. ``position``); such a part steps right after the plant, at
 the plant's rate (default), and the NC and the sensors read the roles the plant lacks from it.
 
+Units on every connection into an FMU component (``inputs:`` or ``connections:``): the source's unit
+(an FMU component's output variable or role, the plant's roles, the NC's and the sensors' outputs) and
+the input's (the FMU's declared unit, or the role's SI unit) are compared with pint when the scenario is
+loaded; a different scale (``rpm`` into ``rad/s``, ``mm`` into ``m``) is converted at the input like a
+role map entry (``x_fmu = scale * source + offset``), another dimension is refused with one line naming
+the connection. A source whose unit is known only at run time (a ``class:`` component) is checked by the
+master (cosim/port_units.py). ``cosim info FMU --map SCENARIO`` lists each link and its conversion.
+
 A scenario without ``nc:`` is a system of components only (e.g. foreign FMUs run alone, as the
 conformance tests run the Modelica Reference-FMUs): no NC, plant, sensors or monitor; ``stop_time``
 is then required.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from pydantic import ValidationError
 
 from feeddrive.cosim.fmu_inspect import REAL_TYPES, check_archive, fmi_version, model_description, runnable, sha256
+from feeddrive.cosim.fmu_ports import unit_of
+from feeddrive.cosim.unit_map import ROLE_UNITS, role_unit
 from feeddrive.cosim.yaml_source import from_validation
 
 #: top-level keys a components-only scenario (no ``nc:``) cannot have
@@ -54,11 +65,14 @@ def resolve_components(s: Any, config_class: type, check_map: Any) -> list:
 
     ``config_class`` is ``cosim.scenario.FMUConfig`` and ``check_map`` ``cosim.scenario.check_map``
     (passed in: the scenario module imports this one)."""
-    out = []
+    out, descriptions = [], {}
     for k, spec in enumerate(s.components):
         if (spec.fmu is None) == (spec.class_ is None):
             raise s.error(("components", k), f"component {spec.name!r}: expected exactly one of class: or fmu:")
-        out.append(spec if spec.fmu is None else _resolve_fmu(s, k, spec, config_class, check_map))
+        if spec.fmu is not None:
+            spec, descriptions[spec.name] = _resolve_fmu(s, k, spec, config_class, check_map)
+        out.append(spec)
+    _link_units(s, out, descriptions)
     return out
 
 
@@ -88,11 +102,15 @@ def _resolve_fmu(s: Any, k: int, spec: Any, cls: type, check_map: Any) -> Any:
         hold = cfg.hold(md)
     except ValueError as exc:
         raise s.error((*where, "fmu"), f"{path}: {exc}") from None
-    # a role map here may be partial (a plant split into FMUs): only its entries are checked
-    problems = [p for p in check_map(md, cfg.map, path.name) if p[0] != ("plant", "map")]
+    # a role map here may be partial (a plant split into FMUs): only its entries are checked, and each one
+    # converted by its units as the plant's are (n_mot [rpm] -> speed x 0.10472)
+    conversions: dict = {}
+    problems = [p for p in check_map(md, cfg.map, path.name, s.axis.kind, conversions) if p[0] != ("plant", "map")]
     if problems:
         key, message = problems[0]
         raise s.error((*where, "config", *key[1:]), message)
+    role_map = {r: e.model_copy(update={"scale": conversions[r].scale, "offset": conversions[r].offset})
+                for r, e in cfg.map.items()}
     variables = {v.name: v for v in md.modelVariables}
     for key in ("parameters", "start"):
         for name in getattr(cfg, key):
@@ -107,5 +125,99 @@ def _resolve_fmu(s: Any, k: int, spec: Any, cls: type, check_map: Any) -> Any:
                                   or v.type not in REAL_TYPES or not isinstance(ev.value, float)):
             raise s.error(("events", j), f"{param!r} is not a tunable Real parameter of {path.name} (or the value "
                                          f"{ev.value!r} is not a number)")
-    cfg = cfg.model_copy(update={"fmu": str(path), "sha256": sha256(path), "input_hold": hold})
-    return spec.model_copy(update={"config": cfg})
+    cfg = cfg.model_copy(update={"fmu": str(path), "sha256": sha256(path), "input_hold": hold, "map": role_map})
+    return spec.model_copy(update={"config": cfg}), md
+
+
+@dataclass(frozen=True)
+class Link:
+    """One input port of an FMU component and its source: the FMU gets ``scale * source + offset``.
+
+    ``unit`` is the port's unit ('' when the FMU declares none), ``source_unit`` the source's (None when
+    not known before the run: a number, or a ``class:`` component's output)."""
+
+    port: str
+    unit: str
+    source: str | float
+    source_unit: str | None
+    scale: float = 1.0
+    offset: float = 0.0
+
+    def describe(self) -> str:
+        """``n_set [rpm] <- a.w [rad/s] x 9.5493`` (what ``cosim info --map`` prints)."""
+        text = f"{self.port} [{self.unit or '?'}] <- {self.source}"
+        if not isinstance(self.source, str):
+            return text + " (a constant)"
+        if self.source_unit is None:
+            return text + "  (unit known at run time: checked by the master, not converted)"
+        text += f" [{self.source_unit or '?'}]"
+        if (self.scale, self.offset) != (1.0, 0.0):
+            text += f" x {self.scale:.5g}" + (f" {'+' if self.offset >= 0 else '-'} {abs(self.offset):.5g}"
+                                               if self.offset else "")
+        return text
+
+
+def _output_unit(s: Any, fmus: dict, descriptions: dict, source: str) -> str | None:
+    """The unit of ``component.output`` when the scenario alone says it (None: known at run time only)."""
+    from feeddrive.cosim.nc import NCComponent
+    from feeddrive.cosim.sensors import SensorsComponent
+
+    comp, _, port = source.partition(".")
+    if comp in fmus:
+        if port in fmus[comp].config.map:
+            return role_unit(port, s.axis.kind)
+        v = {v.name: v for v in descriptions[comp].modelVariables}.get(port.split("[")[0])
+        return unit_of(v) if v is not None else None
+    if s.nc is None:
+        return None
+    if comp == "plant" and port.removesuffix("_mean") in ROLE_UNITS:
+        return role_unit(port.removesuffix("_mean"), s.axis.kind)
+    known = {"nc": NCComponent, "sensors": SensorsComponent}.get(comp)
+    return dict(zip(known.output_names, known.output_units)).get(port) if known is not None else None
+
+
+def _link_units(s: Any, specs: list, descriptions: dict) -> None:
+    """Each FMU component's input links (``config._links``), their units compared and converted with pint."""
+    from feeddrive.cosim.unit_map import _affine
+
+    fmus = {spec.name: spec for spec in specs if spec.fmu is not None}
+    for k, spec in enumerate(specs):
+        if spec.fmu is None:
+            continue
+        cfg, links = spec.config, {}
+        variables = {v.name: v for v in descriptions[spec.name].modelVariables}
+        given = {dst.partition(".")[2]: (("connections", dst), src) for dst, src in s.connections.items()
+                 if dst.partition(".")[0] == spec.name}
+        given |= {port: (("components", k, "inputs", port), src) for port, src in spec.inputs.items()}
+        for port, (key, src) in given.items():
+            v = variables.get(port.split("[")[0])
+            unit = role_unit(port, s.axis.kind) if port in cfg.map else (unit_of(v) if v is not None else "")
+            su = _output_unit(s, fmus, descriptions, src) if isinstance(src, str) else None
+            scale, offset = 1.0, 0.0
+            if su and unit and su != unit:
+                import pint  # only here: its import is not free
+
+                try:
+                    scale, offset = _affine(su, None, unit)  # x_fmu = scale * source + offset
+                except pint.errors.DimensionalityError:
+                    raise s.error(key, f"{src} -> {spec.name}.{port}: unit {su!r} does not convert to {unit!r} "
+                                       f"(another dimension); expected a source in a unit convertible to {unit}") from None
+                except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError, AssertionError):
+                    raise s.error(key, f"{src} -> {spec.name}.{port}: cannot compare units {su!r} and {unit!r} "
+                                       "(unknown to pint); expected units pint knows (state them in the FMU)") from None
+            links[port] = Link(port, unit, src, su, scale, offset)
+        cfg._links = links
+
+
+def convert_links(names: tuple, units: tuple, lin: list, links: dict) -> tuple[tuple, list]:
+    """An FMU component's input units and ``(index, scale, offset)`` conversions with its links applied: a port
+    fed in another unit declares the source's unit (the master's check passes) and converts it (role map after
+    link: ``x = s (a source + b) + o``)."""
+    units, lin = list(units), list(lin)
+    for k, port in enumerate(names):
+        link = links.get(port)
+        if link is not None and link.source_unit and (link.scale, link.offset) != (1.0, 0.0):
+            i, scale, offset = lin[k]
+            lin[k] = (i, scale * link.scale, scale * link.offset + offset)
+            units[k] = link.source_unit
+    return tuple(units), lin

@@ -29,7 +29,7 @@ def model_description(path: Path) -> Any:
     from fmpy.model_description import ValidationError as FMIValidationError
 
     try:
-        return read_model_description(str(path))
+        return with_intermediate_update(read_model_description(str(path)), path)
     except FMIValidationError as exc:
         problems = [" ".join(str(p).split()) for p in exc.problems] or ["(no detail)"]
         more = f" (and {len(problems) - 1} more problem{'s' * (len(problems) > 2)})" if len(problems) > 1 else ""
@@ -57,6 +57,53 @@ def interpolates_inputs(md: Any) -> bool:
     inputs = [v for v in md.modelVariables if v.causality == "input" and v.type == "Float64"
               and v.variability == "continuous"]
     return bool(cs.providesIntermediateUpdate) and bool(inputs) and all(v.intermediateUpdate for v in inputs)
+
+
+def with_intermediate_update(md: Any, path: Path | str) -> Any:
+    """``md`` with each FMI 3.0 variable's ``intermediateUpdate`` read from ``path``'s modelDescription.xml.
+
+    fmpy 0.3 reads ``providesIntermediateUpdate`` but leaves every variable's ``intermediateUpdate`` False,
+    which would hide an FMU's intermediate update from :func:`interpolates_inputs`. ``path``: the .fmu or
+    the folder it was extracted to.
+    """
+    if not str(md.fmiVersion).startswith("3"):
+        return md
+    path = Path(path)
+    if path.is_dir():
+        root = ElementTree.parse(path / "modelDescription.xml").getroot()
+    else:
+        with zipfile.ZipFile(path) as z, z.open("modelDescription.xml") as f:
+            root = ElementTree.parse(f).getroot()
+    flagged = {e.get("name") for e in root.iterfind("ModelVariables/*") if e.get("intermediateUpdate") == "true"}
+    for v in md.modelVariables:
+        v.intermediateUpdate = v.name in flagged
+    return md
+
+
+def input_handling(md: Any) -> list[str]:
+    """How the master feeds the FMU's continuous Real inputs between communication points, one line per
+    interface (printed by ``cosim info``): the first-order hold where the FMU allows it, else the hold."""
+    inputs = [v.name for v in md.modelVariables if v.causality == "input" and v.type in REAL_TYPES
+              and v.variability == "continuous"]
+    if not inputs:
+        return ["inputs: no continuous Real inputs (nothing to hold between communication points)"]
+    out, fmi3 = [], str(md.fmiVersion).startswith("3")
+    held = ("held over each communication step h (input_hold zoh): a ramp of slope s is seen s h / 2 low "
+            "on average over the step")
+    if md.coSimulation is not None and interpolates_inputs(md):
+        how = ("the master sets u_n + slope (t - t_n) when the FMU asks inside fmi3DoStep (intermediate update "
+               f"of {', '.join(inputs)})" if fmi3 else
+               "the master passes the slopes with fmi2SetRealInputDerivatives (canInterpolateInputs)")
+        out.append(f"Co-Simulation inputs: first-order hold (input_hold foh, the default): {how}")
+    elif md.coSimulation is not None:
+        flagged = [v.name for v in md.modelVariables if getattr(v, "intermediateUpdate", False)]
+        why = ("no canInterpolateInputs" if not fmi3 else "FMI 3.0 has no input derivatives and the FMU provides "
+               "no intermediate update" if not md.coSimulation.providesIntermediateUpdate else
+               f"intermediate update, but not of every input ({', '.join(n for n in inputs if n not in flagged)})")
+        out.append(f"Co-Simulation inputs: {held} ({why})")
+    if md.modelExchange is not None:
+        out.append("Model Exchange inputs: first-order hold by the master inside CVode (input_hold foh, the default)")
+    return out
 
 
 def runnable(md: Any, interface: str, name: str) -> tuple[str, str] | None:

@@ -35,7 +35,7 @@ class _RampedInputs:
         dt = t - p._ramp_start
         for k, j in p._foh:
             values[j] = p._u[k] + p._du[j] * dt
-        p._set_real(p._c, self._vr, len(values), values)
+        p._set_real(p._c, self._vr, len(self._vr), values)  # an FMI 3.0 array: one vr, several values
 
 
 

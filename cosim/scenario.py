@@ -51,7 +51,6 @@ STANDARD_COMPONENTS = ("nc", "plant", "sensors", "monitor")
 DEFAULT_MONITOR = "feeddrive.cosim.monitor:Monitor"
 
 
-
 class _Strict(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
 
@@ -101,6 +100,7 @@ class PlantConfig(_Strict):
     parameters: dict[str, float] = {}
     start: dict[str, float] = {}
     map: dict[Role, MapEntry] = {}
+    _links: dict = PrivateAttr(default_factory=dict)  # an FMU component's input -> Link (cosim/fmu_components.py)
     input_hold: Literal["foh", "zoh"] | None = Field(
         None, description="how the plant sees its inputs between communication points. "
         "foh: first-order hold, the value set at t_n plus the slope (value_n - value_(n-1)) / h given with "

@@ -73,6 +73,10 @@ def main(args: argparse.Namespace) -> int:
     widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
     for r in rows:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
+    from feeddrive.cosim.fmu_inspect import input_handling
+
+    for line in input_handling(md):
+        print(f"  {line}")
     missing = _missing_binary(path, md)
     if missing:  # the variables are worth reading all the same (to write a map); running it is not possible
         print(f"cosim info: warning: {path}: {missing}; cosim run refuses it (exit 2)", file=sys.stderr)
@@ -80,6 +84,8 @@ def main(args: argparse.Namespace) -> int:
         return 0
     if missing:
         raise InputError(f"{path}: {missing}")
+    if _components(path, md, args.map):  # the scenario runs this FMU as components, not as its plant
+        return 0
     role_map, error = load_plant_map(args.map)
     conversions: dict = {}
     problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions)
@@ -95,6 +101,32 @@ def main(args: argparse.Namespace) -> int:
         raise ScenarioError(f"{first}{more}")
     print("  map OK")
     return 0
+
+
+def _components(path: Path, md, scenario: Path) -> bool:  # noqa: ANN001 - fmpy's ModelDescription
+    """Print the role map and the input links of each component of ``scenario`` that runs the FMU ``path``;
+    True when the scenario's plant is another FMU (nothing more to check)."""
+    from feeddrive.cosim.scenario import check_map, load_scenario
+    from feeddrive.cosim.yaml_source import read_yaml
+
+    data, _ = read_yaml(scenario)
+    data = data if isinstance(data, dict) else {}
+
+    def here(fmu: object) -> bool:
+        return isinstance(fmu, str) and (scenario.parent / Path(fmu).expanduser()).resolve() == path.resolve()
+
+    if not any(isinstance(c, dict) and here(c.get("fmu")) for c in data.get("components") or []):
+        return False
+    s = load_scenario(scenario)  # every unit of every connection checked (one line when one does not fit)
+    for spec in s.components:
+        if spec.fmu is None or Path(spec.config.fmu) != path.resolve():
+            continue
+        print(f"component {spec.name} of {scenario} (port [unit] <- source [unit] x scale + offset)")
+        conversions: dict = {}
+        check_map(md, spec.config.map, path.name, s.axis.kind, conversions)
+        for line in [c.describe() for c in conversions.values()] + [x.describe() for x in spec.config._links.values()]:
+            print(f"  {line}")
+    return not here((data.get("plant") or {}).get("fmu") if isinstance(data.get("plant"), dict) else None)
 
 
 def _axis_kind(scenario: Path) -> str:

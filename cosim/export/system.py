@@ -60,8 +60,8 @@ def wiring(scenario: Scenario) -> tuple[list[tuple[str, str, str, str]], dict[st
     Raises
     ------
     ExportError
-        User components (``components:``), or a plant map with a scale or offset (OSP connections are
-        plain assignments).
+        User components (``components:``), or a map with a scale or offset, or an FMU component's input
+        converted from its source's unit (OSP connections are plain assignments).
     """
     classes = [c.name for c in scenario.components if c.fmu is None]
     if classes:
@@ -84,6 +84,13 @@ def wiring(scenario: Scenario) -> tuple[list[tuple[str, str, str, str]], dict[st
                 raise ExportError(f"{scenario.source}: {key}.map.{role}: scale {entry.scale:g} and offset "
                                   f"{entry.offset:g}; an OSP connection cannot convert units, expected scale 1 and "
                                   "offset 0 (or an FMU in SI units)")
+    converted = [(c.name, x) for c in scenario.components if c.fmu is not None for x in c.config._links.values()
+                 if (x.scale, x.offset) != (1.0, 0.0)]
+    if converted:
+        name, x = converted[0]
+        raise ExportError(f"{scenario.source}: components[{name}].inputs.{x.port}: {x.source} [{x.source_unit}] into "
+                          f"[{x.unit}] is converted (x {x.scale:.5g}); an OSP connection cannot convert units, "
+                          "expected the same unit on both sides")
     ports = {n: (tuple(c.input_names), tuple(c.output_names)) for n, c in COMPONENTS.items()}
     ports["plant"] = (tuple(r for r in INPUT_ROLES if r in maps["plant"]),
                       tuple(r for r in OUTPUT_ROLES if r in maps["plant"]))

@@ -1,6 +1,6 @@
 """The built-in plant as an FMI 3.0 FMU: the same model code and wrapper core as FMI 2.0, so the same
 numbers; fmpy's validation; the contract (bad values refused with a message, instance still usable);
-the cache; ``cosim build-fmu --fmi-version 3``; and the estimates through the master once it runs FMI 3."""
+the cache; ``cosim build-fmu --fmi-version 3``; and the estimates through the master."""
 from __future__ import annotations
 
 import math
@@ -404,7 +404,7 @@ def test_fmi3_cs_steps_equal_fmi2_steps_through_the_raw_api(instance3, instance)
     assert [v.name for v in fmu_variables(feed_drive())] == [n for n in a.vr if n != "time"]
 
 
-# -- the master (another engineer adds FMI 3 to cosim/fmu_adapter.py) ---------------------------------
+# -- the master (cosim/fmi3_adapter.py) -------------------------------------------------------------
 
 def _estimates(plant: dict, out: Path) -> list[dict]:
     from feeddrive.cosim.run import run_scenario
@@ -422,12 +422,7 @@ def test_the_master_gets_the_same_estimates_from_fmi3(tmp_path, fmi3_fmu, feeddr
     from feeddrive.cosim.scenario import BUILTIN_MAP
 
     plant3 = {"fmu": str(fmi3_fmu), "map": {role: {"var": var} for role, var in BUILTIN_MAP.items()}}
-    try:
-        third = _estimates(plant3, tmp_path / "fmi3")
-    except Exception as exc:  # noqa: BLE001 - only a refusal naming FMI 3 means "not supported yet"
-        if "FMI 3" in str(exc):
-            pytest.skip(f"the master does not run FMI 3.0 plants yet: {exc}")
-        raise
+    third = _estimates(plant3, tmp_path / "fmi3")
     # FMI 3.0 Co-Simulation has no input derivatives: the FMI 2.0 twin holds its inputs too
     second = _estimates({"fmu": "builtin", "input_hold": "zoh"}, tmp_path / "fmi2")
     assert len(third) == len(second) >= 1

@@ -76,16 +76,22 @@ def model_description(version: int) -> str:
 
 def build(out: Path, version: int) -> Path:
     """Compile and pack RefAxis as an FMI ``version`` (2 or 3) FMU at ``out``; skips without the framework."""
+    return pack(out, version, HERE, "RefAxis", model_description(version))
+
+
+def pack(out: Path, version: int, source: Path, identifier: str, description: str) -> Path:
+    """Compile ``source``/model.c (with its config.h) against the Reference-FMUs framework as an FMI ``version``
+    FMU ``identifier`` with ``description`` as modelDescription.xml, at ``out``; skips without the framework."""
     if not (FRAMEWORK / "src" / "cosimulation.c").is_file():
         pytest.skip(f"Reference-FMUs source not found: {FRAMEWORK.resolve()}")
     platform = fmpy.platform_tuple if version == 3 else fmpy.platform
     with tempfile.TemporaryDirectory() as tmp:
-        lib = Path(tmp) / f"RefAxis{fmpy.sharedLibraryExtension}"
+        lib = Path(tmp) / f"{identifier}{fmpy.sharedLibraryExtension}"
         subprocess.run([*compiler(), "-O2", "-fPIC", "-shared", f"-DFMI_VERSION={version}", "-DDISABLE_PREFIX",
-                        f"-I{FRAMEWORK / 'include'}", f"-I{HERE}", "-o", str(lib), str(HERE / "model.c"),
+                        f"-I{FRAMEWORK / 'include'}", f"-I{source}", "-o", str(lib), str(source / "model.c"),
                         str(FRAMEWORK / "src" / f"fmi{version}Functions.c"), str(FRAMEWORK / "src" / "cosimulation.c"),
                         "-lm"], check=True, capture_output=True)
         with zipfile.ZipFile(out, "w") as z:
-            z.writestr("modelDescription.xml", model_description(version))
+            z.writestr("modelDescription.xml", description)
             z.write(lib, f"binaries/{platform}/{lib.name}")
     return out
