@@ -120,6 +120,9 @@ class Master:
         FMU components mapping some of the plant's roles (see :func:`default_connections`).
     """
 
+    #: recorded rows per block (the compiled loop's row buffer reads it here: no import back into master)
+    block = BLOCK
+
     def __init__(self, components: Sequence[tuple[str, Component]], *, step: float, n_steps: int,
                  t0: float = 0.0, connections: Mapping[str, str | float] | None = None,
                  events: Iterable[tuple[float, str, Any]] = (), record: str | Sequence[str] = "all",

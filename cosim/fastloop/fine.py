@@ -138,14 +138,13 @@ class FineLoop:
         """Recorded columns from the block (``rec_src``) and from the rest of the bus (``static``)."""
         import numpy as np
 
-        from feeddrive.cosim.master import BLOCK
-
         s, width = self.s, self.plant._ny + 8
         cols = master._rec_index
         self._rec_src = (_l * max(len(cols), 1))(*[i - a if a <= i < a + width else -1 for i in cols])
         #: recorded columns not from the block, and their index in the master's bus Y
         self.static_cols = [j for j, i in enumerate(cols) if not a <= i < a + width]
         self.static_src = [cols[j] for j in self.static_cols]
+        BLOCK = master.block
         self.rec_buf = np.empty((BLOCK, max(len(cols), 1)))
         s.rec_buf, s.rec_m, s.n_rec, s.rec_cap = self.rec_buf.ctypes.data, master.m, len(cols), BLOCK
         s.rec_src = _addr(self._rec_src)
