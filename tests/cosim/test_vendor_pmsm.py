@@ -20,7 +20,7 @@ from feeddrive.fmu_build import builtin_fmu
 from feeddrive.models import pmsm_drive
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "plants"))
-from vendor_pmsm import BUILTIN_NAMES, ROLE_MAP, RPM, TRUTH  # noqa: E402
+from vendor_pmsm import ROLE_MAP, RPM, TRUTH  # noqa: E402
 
 NOMINAL = pmsm_drive().nominal()
 EXAMPLE = Path(__file__).parents[2] / "examples" / "pmsm_axis.yaml"

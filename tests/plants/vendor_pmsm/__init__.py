@@ -54,10 +54,6 @@ SQRT2 = math.sqrt(2.0)
 TRUTH = {"R": 0.7, "L_d": 8.0e-3, "L_q": 8.0e-3, "psi_f": 0.23, "p": 4.0, "J": 3.0e-3, "ft": 1.5e-3, "Cd": 0.4}
 #: the inverter's defaults: 1 us dead time at 8 kHz on a 600 V DC link (a 4.8 V loss per leg)
 INVERTER = {"t_dead": 1.0e-6, "f_pwm": 8.0e3, "u_dc": 600.0}
-#: name of each vendor parameter in feeddrive.models.pmsm_drive (the built-in PMSM)
-BUILTIN_NAMES = {"R": "R", "L_d": "L_d", "L_q": "L_q", "psi_f": "psi_f", "p": "p", "J": "Jt", "ft": "ft", "Cd": "Cd",
-                 "t_dead": "t_dead", "f_pwm": "f_pwm", "u_dc": "u_dc", "i_eps": "i_eps"}
-
 _IN, _OUT, _PAR = "input", "output", "parameter"
 #: (name, causality, unit, description, start); value references in this order, as vendor_pmsm.c's enum
 VARIABLES = [
