@@ -36,7 +36,7 @@ from pydantic import Field
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.nc import StrictConfig, drive_chain_nominal
-from feeddrive.cosim.sensors import BLOCK, CurrentSensor, EncoderConfig, VoltageSensor
+from feeddrive.cosim.sensors import BLOCK, CurrentSensor, EncoderConfig, VoltageSensor, parse_event
 from feeddrive.estimator.redundancy_servo import PHASES, inverse_park
 
 #: the component's inputs (SI, peak dq currents, mechanical motor angle, table position)
@@ -185,16 +185,7 @@ class ServoSensors(Component):
         self._sample()
 
     def set_parameter(self, name: str, value: object) -> None:
-        channel, _, field = name.partition(".")
-        if channel not in self._params or field not in _FIELDS:
-            raise ScenarioError(f"{self.name}.{name}: expected <channel>.<field> with channel in "
-                                f"{', '.join(self._params)} and field in {', '.join(_FIELDS)}")
-        try:
-            v = float(value)
-        except (TypeError, ValueError):
-            raise ScenarioError(f"{self.name}.{name}: expected a number, got {value!r}") from None
-        if not math.isfinite(v) or (field == "noise" and v < 0):
-            raise ScenarioError(f"{self.name}.{name}: expected a finite number{' >= 0' * (field == 'noise')}, got {value!r}")
+        channel, field, v = parse_event(self.name, name, value, tuple(self._params))
         self._params[channel][field] = v
 
     def set_inputs(self, values: Sequence[float]) -> None:
