@@ -179,8 +179,11 @@ class ServoSensors(Component):
         self._params = _params(self.config)
         self._scales = tuple(self.config.scales.get(k, 1.0) for k in INPUTS)
         self._inputs: Sequence[float] = (0.0,) * len(INPUTS)
-        names = tuple(self.config.channels())
-        self._rngs = {c: np.random.default_rng([self.config.seed, zlib.crc32(c.encode())]) for c in names}
+        cfg = self.config
+        self._rngs = {c: np.random.default_rng([cfg.seed, zlib.crc32(c.encode())]) for c in cfg.channels()}
+        self._p, self._second = cfg.pole_pairs, PHASES.index(cfg.second_sensor_on or "U")
+        self._q = 2 * math.pi / (4 * cfg.encoder.lines)
+        self._conv = cfg.encoder.pitch / (2 * math.pi * cfg.encoder.belt_ratio)
         self._k = BLOCK
         self._sample()
 
@@ -192,14 +195,24 @@ class ServoSensors(Component):
         self._inputs = values
 
     def _sample(self) -> None:
+        """``measure_servo`` on one sample, written with scalars (the master's loop calls it every step)."""
         if self._k == BLOCK:  # noise drawn in blocks, one draw per channel and sample
-            self._z = {c: rng.standard_normal(BLOCK) for c, rng in self._rngs.items()}
+            self._z = np.column_stack([rng.standard_normal(BLOCK) for rng in self._rngs.values()]).tolist()
             self._k = 0
-        k = self._k
+        z = self._z[self._k]
         self._k += 1
-        true = {name: np.array([v * s]) for name, v, s in zip(INPUTS, self._inputs, self._scales)}
-        z = {c: draws[k:k + 1] for c, draws in self._z.items()}
-        self._y = [float(v[0]) for v in measure_servo(true, self.config, self._params, z).values()]
+        i_d, i_q, theta, u_d_ref, u_q_ref, u_d, u_q, x_table = (v * s for v, s in zip(self._inputs, self._scales))
+        phi = self._p * theta
+        raw = [i_d * math.cos(phi - a) - i_q * math.sin(phi - a) for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
+        true = (*raw, raw[self._second], u_d_ref, u_q_ref, u_d, u_q)
+        p = self._params
+        y = [p[c]["gain"] * x + p[c]["offset"] + p[c]["noise"] * zc for c, x, zc in zip(OUTPUTS[:8], true, z)]
+        if self.config.second_sensor_on is None:
+            y[3] = y[0]
+        pe, ps, q, res = p["encoder"], p["scale"], self._q, self.config.scale.resolution
+        theta_enc = q * math.floor((pe["gain"] * theta + pe["offset"] + pe["noise"] * z[8]) / q + 0.5)
+        x_lin = res * math.floor((ps["gain"] * x_table + ps["offset"] + ps["noise"] * z[9]) / res + 0.5)
+        self._y = [*y, theta_enc, theta_enc * self._conv, x_lin]
 
     def step(self, n: int) -> None:
         self._sample()

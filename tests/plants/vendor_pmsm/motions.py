@@ -22,9 +22,11 @@ def out_and_back(fmu: Path | str, n_rpm: float, t_run: float, lost_motion_mm: fl
                  parameters: dict | None = None) -> dict[str, np.ndarray]:
     """The true signals of one out-and-back motion, in the servo sensors' units (``cosim.sensors_servo.INPUTS``)."""
     t0, t1, t2, stop = 0.02, 0.02 + t_run, 0.02 + 2 * t_run, 0.07 + 2 * t_run
-    signal = np.array([(0.0, 0.0), (t0, 0.0), (t0, n_rpm), (t1, n_rpm), (t1, -n_rpm), (t2, -n_rpm), (t2, 0.0),
-                       (stop, 0.0)], dtype=[("time", float), ("n_soll", float)])
     start = {"lost_motion_mm": lost_motion_mm} | (parameters or {})
+    load = start.pop("M_last", 0.0)  # an input: given with the signal (fmpy warns of inputs it is not given)
+    signal = np.array([(t, n, load) for t, n in ((0.0, 0.0), (t0, 0.0), (t0, n_rpm), (t1, n_rpm), (t1, -n_rpm),
+                                                 (t2, -n_rpm), (t2, 0.0), (stop, 0.0))],
+                      dtype=[("time", float), ("n_soll", float), ("M_last", float)])
     r = simulate_fmu(str(fmu), start_values=start, stop_time=stop, output_interval=h, input=signal, output=OUTPUTS)
     p = start.get("p", 4.0)
     return {"i_d": math.sqrt(2) * r["I_d_rms"], "i_q": math.sqrt(2) * r["I_q_rms"], "theta": r["phi_el"] / p,
