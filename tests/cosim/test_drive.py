@@ -77,16 +77,22 @@ def test_contradictions_are_one_line_errors(tmp_path, axis, plant, key, words):
 
 
 def test_builtin_pmsm_run_phase_currents_and_no_lost_motion(tmp_path):
-    """The example's tool change (out 0.2 m and back) through `cosim run`: the servo sensors' phase currents sum
-    to zero within their noise and agree with i_q; the built-in drive chain has no play, so the two encoders
-    show no lost motion (the 95 % interval within +-0.1 um of 0)."""
-    s = run_scenario(scenario_from_dict(example(stop_time=2.1)), tmp_path / "run", plots=False).signals
+    """The example's tool change (out 0.2 m, dwell, back) through `cosim run`, with an event at 1 s (in the dwell)
+    raising phase V's sensor gain to 1.03: on the way out the phase currents sum to zero within their noise and
+    agree with i_q; on the way back the sum isolates phase V and its gain (within 0.005). The built-in drive chain
+    has no play, so the two encoders show no lost motion (the 95 % interval within +-0.1 um of 0)."""
+    data = example(stop_time=2.1, events=[{"time": 1.0, "target": "servo.I_V.gain", "value": 1.03}])
+    s = run_scenario(scenario_from_dict(data), tmp_path / "run", plots=False).signals
     i = [s[f"servo.I_{k}"] for k in "UVW"]
+    n = np.arange(len(i[0]))
     moving = np.abs(s["plant.speed"]) > 1
-    check = rs.phase_current_sum(*(x[moving] for x in i))
+    out, back = moving & (n < 10_000), moving & (n > 10_000)
+    check = rs.phase_current_sum(*(x[out] for x in i))
     assert not check.faulty and check.noise_std == pytest.approx(0.05 * math.sqrt(3), rel=0.1)
-    phi = 4 * s["plant.theta"][moving]
-    assert not rs.dq_current_consistency(s["plant.current"][moving], *(x[moving] for x in i), phi).faulty
+    phi = 4 * s["plant.theta"][out]
+    assert not rs.dq_current_consistency(s["plant.current"][out], *(x[out] for x in i), phi).faulty
+    fault = rs.phase_current_sum(*(x[back] for x in i))
+    assert fault.faulty and fault.phase == "V" and fault.gain == pytest.approx(1.03, abs=0.005)
     lm = rs.lost_motion(s["servo.x_mot"] * 1e3, s["servo.x_lin"] * 1e3, H)
     assert not lm.detected and -1e-4 < lm.ci95_mm[0] and lm.ci95_mm[1] < 1e-4, lm
 

@@ -52,6 +52,14 @@ def test_validates_and_declares_a_vendor_interface(vendor_pmsm_fmu):
                                                                                    "lost_motion_mm"}
 
 
+def test_bad_parameter_values_are_refused_with_a_log_message(vendor_pmsm_fmu):
+    messages = []
+    with pytest.raises(Exception, match="fmi2SetReal"):
+        simulate_fmu(str(vendor_pmsm_fmu), start_values={"R": 0.0}, stop_time=0.01,
+                     logger=lambda *args: messages.append(args[-1]))
+    assert any(b"= 0 is out of range" in m for m in messages), messages
+
+
 def test_matches_the_builtin_pmsm_without_dead_time_and_the_steady_state_equations(vendor_pmsm_fmu, pmsm_fmu):
     """1000 rpm and 2 N.m from rest: step response and steady state. Same equations, same RK4 at 1e-5 s:
     the trajectories agree to round-off (measured 3e-12 of each signal's range); at 0.4 s the steady state is
