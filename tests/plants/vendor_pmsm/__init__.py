@@ -18,7 +18,7 @@ U_q_soll       V       q voltage reference
 U_d, U_q       V       terminal voltages after the SVPWM limit u_dc / sqrt(3) and the dead time
 M_mot          N.m     air-gap torque
 s_mot_mm       mm      table position from the motor angle (motor encoder side)
-s_lin_mm       mm      table position behind the play of ``lost_motion_mm`` (the linear scale's side)
+s_lin_mm       mm      table position behind the screw's stiffness ``k_axial`` and the play ``lost_motion_mm``
 phi_el         rad     electrical angle p * theta (not wrapped)
 =============  ======  ==========================================================================
 
@@ -49,6 +49,9 @@ GUID = "{8c4e810f-3df3-4a00-8276-176fa3c9f9e0}"
 MODEL = "VendorPMSM"
 RPM = 30 / math.pi  # rad/s -> rpm
 SQRT2 = math.sqrt(2.0)
+#: a table's share of the lumped load, for a drive chain that deflects: 150 kg of table and work-piece, 120 N of
+#: guide friction (preloaded linear guides), 200 N/um axial stiffness: 2 Fc / k = 1.2 um of elastic lost motion
+ELASTIC = {"m_table": 150.0, "Fc_table": 120.0, "k_axial": 200.0}
 
 #: the plant's true physical parameters (the built-in PMSM's defaults), for judging estimates
 TRUTH = {"R": 0.7, "L_d": 8.0e-3, "L_q": 8.0e-3, "psi_f": 0.23, "p": 4.0, "J": 3.0e-3, "ft": 1.5e-3, "Cd": 0.4}
@@ -98,6 +101,9 @@ VARIABLES = [
     ("w_eps", _PAR, "rad/s", "dry-friction smoothing speed", 1.0e-2),
     ("i_eps", _PAR, "A", "current scale of the dead time's smooth sign", 0.2),
     ("dt_int", _PAR, "s", "integrator step (RK4)", 1.0e-5),
+    ("m_table", _PAR, "kg", "table and work-piece mass (its deflection of the screw; part of J)", 0.0),
+    ("Fc_table", _PAR, "N", "dry friction of the table's guides (its deflection of the screw; part of Cd)", 0.0),
+    ("k_axial", _PAR, "N/um", "axial stiffness of the screw, nut and bearings", 200.0),
 ]
 
 #: a scenario's ``plant.map`` for this FMU (rpm and mm converted by their units; the rms factor stated)

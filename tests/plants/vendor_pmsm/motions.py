@@ -35,14 +35,15 @@ def out_and_back(fmu: Path | str, n_rpm: float, t_run: float, lost_motion_mm: fl
 
 
 def campaign(fmu: Path | str, motions: int, lost_motion_mm: float, seed: int = 0, alpha: float = 0.01,
-             h: float = 1e-4) -> list:
+             h: float = 1e-4, parameters: dict | None = None, allowed_mm: float = 0.0) -> list:
     """``motions`` random out-and-back motions (300..1500 rpm, 0.1..0.25 s each way; sensor noise seeded per motion)
-    with the plant's lost motion ``lost_motion_mm``; each one's ``redundancy_servo.LostMotion`` at ``alpha``."""
+    with the plant's lost motion ``lost_motion_mm`` (and its ``parameters``, e.g. ``ELASTIC``); each one's
+    ``redundancy_servo.LostMotion`` tested against ``allowed_mm`` at ``alpha``."""
     rng = np.random.default_rng(seed)
     out = []
     for k in range(motions):
         n_rpm, t_run = rng.uniform(300.0, 1500.0), rng.uniform(0.1, 0.25)
-        true = out_and_back(fmu, n_rpm, t_run, lost_motion_mm, h)
+        true = out_and_back(fmu, n_rpm, t_run, lost_motion_mm, h, parameters)
         meas = measure_servo(true, {"seed": seed * 100_000 + k})
-        out.append(lost_motion(meas["x_mot"] * 1e3, meas["x_lin"] * 1e3, h, alpha=alpha))
+        out.append(lost_motion(meas["x_mot"] * 1e3, meas["x_lin"] * 1e3, h, alpha=alpha, allowed_mm=allowed_mm))
     return out

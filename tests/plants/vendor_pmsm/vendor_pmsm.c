@@ -15,8 +15,11 @@
  * the terminal dq voltages are the Park transform of the phase voltages minus their mean. Its fundamental
  * is the built-in model's -(4/pi) t_dead f_pwm u_dc i_dq/|i_dq|, plus a sixth-harmonic ripple.
  *
- * The table is driven through a play of width lost_motion_mm (backlash and lost motion of the screw and
- * nut): s_lin = min(max(s_lin, s_mot - b/2), s_mot + b/2), updated after each integrator step.
+ * The table is driven through the screw's axial stiffness k_axial [N/um] and a play of width lost_motion_mm
+ * (backlash of the screw and nut): with the force on the table F = m_table a + Fc_table sgn(v) (its share of
+ * the lumped J and Cd, which already load the motor), s = s_mot - F / k and
+ * s_lin = min(max(s_lin, s - b/2), s + b/2), updated after each integrator step. Reversing, the two encoders
+ * see the lost motion b + 2 Fc_table / k (backlash and friction-dependent deflection).
  */
 #include <math.h>
 #include <stdarg.h>
@@ -35,7 +38,7 @@ enum {
     N_SOLL, M_LAST,
     N_IST, I_U, I_V, I_W, I_D_RMS, I_Q_RMS, U_D_SOLL, U_Q_SOLL, U_D, U_Q, M_MOT, S_MOT_MM, S_LIN_MM, PHI_EL,
     R_, L_D, L_Q, PSI_F, P_, J_, FT, CD, T_DEAD, F_PWM, U_DC, PITCH_MM, LOST_MOTION_MM, I_MAX, KP_I, KI_I, KP_W,
-    KI_W, TAU_REF, W_BASE, I_FW, FW, W_EPS, I_EPS, DT_INT,
+    KI_W, TAU_REF, W_BASE, I_FW, FW, W_EPS, I_EPS, DT_INT, M_TABLE, FC_TABLE, K_AXIAL,
     NVR
 };
 #define FIRST_PARAM R_
@@ -49,7 +52,7 @@ static const double DEFAULTS[NVR] = {
     [I_MAX] = 25.0, [KP_I] = 8.0e-3 * 2 * PI * 1000, [KI_I] = 0.7 * 2 * PI * 1000,
     [KP_W] = 3.0e-3 * 2 * PI * 50 / (1.5 * 4 * 0.23), [KI_W] = 3.0e-3 * 2 * PI * 50 / (1.5 * 4 * 0.23) * 2 * PI * 10,
     [TAU_REF] = 1.0e-3, [W_BASE] = 300.0, [I_FW] = 0.23 / 8.0e-3, [FW] = 1.0, [W_EPS] = 1.0e-2, [I_EPS] = 0.2,
-    [DT_INT] = 1.0e-5,
+    [DT_INT] = 1.0e-5, [M_TABLE] = 0.0, [FC_TABLE] = 0.0, [K_AXIAL] = 200.0,
 };
 
 typedef struct {
@@ -134,7 +137,14 @@ static void derivatives(const Instance *m, const double *x, double *dx) {
 static double s_mot(const Instance *m) { return m->x[X_TH] / (2.0 * PI) * m->v[PITCH_MM]; }
 
 static void play(Instance *m) {
-    double s = s_mot(m), b = 0.5 * m->v[LOST_MOTION_MM];
+    /* the nut pushes the table through the screw's axial stiffness: it lags the motor side by F / k, with
+       F = m_table a + Fc_table sgn(v) (the table's share of the lumped J and Cd); then the play */
+    const double *v = m->v;
+    double dx[NX];
+    derivatives(m, m->x, dx);
+    double lead = v[PITCH_MM] * 1e-3 / (2.0 * PI);  /* m of table travel per rad */
+    double force = v[M_TABLE] * dx[X_W] * lead + v[FC_TABLE] * tanh(m->x[X_W] / v[W_EPS]);
+    double s = s_mot(m) - force / (v[K_AXIAL] * 1e3), b = 0.5 * v[LOST_MOTION_MM];
     m->s_lin = fmin(fmax(m->s_lin, s - b), s + b);
 }
 
@@ -232,7 +242,8 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
         }
         double x = value[k];
         int positive = r == R_ || r == L_D || r == L_Q || r == J_ || r == P_ || r == F_PWM || r == U_DC || r == DT_INT
-                       || r == TAU_REF || r == W_EPS || r == I_EPS || r == PITCH_MM || r == KP_I || r == KP_W;
+                       || r == TAU_REF || r == W_EPS || r == I_EPS || r == PITCH_MM || r == KP_I || r == KP_W
+                       || r == K_AXIAL;
         if (!isfinite(x) || (positive && !(x > 0)) || (!positive && r >= FIRST_PARAM && x < 0)) {
             logf_(m, fmi2Error, "fmi2SetReal: value reference %u = %g is out of range", r, x);
             return fmi2Error;
