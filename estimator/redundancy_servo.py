@@ -336,7 +336,10 @@ def lost_motion(s_mot_mm: np.ndarray, s_lin_mm: np.ndarray, h: float, alpha: flo
 
     While the axis moves in one direction the difference ``d = s_mot - s_lin`` is constant (plus the
     encoders' noise); at a reversal the motor turns through the lost motion before the table follows, so
-    ``d`` moving forward minus ``d`` moving backward is the lost motion. The samples moving faster than
+    ``d`` moving forward minus ``d`` moving backward is the lost motion: the backlash plus the deflection of
+    the drive chain under the table's friction, twice (what a reversal test with two encoders measures). The
+    deflection under acceleration changes ``d`` within a motion; it widens the interval, it does not bias it
+    when the motion accelerates and brakes alike. The samples moving faster than
     ``v_min_mm_s`` are kept, except those within ``settle_mm`` of motor travel after the last reversal (the
     play being taken up). Each direction's kept samples are cut into consecutive batches of ``batch``
     samples, whose means are close to independent even for coloured encoder errors; Welch's t-test on the
