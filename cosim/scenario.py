@@ -164,6 +164,8 @@ def load_plant_map(path: str | Path) -> tuple[dict[str, MapEntry], Callable[[Key
     ``builtin``), without resolving its FMU; and a factory of errors naming that file and line."""
     path = Path(path)
     data, lines = read_yaml(path)
+    if isinstance(data, dict):  # axis.drive chooses the default plant (builtin-pmsm for kind: pmsm)
+        data = apply_drive(data, lambda key, message: located_error(str(path), lines, key, message))
     raw = data.get("plant") or {} if isinstance(data, dict) else {}
     try:
         plant = PlantConfig.model_validate(raw)
