@@ -167,6 +167,23 @@ def test_a_bare_rms_scale_is_refused_in_one_line(vendor_pmsm_fmu):
     assert "\n" not in msg and "plant.map.current.scale" in msg and "contradicts" in msg, msg
 
 
+def test_a_missing_rms_factor_is_caught_by_the_phase_currents(runs, vendor_pmsm_fmu, tmp_path):
+    """``current: {var: I_q_rms}`` passes the unit check (A -> A) but reads i_q / sqrt(2): against the Park
+    transform of the FMU's own phase currents its gain is 0.707; with the stated factor it is 1."""
+    from feeddrive.estimator.redundancy_servo import dq_current_consistency
+
+    def gain(s: dict) -> object:
+        moving = np.abs(s["plant.speed"]) > 1.0
+        phases = (s[f"plant.I_{k}"][moving] for k in "UVW")
+        return dq_current_consistency(s["plant.current"][moving], *phases, s["plant.phi_el"][moving])
+
+    ok = gain(runs["instant1"])
+    assert not ok.faulty and ok.gain == pytest.approx(1.0, abs=1e-9)
+    bare = run(tmp_path, scenario(vendor_pmsm_fmu, current={"current": {"var": "I_q_rms"}}), "bare")
+    caught = gain(bare)
+    assert caught.faulty and caught.gain == pytest.approx(1 / math.sqrt(2), abs=1e-9)
+
+
 def test_held_inputs_give_one_trajectory_whatever_the_oversampling(runs):
     """The NC's reference is held over its 1e-4 s cycle; the plant's own RK4 runs at 1e-5 s: stepping it 1 or 10
     times per recording step gives the same trajectory (round-off)."""
