@@ -331,19 +331,19 @@ class LostMotion:
 
 def lost_motion(s_mot_mm: np.ndarray, s_lin_mm: np.ndarray, h: float, alpha: float = 0.01,
                 allowed_mm: float = 0.0, settle_mm: float = 0.2, v_min_mm_s: float = 1.0,
-                batch: int = 200) -> LostMotion:
+                a_max_mm_s2: float = 200.0, batches: int = 6) -> LostMotion:
     """Lost motion (backlash) of the drive chain from the motor encoder and the linear scale on one motion.
 
     While the axis moves in one direction the difference ``d = s_mot - s_lin`` is constant (plus the
     encoders' noise); at a reversal the motor turns through the lost motion before the table follows, so
     ``d`` moving forward minus ``d`` moving backward is the lost motion: the backlash plus the deflection of
     the drive chain under the table's friction, twice (what a reversal test with two encoders measures). The
-    deflection under acceleration changes ``d`` within a motion; it widens the interval, it does not bias it
-    when the motion accelerates and brakes alike. The samples moving faster than
+    deflection under acceleration is not lost motion: samples where the motor side accelerates faster than
+    ``a_max_mm_s2`` (second difference over 5 ms, ~30 mm/s^2 of encoder noise) are left out. The samples moving faster than
     ``v_min_mm_s`` are kept, except those within ``settle_mm`` of motor travel after the last reversal (the
-    play being taken up). Each direction's kept samples are cut into consecutive batches of ``batch``
-    samples, whose means are close to independent even for coloured encoder errors; Welch's t-test on the
-    batch means gives the interval and the one-sided test of ``H0: lost motion <= allowed_mm`` at ``alpha``.
+    play being taken up). Each direction's kept samples are cut into ``batches`` consecutive parts, whose
+    means are close to independent even for coloured encoder errors; Welch's t-test on the batch means gives
+    the interval and the one-sided test of ``H0: lost motion <= allowed_mm`` at ``alpha``.
 
     Parameters
     ----------
@@ -357,8 +357,10 @@ def lost_motion(s_mot_mm: np.ndarray, s_lin_mm: np.ndarray, h: float, alpha: flo
         Level of the test.
     allowed_mm : float
         The lost motion tolerated (the test's null) [mm].
-    settle_mm, v_min_mm_s, batch : float, float, int
-        Travel skipped after a reversal [mm]; slowest kept speed [mm/s]; samples per batch mean.
+    settle_mm, v_min_mm_s, a_max_mm_s2 : float
+        Travel skipped after a reversal [mm]; slowest kept speed [mm/s]; largest kept acceleration [mm/s^2].
+    batches : int
+        Batch means per direction (consecutive kept samples, in time order, cut into equal parts).
 
     Returns
     -------
@@ -387,18 +389,21 @@ def lost_motion(s_mot_mm: np.ndarray, s_lin_mm: np.ndarray, h: float, alpha: flo
             anchor = s_mot[max(j - k, 0)]
             current = dj
         keep[j] = dj != 0 and abs(s_mot[j] - anchor) > settle_mm
+    K = max(1, int(round(5e-3 / h)))
+    accel = np.full(s_mot.size, np.inf)
+    accel[K:-K] = (s_mot[2 * K:] - 2 * s_mot[K:-K] + s_mot[:-2 * K]) / (K * h) ** 2
+    keep &= np.abs(accel) <= a_max_mm_s2
     d = s_mot - s_lin
     means = []
     for sign in (1, -1):
         idx = np.flatnonzero(keep & (direction == sign))
-        runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if idx.size else []
-        m = [d[r[i:i + batch]].mean() for r in runs for i in range(0, r.size - batch + 1, batch)]
-        means.append(np.asarray(m))
+        means.append(np.array([d[part].mean() for part in np.array_split(idx, batches)]) if idx.size >= 20 * batches
+                     else np.array([]))
     fwd, bwd = means
     if fwd.size < 2 or bwd.size < 2:
-        raise EstimatorInputError(f"lost_motion: {fwd.size} forward and {bwd.size} backward batches of {batch} "
-                                  f"samples beyond {settle_mm} mm of travel; need at least 2 each (a motion out "
-                                  "and back)")
+        raise EstimatorInputError(f"lost_motion: {np.count_nonzero(keep & (direction == 1))} forward and "
+                                  f"{np.count_nonzero(keep & (direction == -1))} backward samples at constant speed "
+                                  f"beyond {settle_mm} mm of travel; need {20 * batches} each (a motion out and back)")
     value = float(fwd.mean() - bwd.mean())
     v1, v2 = fwd.var(ddof=1) / fwd.size, bwd.var(ddof=1) / bwd.size
     se = math.sqrt(v1 + v2) or np.finfo(float).tiny

@@ -80,7 +80,9 @@ def test_builtin_pmsm_run_phase_currents_and_no_lost_motion(tmp_path):
     """The example's tool change (out 0.2 m, dwell, back) through `cosim run`, with an event at 1 s (in the dwell)
     raising phase V's sensor gain to 1.03: on the way out the phase currents sum to zero within their noise and
     agree with i_q; on the way back the sum isolates phase V and its gain (within 0.005). The built-in drive chain
-    has no play, so the two encoders show no lost motion (the 95 % interval within +-0.1 um of 0)."""
+    has no play, so the two encoders show no lost motion (the 95 % interval within half a count of the motor
+    encoder, +-0.5 um, of 0: at 0.3 m/s the axis moves exactly 30 counts per sample, so the encoder's rounding
+    error does not average out within a direction; measured -0.05 +- 0.08 um)."""
     data = example(stop_time=2.1, events=[{"time": 1.0, "target": "servo.I_V.gain", "value": 1.03}])
     s = run_scenario(scenario_from_dict(data), tmp_path / "run", plots=False).signals
     i = [s[f"servo.I_{k}"] for k in "UVW"]
@@ -94,7 +96,7 @@ def test_builtin_pmsm_run_phase_currents_and_no_lost_motion(tmp_path):
     fault = rs.phase_current_sum(*(x[back] for x in i))
     assert fault.faulty and fault.phase == "V" and fault.gain == pytest.approx(1.03, abs=0.005)
     lm = rs.lost_motion(s["servo.x_mot"] * 1e3, s["servo.x_lin"] * 1e3, H)
-    assert not lm.detected and -1e-4 < lm.ci95_mm[0] and lm.ci95_mm[1] < 1e-4, lm
+    assert not lm.detected and -5e-4 < lm.ci95_mm[0] and lm.ci95_mm[1] < 5e-4, lm
 
 
 def test_vendor_pmsm_with_lost_motion_through_cosim_run(vendor_pmsm_fmu, tmp_path):

@@ -113,20 +113,21 @@ def test_the_dead_time_is_modelled_not_flagged(motion):
 
 def test_lost_motion_campaign_of_twenty_motions(vendor_pmsm_fmu):
     """An elastic drive chain (``ELASTIC``: the table's guide friction deflects the screw, 2 Fc / k = 1.2 um of
-    lost motion on a healthy axis, and its acceleration up to ~14 um in the speed steps) tested against an
-    acceptance value of 5 um at alpha = 1 %: 10 healthy motions and 10 with 0.02 mm of backlash (random 300..1500
-    rpm out-and-back motions). All 10 worn ones detected, their estimates within 2 um of 21.2 um and at least 8
-    of the 10 95 % intervals covering it (measured 10); at most 1 healthy alarm (measured 0). The full campaign
-    (100 + 100 motions) is benchmarks/bench_lost_motion.py."""
+    lost motion on a healthy axis; its acceleration up to ~14 um in the speed steps, left out by the estimator)
+    tested against an acceptance value of 5 um at alpha = 1 %: 10 healthy motions and 10 with 0.02 mm of
+    backlash (random 300..1500 rpm out-and-back motions). All 10 worn ones detected, at most 1 healthy alarm
+    (measured 0); every estimate within 0.5 um of 1.2 um or 21.2 um (measured about 0.05 um low: the speed
+    loop's settling tail, accelerations below the 0.2 m/s^2 cut, still deflects the screw by m a / k). The full
+    campaign (100 + 100 motions) is benchmarks/bench_lost_motion.py."""
     elastic = 2 * ELASTIC["Fc_table"] / ELASTIC["k_axial"] * 1e-3  # mm
     healthy = campaign(vendor_pmsm_fmu, 10, 0.0, seed=11, parameters=ELASTIC, allowed_mm=0.005)
     worn = campaign(vendor_pmsm_fmu, 10, 0.02, seed=12, parameters=ELASTIC, allowed_mm=0.005)
     assert sum(r.detected for r in healthy) <= 1
     assert all(r.detected for r in worn)
-    truth = 0.02 + elastic
-    for r in worn:
-        assert r.value_mm == pytest.approx(truth, abs=2e-3)
-    assert sum(r.ci95_mm[0] <= truth <= r.ci95_mm[1] for r in worn) >= 8
+    for runs, truth in ((healthy, elastic), (worn, 0.02 + elastic)):
+        for r in runs:
+            assert r.value_mm == pytest.approx(truth, abs=5e-4)
+            assert r.ci95_mm[1] - r.ci95_mm[0] < 1e-3  # a 95 % interval narrower than 1 um
     with pytest.raises(ValueError, match="out and back"):
         rs.lost_motion(np.linspace(0, 10, 3000), np.linspace(0, 10, 3000), H)
 
