@@ -14,6 +14,14 @@ of the components before it and at t_n of those after it (see cosim/component.py
 compiled once into index getters on ``Y``; constants (a source given as a number) live at the end
 of ``Y``. Time is ``t0 + n h`` with an integer n.
 
+Two loops, the same results bit for bit (tests/cosim/test_fastloop.py). The fast path (``Master.loop`` says
+which ran and why; report.json has it as ``loop``): when the plant is an FMI 2.0 Co-Simulation FMU with Real
+outputs and the standard sensors follow it at the finest rate (cosim/fastloop/fine.py ``plan``), the two
+step in compiled blocks (cosim/fastloop/fineloop.c) from one tick at which a Python component steps or an
+event lands to the next, recording the rows inside the block; the NC, the monitor and the user components
+step in Python at their rates in between. Otherwise (Model Exchange, FMI 3.0, other sensors,
+a plant split into FMUs, no C compiler, ``FEEDDRIVE_FASTLOOP=0``) every tick runs the Python loop.
+
 Default wiring of the standard components (by port name; a scenario's ``connections`` override it)::
 
     plant.speed_ref, plant.load           <- nc
@@ -31,6 +39,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from feeddrive.cosim import fastloop
 from feeddrive.cosim.component import Component, load_component_class
 from feeddrive.cosim.errors import InputError, ScenarioError, SimulationError, format_path
 from feeddrive.cosim.nc import SETTLING
@@ -137,6 +146,8 @@ class Master:
         self.recorder: Recorder | None = None
         self._ready = False
         self._terminated: set[str] = set()
+        #: which loop stepped the plant and the sensors, and why (set by ``run``; see cosim/fastloop)
+        self.loop = "not run"
 
     @classmethod
     def from_scenario(cls, scenario: Any) -> Master:
@@ -239,8 +250,9 @@ class Master:
         self.connections = default_connections(ports, self.plant_parts) | self.user_connections
         constants: list[float] = []
         self._getters: list[Callable] = []
+        self._input_index: dict[str, list[int]] = {}  # each component's inputs' indices in Y (the fast path reads them)
         for n, c in self.components.items():
-            idx = []
+            idx = self._input_index[n] = []
             for port in c.input_names:
                 dst = f"{n}.{port}"
                 src = self.connections.get(dst)
@@ -270,6 +282,7 @@ class Master:
                     raise self._error(("record", k), f"unknown signal {name!r}; expected one of: {', '.join(names)}")
                 rec.append(index[name])
         self._rec_get = _getter(rec)
+        self._rec_index = rec
         self.recorder = Recorder([names[j] for j in rec], [units[j] for j in rec], self.n_steps + 1, self.t0, self.h)
         order = list(self.components)
         self._events = []
@@ -293,6 +306,9 @@ class Master:
         comps = list(self.components.values())
         Y = [0.0] * self.n_signals + self._constants
         schedule, period = self._schedule()
+        fine, self.loop = fastloop.plan(self)
+        fast = self._fast_tables(schedule, period) if fine is not None else None
+        where: list[Any] = [0, None]  # the fast path's tick and component, for the error message
         for c in comps:
             a, b = self._slices[c]
             Y[a:b] = c.get_outputs()
@@ -309,24 +325,32 @@ class Master:
                       leave=False, desc="co-simulation", bar_format="{desc}: {percentage:3.0f}%|{bar}| "
                       "{n:.2f}/{total:.2f} s [{elapsed}<{remaining}, {rate_fmt}]") as bar:
                 for k0 in range(0, ticks, BLOCK * m):
-                    for k in range(k0, min(k0 + BLOCK * m, ticks)):
-                        while k == next_event:
-                            _, name, param, value = events[e]
-                            c = self.components[name]
-                            c.set_parameter(param, value)
-                            e += 1
-                            next_event = events[e][0] if e < len(events) else -1
-                        for c, set_inputs, getter, step, get_outputs, a, b, d in schedule[k % period]:
-                            set_inputs(getter(Y))
-                            step(k // d)
-                            Y[a:b] = get_outputs()
-                        if m == 1 or (k + 1) % m == 0:
-                            rows.append(rec(Y))
+                    k1 = min(k0 + BLOCK * m, ticks)
+                    if fine is not None:  # the plant and the sensors in compiled blocks
+                        e, next_event = self._fast_block(fine, fast, k0, k1, Y, rows, e, next_event, where)
+                        k = k1 - 1
+                    else:
+                        for k in range(k0, k1):
+                            while k == next_event:
+                                _, name, param, value = events[e]
+                                c = self.components[name]
+                                c.set_parameter(param, value)
+                                e += 1
+                                next_event = events[e][0] if e < len(events) else -1
+                            for c, set_inputs, getter, step, get_outputs, a, b, d in schedule[k % period]:
+                                set_inputs(getter(Y))
+                                step(k // d)
+                                Y[a:b] = get_outputs()
+                            if m == 1 or (k + 1) % m == 0:
+                                rows.append(rec(Y))
                     recorder.extend(rows)
                     rows.clear()
                     bar.update((k + 1 - k0) // m)
             recorder.extend(rows)  # the t0 row when there are no steps
         except BaseException as exc:
+            if fine is not None:
+                fine.sync()
+                k, c = where
             recorder.extend(rows)
             if signals_path is not None:
                 recorder.write_csv(signals_path)
@@ -336,9 +360,92 @@ class Master:
             name = next((k for k, v in self.components.items() if v is c), "?")
             raise SimulationError(f"{name}: {type(exc).__name__}: {exc} (in step {max(k, 0) // m} from t="
                                   f"{self.t0 + max(k, 0) * self.hf:.6g} s)") from exc
+        if fine is not None:
+            fine.sync()
         if signals_path is not None:
             recorder.write_csv(signals_path)
         return recorder
+
+    # -- the fast path: plant and sensors in compiled blocks (cosim/fastloop) ----------------------------
+    def _fast_tables(self, schedule: list[list[tuple]], period: int) -> tuple:
+        """Per tick residue modulo ``P = lcm(period, m)``: the entries before the plant and after the sensors,
+        whether a row is recorded, the ticks from there to the end of the block (a tick after which a Python
+        component steps, or before one at which a Python component steps) and whether the compiled loop records
+        rows in such a block (a recording tick before its last one, whose row the master records)."""
+        names = list(self.components)
+        i_plant, i_sensors = names.index("plant"), names.index("sensors")
+        order = {c: j for j, c in enumerate(self.components.values())}
+        P = math.lcm(period, self.m)
+        pre = [[x for x in schedule[r % period] if order[x[0]] < i_plant] for r in range(P)]
+        post = [[x for x in schedule[r % period] if order[x[0]] > i_sensors] for r in range(P)]
+        is_rec = [self.m == 1 or (r + 1) % self.m == 0 for r in range(P)]
+        ends = [bool(post[t] or pre[(t + 1) % P]) for t in range(P)]
+        if not any(ends):  # nothing in Python at all: blocks of one period
+            ends[P - 1] = True
+        span = [0] * P
+        nxt = next(t for t in range(P) if ends[t]) + P  # the first end, one period later
+        for r in range(P - 1, -1, -1):
+            nxt = r if ends[r] else nxt
+            span[r] = nxt - r + 1
+        inside = [self.m - 1 - r % self.m < span[r] - 1 for r in range(P)]  # the next recording tick is inside
+        return pre, post, is_rec, span, P, inside
+
+    def _fast_block(self, fine: Any, fast: tuple, k: int, k1: int, Y: list, rows: list, e: int, next_event: int,
+                    where: list) -> tuple[int, int]:
+        """Ticks k .. k1 - 1 with the plant and the sensors in compiled blocks; returns the events' state.
+
+        On a failure ``where`` gets the tick and the component (for the master's error message)."""
+        pre, post, is_rec, span, P, inside = fast
+        recorder = self.recorder
+        events, rec = self._events, self._rec_get
+        plant, sensors = fine.plant, fine.sensors
+        set_plant, get_plant = plant.set_inputs, self._getters[list(self.components).index("plant")]
+        crun, state, out = fine.crun, fine.address, fine.out
+        a, b = self._slices[plant][0], self._slices[sensors][1]
+        c = None
+        try:
+            while k < k1:
+                if k == next_event:
+                    plant._k = k  # the time of an event's failure (FMUComponent._raise)
+                    while k == next_event:
+                        _, name, param, value = events[e]
+                        c = self.components[name]
+                        c.set_parameter(param, value)
+                        if c is sensors:
+                            fine.noise_changed()
+                        e += 1
+                        next_event = events[e][0] if e < len(events) else -1
+                r0 = r = k % P
+                for c, set_inputs, getter, step, get_outputs, ya, yb, d in pre[r]:
+                    set_inputs(getter(Y))
+                    step(k // d)
+                    Y[ya:yb] = get_outputs()
+                n = span[r]
+                if k + n > k1:
+                    n = k1 - k
+                if k < next_event < k + n:
+                    n = next_event - k
+                c = plant
+                set_plant(get_plant(Y))
+                if crun(state, k, n, 1):  # stopped inside: new noise rows (then go on), or a failure (raises)
+                    fine.resume(k, n)
+                if inside[r0]:
+                    fine.take_rows(Y, rows, recorder)
+                Y[a:b] = out[:]
+                k += n
+                r = (k - 1) % P
+                for c, set_inputs, getter, step, get_outputs, ya, yb, d in post[r]:
+                    set_inputs(getter(Y))
+                    step((k - 1) // d)
+                    Y[ya:yb] = get_outputs()
+                if is_rec[r]:
+                    rows.append(rec(Y))
+        except BaseException:
+            where[:] = [k, c]
+            if fine.s.rec_rows:  # the rows recorded in the block before its failure
+                fine.take_rows(Y, rows, recorder)
+            raise
+        return e, next_event
 
     def _schedule(self) -> tuple[list[list[tuple]], int]:
         """Per tick residue ``k % period``: the components that step at tick k, in stepping order.

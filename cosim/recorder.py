@@ -59,8 +59,8 @@ class Recorder:
         self._stream.flush()
 
     def extend(self, rows: Sequence[Sequence[float]]) -> None:
-        """Append rows (each one value per signal, in ``names`` order)."""
-        if rows:
+        """Append rows (each one value per signal, in ``names`` order; a list, or an array of shape (rows, signals))."""
+        if len(rows):
             self.data[self.n:self.n + len(rows)] = rows
             self.n += len(rows)
             if self._stream is not None:

@@ -132,6 +132,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
         write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names))
         recorder = master.run(progress=progress, signals_path=paths["signals"])
+        report["loop"] = master.loop  # compiled fine loop or Python loop, and why (cosim/fastloop)
         report["components"] = master.reports()
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
         signals = recorder.signals()

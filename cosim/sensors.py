@@ -285,7 +285,8 @@ class SensorsComponent(Component):
         p = [self._params[c] for c in self._names]
         offsets = np.array([q["offset"] for q in p])
         noise = np.array([q["noise"] for q in p])
-        self._rows = (offsets + noise * self._z).tolist()
+        self._noise = offsets + noise * self._z  # shape (BLOCK, 6): read as it is by the compiled fine loop
+        self._rows = None  # its rows as lists, made on first use by the Python loop
         self._gains = tuple(q["gain"] for q in p)
 
     def set_parameter(self, name: str, value: Any) -> None:
@@ -301,7 +302,10 @@ class SensorsComponent(Component):
         """Outputs from the true signals at the sample instant and the next noise row."""
         if self._k == BLOCK:
             self._new_block()
-        o1, o2, ou, our, ow, oe = self._rows[self._k]
+        rows = self._rows
+        if rows is None:
+            rows = self._rows = self._noise.tolist()
+        o1, o2, ou, our, ow, oe = rows[self._k]
         self._k += 1
         g1, g2, gu, gur, gw, ge = self._gains
         position = true[4]

@@ -153,3 +153,14 @@ def test_a_users_own_models_package_is_not_mistaken_for_ours(tmp_path, monkeypat
                                  "class Mine(Component):\n    pass\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     assert load_component_class("models.mine:Mine").__name__ == "Mine"
+
+
+def test_every_package_folder_is_listed_in_pyproject():
+    """A package folder missing from pyproject's `packages` is absent from a wheel (non-editable install)."""
+    import tomllib
+
+    root = Path(__file__).resolve().parents[2]
+    listed = set(tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    folders = {"feeddrive." + ".".join(p.parent.relative_to(root).parts)
+               for top in ("models", "fmu_build", "estimator", "cosim") for p in (root / top).rglob("__init__.py")}
+    assert folders - listed == set(), f"add to pyproject.toml [tool.setuptools] packages: {sorted(folders - listed)}"
