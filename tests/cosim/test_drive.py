@@ -117,3 +117,15 @@ def test_vendor_pmsm_with_lost_motion_through_cosim_run(vendor_pmsm_fmu, tmp_pat
     data["axis"]["drive"]["pole_pairs"] = 3
     with pytest.raises(ScenarioError, match="axis.drive.pole_pairs: 3 contradicts the FMU's p = 4"):
         scenario_from_dict(data)
+
+
+def test_servo_sensors_refuse_an_unknown_input_scale():
+    from feeddrive.cosim.master import Master
+
+    data = example()
+    data["components"] = [{"name": "servo", "class": "feeddrive.cosim.sensors_servo:ServoSensors",
+                           "config": {"scales": {"i_x": 1.0}}, "inputs": dict(SERVO_WIRING)}]
+    with pytest.raises(ScenarioError) as err:
+        Master.from_scenario(scenario_from_dict(data))
+    msg = str(err.value)
+    assert "\n" not in msg and "scales.i_x" in msg and "'x_table'" in msg, msg
