@@ -69,7 +69,7 @@ class ServoSensorsConfig(StrictConfig):
     phases : (CurrentSensor, CurrentSensor, CurrentSensor)
         Phase current sensors U, V, W.
     second_sensor_on : {"U", "V", "W"} or None
-        The phase with a second current sensor (output ``I_2``; None: ``I_2`` repeats ``I_U`` noise-free).
+        The phase with a second current sensor (output ``I_2``; None: no second sensor, ``I_2`` repeats ``I_U``).
     second : CurrentSensor
     voltage_ref, voltage : VoltageSensor
         Channels of the dq voltage references and of the terminal voltages (the same settings for d and q).
@@ -134,7 +134,9 @@ def measure_servo(true: Mapping[str, np.ndarray], config: ServoSensorsConfig | d
     if missing:
         raise ScenarioError(f"measure_servo: missing true signals {', '.join(missing)}; expected {', '.join(INPUTS)}")
     x = {k: np.asarray(true[k], dtype=float) for k in INPUTS}
-    p = _params(cfg) | {k: dict(v) for k, v in (params or {}).items()}
+    p = _params(cfg)
+    for channel, fields in (params or {}).items():  # a fault: some fields of some channels
+        p[channel] = p[channel] | dict(fields)
     phi = cfg.pole_pairs * x["theta"]
     abc = inverse_park(x["i_d"], x["i_q"], phi)
     raw = dict(zip(PHASES, abc))
