@@ -13,7 +13,8 @@ The DC drive's pairs (paper section IV.B, ``estimator.validation``) become, on a
   (``dq_current_consistency``);
 * **voltage reference against terminal voltage**: the inverter's dead time costs each leg
   ``t_dead f_pwm u_dc`` against its current's sign. That loss is modelled (``dead_time_loss``), not flagged:
-  the test is on ``u_ref - loss - u`` (``voltage_reference_check``), and the loss is also estimated;
+  the test is on ``u_ref - loss - u`` (``voltage_reference_check``), and the loss is also estimated; without
+  a voltage sensor ``u`` is observed from the dq equations (``observed_terminal_voltage``);
 * **motor encoder against the linear scale**: their difference is constant while the axis moves in one
   direction and jumps by the lost motion (backlash) at each reversal; ``lost_motion`` estimates it with an
   interval and tests it at ``alpha`` (the commercial "fingerprint" test with two encoders).
@@ -239,6 +240,37 @@ def dead_time_loss(i_u: np.ndarray, i_v: np.ndarray, i_w: np.ndarray, phi_el: np
     loss = u_loss * abc / np.sqrt(abc**2 + i_eps**2)
     loss -= loss.mean(axis=0)
     return park(loss, phi_el)
+
+
+def observed_terminal_voltage(i_d: np.ndarray, i_q: np.ndarray, theta: np.ndarray, h: float, R: float, L_d: float,
+                              L_q: float, psi_f: float, p: float) -> tuple[np.ndarray, np.ndarray]:
+    """The terminal voltages the dq equations give for measured currents and motor angle, for a drive without
+    a voltage sensor: ``u_d = R i_d + L_d di_d/dt - p w L_q i_q``, ``u_q = R i_q + L_q di_q/dt + p w (psi_f +
+    L_d i_d)``, with ``w = dtheta/dt`` and the derivatives by central differences (``numpy.gradient``).
+
+    Parameters
+    ----------
+    i_d, i_q : ndarray, shape (n,)
+        dq currents [A, peak] (e.g. the Park transform of the phase currents).
+    theta : ndarray, shape (n,)
+        Motor angle [rad] (the encoder's).
+    h : float
+        Sample time [s].
+    R, L_d, L_q, psi_f, p : float
+        The motor's resistance [Ohm], inductances [H], magnet flux [Wb] and pole pairs (the last validated
+        values, as the paper's isolation uses).
+
+    Returns
+    -------
+    (ndarray, ndarray)
+        ``u_d, u_q`` [V], shape (n,) each. The current noise is amplified by ``L / h`` (a few V at 10 kHz); the
+        residue test's window means average it out.
+    """
+    i_d, i_q, theta = _arrays(i_d, i_q, theta, names=("i_d", "i_q", "theta"))
+    w = np.gradient(theta, h)
+    u_d = R * i_d + L_d * np.gradient(i_d, h) - p * w * L_q * i_q
+    u_q = R * i_q + L_q * np.gradient(i_q, h) + p * w * (psi_f + L_d * i_d)
+    return u_d, u_q
 
 
 @dataclass(frozen=True)
