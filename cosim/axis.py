@@ -20,6 +20,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from feeddrive.cosim.drive import Drive
+
 Kind = Literal["linear", "rotary"]
 Side = Literal["motor", "table"]
 
@@ -62,6 +64,8 @@ class Axis(BaseModel):
         None: not stated here.
     side : {"motor", "table"}
         Side of the drive chain the mechanical parameters are estimated on (the data's side).
+    drive : Drive or None
+        The motor and its drive (``{kind: dc | pmsm, pole_pairs}``, ``cosim.drive``); None: not stated.
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
@@ -71,6 +75,7 @@ class Axis(BaseModel):
     pitch: float | None = Field(None, gt=0, description="table travel per screw turn [m]")
     ratio: float | None = Field(None, gt=0, description="motor turns per screw (or table) turn [1]")
     side: Side = "motor"
+    drive: Drive | None = None
 
     @model_validator(mode="before")
     @classmethod

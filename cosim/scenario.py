@@ -26,113 +26,34 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
+from pydantic import BaseModel, Field, PrivateAttr, ValidationError
 
-from feeddrive.cosim import fmu_inspect
+from feeddrive.cosim import scenario_plant
 from feeddrive.cosim.axis import Axis, resolve_drive_chain
+from feeddrive.cosim.drive import apply_drive, check_pole_pairs
 from feeddrive.cosim.errors import ScenarioError
-from feeddrive.cosim.fmu_inspect import REAL_TYPES, check_archive, fmi_version, model_description, runnable, sha256
+from feeddrive.cosim.fmu_inspect import REAL_TYPES
+from feeddrive.cosim.fmu_inspect import fmi_version as fmi_version  # re-exported: cosim info, the tests
+from feeddrive.cosim.fmu_inspect import model_description as model_description
+from feeddrive.cosim.fmu_inspect import sha256 as sha256
 from feeddrive.cosim.nc import SETTLING, NCConfig, drive_chain_nominal, plan_program
+from feeddrive.cosim.scenario_plant import BUILTIN_MAP as BUILTIN_MAP
+from feeddrive.cosim.scenario_plant import BUILTIN_MAPS as BUILTIN_MAPS
+from feeddrive.cosim.scenario_plant import BUILTIN_PLANTS as BUILTIN_PLANTS
+from feeddrive.cosim.scenario_plant import PMSM_MAP as PMSM_MAP
+from feeddrive.cosim.scenario_plant import FMUConfig, MapEntry, PlantConfig
+from feeddrive.cosim.scenario_plant import Strict as _Strict
 from feeddrive.cosim.sensors import EVENT_FIELDS, SensorsConfig
 from feeddrive.cosim.unit_map import INPUT_ROLES as INPUT_ROLES
 from feeddrive.cosim.unit_map import OUTPUT_ROLES as OUTPUT_ROLES
 from feeddrive.cosim.unit_map import REQUIRED_ROLES as REQUIRED_ROLES
 from feeddrive.cosim.unit_map import ROLE_UNITS as ROLE_UNITS
-from feeddrive.cosim.unit_map import Conversion, check_map
+from feeddrive.cosim.unit_map import check_map
 from feeddrive.cosim.yaml_source import KeyPath, from_validation, located_error, read_yaml
 
-Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
-BUILTIN_MAP = {"speed_ref": "w_ref", "load": "Tl", "voltage": "u", "voltage_ref": "u_ref", "current": "i",
-               "speed": "w", "position": "x"}
-#: The PMSM plant's roles: the DC pipeline's voltage and current are the q axis for now. The monitor's DC model is
-#: biased on it (its one K cannot be both k_T = 1.5 p psi_f and k_E = p psi_f; issue 25 items 3-4 remove the bias).
-PMSM_MAP = BUILTIN_MAP | {"voltage": "u_q", "voltage_ref": "u_q_ref", "current": "i_q"}
 STANDARD_COMPONENTS = ("nc", "plant", "sensors", "monitor")
 DEFAULT_MONITOR = "feeddrive.cosim.monitor:Monitor"
 
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
-
-
-class MapEntry(_Strict):
-    """One role <-> FMU variable conversion: ``role = scale * var + offset`` (or its inverse for inputs).
-
-    ``scale`` and ``offset`` follow from the variable's unit (``unit`` when stated here, else the FMU's
-    declaration) and the role's SI unit; given explicitly, they must agree with it (``cosim.unit_map``).
-    After loading, both are set."""
-
-    var: str
-    unit: str | None = None
-    scale: float | None = None
-    offset: float | None = None
-
-    @field_validator("scale")
-    @classmethod
-    def _scale_nonzero(cls, v: float | None) -> float | None:
-        if v is not None and (v == 0 or not math.isfinite(v)):
-            raise ValueError("scale must be finite and non-zero")
-        return v
-
-    def linear(self) -> tuple[float, float]:
-        """``(scale, offset)``, 1 and 0 where unset."""
-        return (1.0 if self.scale is None else self.scale), (0.0 if self.offset is None else self.offset)
-
-
-#: ``plant.fmu`` values naming a built-in plant: the paper's model, and its variant with backlash in the
-#: drive chain (``models.feed_drive(backlash=True)``), which provokes a model mismatch in the monitor; and the PMSM
-#: servo drive (``models.pmsm_drive()``). Each with its default role map.
-BUILTIN_MAPS = {"builtin": BUILTIN_MAP, "builtin-backlash": BUILTIN_MAP, "builtin-pmsm": PMSM_MAP}
-BUILTIN_PLANTS = tuple(BUILTIN_MAPS)
-
-
-class PlantConfig(_Strict):
-    """The plant FMU. After loading, ``fmu`` is an absolute path, ``sha256`` its hash, ``map`` complete."""
-
-    fmu: str = "builtin"
-    sha256: str | None = None
-    interface: Literal["cs", "me"] = "cs"
-    oversample: int = Field(1, ge=1, description="plant and sensor steps per recording step: the plant's "
-                            "communication step is step / oversample")
-    tolerance: float = Field(1e-8, gt=0, description="relative tolerance of CVode (interface: me)")
-    call_timeout: float = Field(60.0, gt=0, description="watchdog of `cosim run` [s]: a single FMI call "
-                                "running longer stops the run as hung (report.json status: hung)")
-    parameters: dict[str, float] = {}
-    start: dict[str, float] = {}
-    map: dict[Role, MapEntry] = {}
-    _links: dict = PrivateAttr(default_factory=dict)  # an FMU component's input -> Link (cosim/fmu_components.py)
-    input_hold: Literal["foh", "zoh"] | None = Field(
-        None, description="how the plant sees its inputs between communication points. "
-        "foh: first-order hold, the value set at t_n plus the slope (value_n - value_(n-1)) / h given with "
-        "fmi2SetRealInputDerivatives (interface cs, for an FMU declaring canInterpolateInputs, as the built-in "
-        "plant does) or set by the master inside CVode (interface me, any FMU), so a ramping speed reference "
-        "stays a ramp inside each step; zoh: each value held over the step, "
-        "a staircase whose ripple biases the electrical estimates (R, L ~ -0.2 % on the built-in plant). "
-        "Default: foh when the FMU supports it, else zoh")
-
-    def hold(self, md: Any) -> str:
-        """The effective ``input_hold`` for the FMU described by ``md`` (fmpy's model description).
-
-        Raises
-        ------
-        ValueError
-            ``foh`` was asked for in Co-Simulation but the FMU does not declare ``canInterpolateInputs``;
-            the message says what was expected.
-        """
-        # Model Exchange: the master integrates and interpolates the inputs itself
-        can = self.interface == "me" or fmu_inspect.interpolates_inputs(md)
-        if self.input_hold == "foh" and not can:
-            raise ValueError("input_hold foh is not available: the FMU does not declare canInterpolateInputs "
-                             "(FMI 2.0) or intermediate update of its inputs (FMI 3.0); expected zoh, no "
-                             "input_hold, or interface me")
-        return self.input_hold or ("foh" if can else "zoh")
-
-
-class FMUConfig(PlantConfig):
-    """An FMU component's ``config`` (cosim/fmu_components.py): the keys of ``plant:`` and its step multiple."""
-
-    step_multiple: int | None = Field(None, ge=1, description="communication step of the FMU in ticks of the "
-                                      "master's finest step (step / plant.oversample); default: the recording step")
 
 
 class ComponentSpec(_Strict):
@@ -243,6 +164,8 @@ def load_plant_map(path: str | Path) -> tuple[dict[str, MapEntry], Callable[[Key
     ``builtin``), without resolving its FMU; and a factory of errors naming that file and line."""
     path = Path(path)
     data, lines = read_yaml(path)
+    if isinstance(data, dict):  # axis.drive chooses the default plant (builtin-pmsm for kind: pmsm)
+        data = apply_drive(data, lambda key, message: located_error(str(path), lines, key, message))
     raw = data.get("plant") or {} if isinstance(data, dict) else {}
     try:
         plant = PlantConfig.model_validate(raw)
@@ -265,7 +188,8 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     lines = dict(lines or {})
     if not isinstance(data, dict):
         raise located_error(source, lines, (), f"expected a mapping of scenario keys, got {type(data).__name__}")
-    given, data = dict(data), _drive_chain(dict(data), source, lines)
+    data = apply_drive(dict(data), lambda key, message: located_error(source, lines, key, message))
+    given, data = dict(data), _drive_chain(data, source, lines)
     base_dir = Path(base_dir or ".").resolve()
     data["monitor"] = _monitor_spec(data.get("monitor"), data, base_dir, source, lines)
     try:
@@ -296,8 +220,10 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
                                                   f"step {hf:g} s (step / plant.oversample); expected e.g. "
                                                   f"{max(1, round(ticks)) * hf:g}")
     _check_lowpass(scenario)
-    plant, md = _resolve_plant(scenario)
-    _check_drive_chain(scenario, md)
+    plant, md = scenario_plant.resolve_plant(scenario)
+    scenario_plant.check_drive_chain(scenario, md)
+    check_pole_pairs(scenario.axis.drive, {v.name: v for v in md.modelVariables}, scenario.plant.parameters,
+                     scenario.error)
     _check_events(scenario, md)
     return scenario.model_copy(update={"plant": plant, "components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
 
@@ -384,100 +310,6 @@ def _implied_sampling(data: dict) -> dict[str, str]:
                    for c in chans)}
 
 
-# -- the plant FMU -------------------------------------------------------------------------------
-
-def _resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
-    p = s.plant
-    if p.fmu in BUILTIN_PLANTS:
-        from feeddrive.fmu_build import builtin_fmu
-
-        path = Path(builtin_fmu(backlash=p.fmu == "builtin-backlash",
-                                motor="pmsm" if p.fmu == "builtin-pmsm" else "dc")).resolve()
-        # the built-in x is the table travel in the unit of its pitch: rad on a rotary axis, whatever it declares
-        role_map = {r: MapEntry(var=v, unit="rad" if r == "position" and s.axis.kind == "rotary" else None)
-                    for r, v in BUILTIN_MAPS[p.fmu].items()} | dict(p.map)
-    else:
-        path = (s.base_dir / Path(p.fmu).expanduser()).resolve()
-        role_map = dict(p.map)
-        if not path.is_file():
-            raise s.error(("plant", "fmu"), f"FMU file not found: {path} (expected {', '.join(map(repr, BUILTIN_PLANTS))} or the path of an "
-                                            ".fmu, relative to the scenario file)")
-    try:
-        version = fmi_version(path)
-    except ValueError as exc:
-        raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    if version not in ("2.0", "3.0"):
-        raise s.error(("plant", "fmu"), f"{path.name} is an FMI {version or '(unknown)'} FMU; expected FMI 2.0 or 3.0")
-    try:
-        check_archive(path)
-    except ValueError as exc:
-        raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    digest = sha256(path)
-    if p.sha256 and p.sha256 != digest:
-        raise s.error(("plant", "sha256"), f"{path.name} has sha256 {digest}, expected {p.sha256} "
-                                           "(the FMU changed since the scenario was resolved)")
-    try:
-        md = model_description(path)
-    except ValueError as exc:
-        raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    problem = runnable(md, p.interface, path.name)
-    if problem:
-        raise s.error(("plant", "fmu" if problem[0] == "fmu" else "interface"), problem[1])
-    try:
-        check_archive(path, (md.coSimulation if p.interface == "cs" else md.modelExchange).modelIdentifier)
-    except ValueError as exc:
-        raise s.error(("plant", "fmu"), f"{path}: {exc}") from None
-    parts = {r for c in s.components if c.fmu is not None and isinstance(c.config, dict)
-             for r in c.config.get("map") or {}}
-    conversions: dict[str, Conversion] = {}
-    problems = check_map(md, role_map, path.name, s.axis.kind, conversions, parts)
-    if problems:
-        raise s.error(*problems[0])
-    role_map = {r: e.model_copy(update={"scale": conversions[r].scale, "offset": conversions[r].offset})
-                for r, e in role_map.items()}
-    s._conversions = conversions
-    try:
-        hold = p.hold(md)
-    except ValueError as exc:
-        raise s.error(("plant", "input_hold"), f"{path.name}: {exc}") from None
-    variables = {v.name: v for v in md.modelVariables}
-    for key, want in (("parameters", ("parameter",)), ("start", None)):
-        for name in getattr(p, key):
-            v = variables.get(name)
-            if v is None or (want and v.causality not in want) or v.type not in REAL_TYPES:
-                kinds = ", ".join(n for n, x in variables.items() if x.type in REAL_TYPES
-                                  and (not want or x.causality in want))
-                raise s.error(("plant", key, name), f"{path.name} has no Real "
-                              f"{'parameter' if want else 'variable'} {name!r}; expected one of: {kinds}")
-            _check_range(s, ("plant", key, name), v, getattr(p, key)[name], path.name)
-    plant = p.model_copy(update={"fmu": str(path), "sha256": digest, "map": role_map, "input_hold": hold})
-    return plant, md
-
-
-def _check_drive_chain(s: Scenario, md: Any) -> None:
-    """A plant FMU with ``pitch`` / ``belt_ratio`` parameters must agree with the scenario's axis (a vendor
-    FMU built for a 10 mm screw under a scenario left at 20 mm would give a false encoder fault)."""
-    variables = {v.name: v for v in md.modelVariables}
-    for fmu_name, key in (("pitch", "pitch"), ("belt_ratio", "ratio")):
-        v = variables.get(fmu_name)
-        if v is None or v.causality != "parameter" or v.type not in REAL_TYPES or s.axis.kind != "linear":
-            continue
-        value = s.plant.parameters.get(fmu_name, v.start)
-        ours = getattr(s.axis, key)
-        if value not in (None, "") and not math.isclose(float(value), ours, rel_tol=1e-9):
-            where = f"plant.parameters.{fmu_name}" if fmu_name in s.plant.parameters else f"the FMU's {fmu_name}"
-            raise s.error(("axis", key), f"axis.{key} = {ours:g} contradicts {where} = {float(value):g}; expected "
-                                         f"axis: {{{key}: {float(value):g}}}")
-
-
-def _check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str) -> None:
-    """Refuse a value outside the [min, max] the FMU declares for the variable (bad input, not a run failure)."""
-    for bound, outside in ((variable.min, lambda b: value < b), (variable.max, lambda b: value > b)):
-        if bound not in (None, "") and outside(float(bound)):
-            raise s.error(key, f"{variable.name} = {value:g} is outside the range [{variable.min or '-inf'}, "
-                               f"{variable.max or 'inf'}] that {fmu} declares")
-
-
 def _check_events(s: Scenario, md: Any) -> None:
     names = {"plant", "nc", "sensors"} | {c.name for c in s.components} | ({"monitor"} if s.monitor else set())
     users = [c.name for c in s.components]
@@ -500,7 +332,7 @@ def _check_events(s: Scenario, md: Any) -> None:
                                                        f"FMU; expected one of: {', '.join(tunable)}")
             if not isinstance(ev.value, float):
                 raise s.error(("events", k, "value"), f"expected a number for plant.{param}, got {ev.value!r}")
-            _check_range(s, ("events", k, "value"), v, ev.value, "the plant FMU")
+            scenario_plant.check_range(s, ("events", k, "value"), v, ev.value, "the plant FMU")
         elif comp == "sensors":
             _check_sensor_event(s, k, param, ev.value)
         elif comp == "nc" or (comp == "monitor" and s.monitor.class_ == DEFAULT_MONITOR):

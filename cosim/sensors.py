@@ -144,6 +144,22 @@ EVENT_FIELDS = _FIELDS
 _SOURCE = {"Im1": 2, "Im2": 2, "u": 0, "u_ref": 1, "w_tach": 3}
 
 
+def parse_event(component: str, name: str, value: Any, channels: Sequence[str]) -> tuple[str, str, float]:
+    """``(channel, field, value)`` of a sensor event ``<channel>.<gain|offset|noise>``; a ScenarioError otherwise."""
+    channel, _, field = name.partition(".")
+    if channel not in channels or field not in _FIELDS:
+        raise ScenarioError(f"{component}.{name}: expected <channel>.<field> with channel in "
+                            f"{', '.join(channels)} and field in {', '.join(_FIELDS)}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ScenarioError(f"{component}.{name}: expected a number, got {value!r}") from None
+    if not math.isfinite(v) or (field == "noise" and v < 0):
+        raise ScenarioError(f"{component}.{name}: expected a finite number{' >= 0' * (field == 'noise')}, "
+                            f"got {value!r}")
+    return channel, field, v
+
+
 def interval_mean_weights(m: int) -> tuple[float, ...]:
     """Quadrature weights (summing to m) of the m sub-samples y(t_n + j h/m), j = 1..m, for the interval mean.
 
@@ -275,18 +291,8 @@ class SensorsComponent(Component):
 
     def set_parameter(self, name: str, value: Any) -> None:
         """Change ``<channel>.<gain|offset|noise>`` from the next output on (a sensor fault)."""
-        channel, _, field = name.partition(".")
-        if channel not in self._params or field not in _FIELDS:
-            raise ScenarioError(f"{self.name}.{name}: expected <channel>.<field> with channel in "
-                                f"{', '.join(self._names)} and field in {', '.join(_FIELDS)}")
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            raise ScenarioError(f"{self.name}.{name}: expected a number, got {value!r}") from None
-        if not math.isfinite(value) or (field == "noise" and value < 0):
-            raise ScenarioError(f"{self.name}.{name}: expected a finite number{' >= 0' * (field == 'noise')}, "
-                                f"got {value!r}")
-        self._params[channel][field] = value
+        channel, field, v = parse_event(self.name, name, value, tuple(self._params))
+        self._params[channel][field] = v
         self._refresh()
 
     def set_inputs(self, values: Sequence[float]) -> None:

@@ -24,6 +24,17 @@ def feeddrive_fmu(fmu_cache_dir: Path) -> Path:
     return builtin_fmu(fmu_cache_dir)
 
 
+@pytest.fixture(scope="session")
+def vendor_pmsm_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The hand-written vendor-style PMSM FMU (tests/plants/vendor_pmsm), compiled once per test session."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent / "plants"))
+    from vendor_pmsm import build_vendor_pmsm
+
+    return build_vendor_pmsm(tmp_path_factory.mktemp("vendor_pmsm"))
+
+
 # hypothesis profiles: the fuzz tests (tests/cosim/test_fuzz.py) run 500 examples each by default;
 # `pytest --hypothesis-profile=fuzz tests/cosim/test_fuzz.py` runs 10 000 each
 from hypothesis import HealthCheck, settings  # noqa: E402
