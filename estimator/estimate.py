@@ -13,16 +13,17 @@ as independent.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
+import casadi as ca
 import numpy as np
 from scipy.ndimage import binary_erosion
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
 from feeddrive.estimator.motion import (
-    MEASURED,
+    FIELDS,
     METHODS,
     PHYSICAL,
     EstimationOptions,
@@ -35,8 +36,9 @@ from feeddrive.estimator.motion import (
     parameter_covariance,
     stationary_score_covariance,
 )
-from feeddrive.estimator.regression import Regression, derive_regression
+from feeddrive.estimator.regression import Regression, derive_regression, equation_parameters, equation_residual
 from feeddrive.estimator.simulation import MODEL, simulate
+from feeddrive.models.drives import derived_quantities, differentiated, measured
 
 # the data types live in .motion; they are re-exported here, where users have always found them
 __all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionData", "MotionEstimate",
@@ -54,9 +56,15 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     Prepared
     """
     h = data.h
-    raw = {k: getattr(data, k) for k in ("u", "i", "w", "position", "torque") if getattr(data, k) is not None}
-    if data.w is not None:
+    model = options.model
+    raw = data.raw()
+    if "w" in raw:
         raw.pop("position", None)  # a tachometer is preferred to the differentiated encoder
+    unknown = sorted(set(raw) - set(FIELDS) - set(measured(model)))
+    if unknown or (model is not MODEL and ("torque" in raw or set(raw) & {"u", "i"} - set(measured(model)))):
+        bad = (unknown or sorted({"torque", "u", "i"} & set(raw)))[0]
+        raise EstimatorInputError(f"signal {bad!r} is not measured on the {model.name} model: expected "
+                                  f"{', '.join(measured(model))} (and position)")
     edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
     if options.filter.zero_phase and data.n <= 3 * (2 * len(options.filter.sos(h)) + 1):  # sosfiltfilt's padding
         raise too_short(data, options, edge)
@@ -73,7 +81,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     if "w" not in f:
         raise EstimatorInputError("the motion has neither a speed nor a position signal")
     sig = {}
-    for state in ("i", "w"):
+    for state in differentiated(model):
         if state in f:
             sig["D" + state], valid = zero_forcing_derivative(f[state], h)
     # the other signals as the derivative operator sees them (its gain error, see matched_average)
@@ -88,17 +96,23 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
             raise too_short(data, options, edge)
         sig = {k: v[keep] for k, v in sig.items()}
     sig["sgn_w"] = np.sign(sig["w"])
-    free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
+    free = [v.name for v in options.physical if (options.offset or not v.optional) and v.name not in options.known]
+    owner = owners(model)
     regressions, overrides = [], {}
-    for eq in MODEL.equations.values():
+    for eq in model.equations.values():
         known, over = dict(options.known), {}
         if eq.normaliser and "torque" in sig:
             known[eq.normaliser] = 1.0  # the torque signal is the normaliser times the output (K i)
             over[eq.output] = sig["torque"]
-        reg = derive_regression(MODEL, eq.name, free, known)
-        if reg.names and all({**sig, **over}.get(x) is not None for x in reg.signals):
+        mine = [n for n in free if owner.get(n) == eq.name or n == eq.normaliser]
+        borrowed = tuple(n for n in equation_parameters(model, eq.name) if n in free and n not in mine)
+        reg = derive_regression(model, eq.name, mine, known, borrowed)
+        if reg.names and all({**sig, **over}.get(x) is not None for x in reg.signals if x not in reg.constants):
             regressions.append(reg)
             overrides[eq.name] = over
+    if not regressions and model is not MODEL:
+        raise EstimatorInputError(f"no equation of the {model.name} model can be used with the signals {sorted(raw)}: "
+                                  f"expected {', '.join(measured(model))} (a speed or a position at least)")
     if not regressions:
         raise EstimatorInputError(
             f"no model equation can be used with the signals {sorted(raw)}: the electrical equation "
@@ -135,19 +149,74 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
         rows[reg.equation] = r
     block = max(1, int(round(options.block() / h)))
     regressions = [r for r in regressions if r.equation in rows]
-    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused, notes)
+    constants = {v.name: float(options.known.get(v.name, v.nominal or 0.0)) for v in options.physical}
+    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused, notes, constants,
+                    tuple(v.name for v in options.physical))
+
+
+def owners(model) -> dict[str, str]:
+    """Physical parameter -> the equation that estimates it: the first, in model order, whose residual holds it
+    other than as its normaliser (DC: R, L, K electrical; Jt, ft, Cd, T0 mechanical. PMSM: R, L_q, L_d, psi_f
+    from the q-axis voltage equation). The other equations take it as a constant (``Regression.constants``)."""
+    out: dict[str, str] = {}
+    for eq in model.equations.values():
+        for n in equation_parameters(model, eq.name):
+            if n != eq.normaliser:
+                out.setdefault(n, eq.name)
+    return out
+
+
+def update_constants(p: Prepared, reg: Regression, theta: np.ndarray) -> None:
+    """An equation without normaliser estimates its parameters themselves: the later ones take them."""
+    if reg.normaliser is None:
+        p.constants.update(zip(reg.names, map(float, theta)))
+
+
+def derived_estimates(result: MethodResult, model) -> dict[str, ParameterEstimate]:
+    """The model's derived quantities (PMSM: K_t, K_e) from ``result``, standard errors by the delta method.
+
+    Each interval uses the t quantile of the fewest degrees of freedom among the parameters it depends on.
+    Quantities whose parameters are not all estimated or known design values are left out.
+    """
+    import casadi as ca
+    from scipy import stats
+
+    out = {}
+    est = result.parameters
+    for name, (_, _, expr) in derived_quantities(model).items():
+        deps = [v for v in model.parameters if ca.depends_on(expr, v.sym)]
+        if any(v.kind == "physical" and v.name not in est for v in deps):
+            continue
+        free = [v for v in deps if v.name in est]
+        x = ca.vertcat(*[v.sym for v in free])
+        fixed = [v for v in deps if v.name not in est]
+        e = ca.substitute(expr, ca.vertcat(*[v.sym for v in fixed]), ca.DM([float(v.nominal) for v in fixed])) \
+            if fixed else expr
+        f = ca.Function("d", [x], [e, ca.jacobian(e, x)])
+        idx = [result.names.index(v.name) for v in free]
+        val, jac = f([result.values[j] for j in idx])
+        jac = np.asarray(jac, dtype=float).ravel()
+        std = float(np.sqrt(max(jac @ np.asarray(result.covariance)[np.ix_(idx, idx)] @ jac, 0.0)))
+        dof = result.dof if result.parameter_dof is None else float(np.min(np.asarray(result.parameter_dof)[idx]))
+        q = float(stats.t.ppf(0.975, max(dof, 1)))
+        v = float(val)
+        out[name] = ParameterEstimate(v, std, (v - q * std, v + q * std))
+    return out
 
 
 def too_short(data: MotionData, options: EstimationOptions, edge: int) -> NotEnoughExcitation:
     """Why a motion is too short, in one line: what each equation needs at this rate, and what is left."""
-    h, n = data.h, data.n
-    free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
-    have = {k for k in ("u", "i", "w", "torque") if getattr(data, k) is not None}
+    h, n, model = data.h, data.n, options.model
+    free = [v.name for v in options.physical if (options.offset or not v.optional) and v.name not in options.known]
+    have = set(data.raw()) - {"position"}
     have |= {"w"} if data.position is not None else set()
     needs, wanted = [], []
-    for eq in MODEL.equations.values():
-        reg = derive_regression(MODEL, eq.name, free, dict(options.known))
-        base = {x[1:] if x.startswith("D") else x for x in reg.signals if x != "sgn_w"}
+    owner = owners(model)
+    for eq in model.equations.values():
+        mine = [n for n in free if owner.get(n) == eq.name or n == eq.normaliser]
+        borrowed = tuple(n for n in equation_parameters(model, eq.name) if n in free and n not in mine)
+        reg = derive_regression(model, eq.name, mine, dict(options.known), borrowed)
+        base = {x[1:] if x.startswith("D") else x for x in reg.signals if x != "sgn_w" and x not in reg.constants}
         if eq.normaliser and "torque" in have:
             base = (base - {eq.output}) | {"torque"}
         names = reg.names if base <= have else ()
@@ -155,7 +224,7 @@ def too_short(data: MotionData, options: EstimationOptions, edge: int) -> NotEno
             wanted += [n for n in (*names, reg.normaliser) if n and n not in wanted]
             need = 2 * edge + 20 * len(names) + PAST + FUTURE
             needs.append(f"the {eq.name} equation needs {need} ({need * h:.3g} s)")
-    order = [v.name for v in PHYSICAL]
+    order = [v.name for v in options.physical]
     return NotEnoughExcitation(
         sorted(wanted, key=order.index) or free,
         f"motion too short: {n} samples ({n * h:.3g} s at {1 / h:.3g} Hz); the filter's start-up (cut-off "
@@ -164,7 +233,11 @@ def too_short(data: MotionData, options: EstimationOptions, edge: int) -> NotEno
 
 
 def _signals_for(p: Prepared, reg: Regression, instruments: Mapping[str, np.ndarray] | None = None) -> dict:
-    return {**p.signals, **(instruments or {}), **p.overrides[reg.equation]}
+    out = {**p.signals, **(instruments or {}), **p.overrides[reg.equation]}
+    if reg.constants:  # parameters of other equations, at their current estimate
+        n = len(p.signals["w"])
+        out.update({c: np.full(n, p.constants[c]) for c in reg.constants})
+    return out
 
 
 @dataclass
@@ -175,6 +248,8 @@ class _Fit:
     cond: float
     fit: float
     theta_dof: np.ndarray  # (p,) effective dof of each theta's variance
+    #: d theta for a change dy of the outputs (one array per sample set, all samples): theta is linear in y
+    lin: Callable[[list[np.ndarray]], np.ndarray] | None = None
 
 
 def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: float) -> np.ndarray:
@@ -261,13 +336,55 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         Wf = np.zeros((len(y), p))
         Wf[r] = W
         stationary.append((Wf, ef))
-    cov, dof, nb = parameter_covariance(G, np.linalg.inv(A), block, stationary_score_covariance(stationary, block))
+    Ai = np.linalg.inv(A)
+    cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
+
+    def lin(dys: list[np.ndarray]) -> np.ndarray:
+        return Ai @ sum(W.T @ rows(dy, r) for W, dy, (*_, r) in zip(Ws, dys, parts)) / scale
+
     return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
-                float(np.sqrt(res2 / out2)), dof)
+                float(np.sqrt(res2 / out2)), dof, lin)
 
 
-def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 1) -> MethodResult:
-    """Physical parameters from the per-equation theta: p_j = theta_j n for a normalised equation (delta method)."""
+def constant_sensitivities(regressions: list[Regression], sources: list[Prepared], fits: dict) -> dict:
+    """``{equation: {constant: d theta / d constant}}`` for the constants another equation of ``fits`` estimates.
+
+    ``sources`` are the sample sets of each fit (one Prepared for LS, the two halves for IV), whose
+    ``constants`` hold the values the outputs were evaluated with. The outputs are differentiated
+    numerically (relative step 1e-6); the regressors do not depend on the constants in these models.
+    """
+    estimated = {n for r in regressions if r.normaliser is None and r.equation in fits for n in r.names}
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for reg in regressions:
+        fit = fits.get(reg.equation)
+        if fit is None or fit.lin is None:
+            continue
+        for c in reg.constants:
+            if c not in estimated or c in reg.names:
+                continue
+            dys = []
+            for src in sources:
+                base = src.constants[c]
+                d = 1e-6 * max(abs(base), 1e-12)
+                y0 = reg.evaluate(_signals_for(src, reg))[0]
+                src.constants[c] = base + d
+                try:
+                    y1 = reg.evaluate(_signals_for(src, reg))[0]
+                finally:
+                    src.constants[c] = base
+                dys.append((y1 - y0) / d)
+            out.setdefault(reg.equation, {})[c] = fit.lin(dys)
+    return out
+
+
+def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 1,
+             sensitivities: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> MethodResult:
+    """Physical parameters from the per-equation theta: p_j = theta_j n for a normalised equation (delta method).
+
+    ``sensitivities`` (:func:`constant_sensitivities`): an equation whose output holds another equation's
+    estimates (``Regression.constants``) inherits their errors, ``d theta_r = d theta_r0 + S d c``; the
+    covariance of the stacked theta is ``M C0 M^T`` with ``C0`` the equations' own (independent) blocks.
+    """
     theta, cov_blocks, names_t = [], [], []
     for reg in p.regressions:
         theta.extend(fits[reg.equation].theta)
@@ -279,8 +396,16 @@ def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 
         C[k:k + len(c), k:k + len(c)] = c
         k += len(c)
     theta = np.array(theta)
+    if sensitivities:
+        M = np.eye(len(theta))
+        for reg in p.regressions:  # model order: an equation's constants come from the equations before it
+            for c, sens in sensitivities.get(reg.equation, {}).items():
+                jc = next(j for j, (e, n) in enumerate(names_t) if n == c and e != reg.equation)
+                rows_r = [names_t.index((reg.equation, n)) for n in reg.names]
+                M[rows_r] += np.outer(sens, M[jc])
+        C = M @ C @ M.T
     where = {n: j for j, (_, n) in enumerate(names_t)}
-    names = [v.name for v in PHYSICAL if v.name in where]
+    names = [n for n in (p.order or [v.name for v in PHYSICAL]) if n in where]
     values = np.array([theta[where[n]] for n in names])
     J = np.zeros((len(names), len(theta)))
     for a, n in enumerate(names):
@@ -323,11 +448,13 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
                                         _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
         except NotEnoughExcitation as exc:
             refused.append(exc)
+            continue
+        update_constants(p, reg, fits[reg.equation].theta)
     if refused:
         raise NotEnoughExcitation([n for exc in refused for n in exc.unidentifiable],
                                   "; ".join(exc.reason for exc in refused),
                                   max(exc.condition_number for exc in refused))
-    res = _combine("ls", p, fits)
+    res = _combine("ls", p, fits, sensitivities=constant_sensitivities(p.regressions, [p], fits))
     check_result(res, options)
     return res
 
@@ -345,8 +472,8 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
     dict of str to ndarray, shape (n,)
         ``i``, ``w``, ``Di``, ``Dw``, ``sgn_w`` (those that can be simulated).
     """
-    s, h = source.signals, source.h
-    par = {**{v.name: v.nominal for v in PHYSICAL if v.optional}, **params, **source.known}
+    s, h, model = source.signals, source.h, options.model
+    par = {**{v.name: v.nominal for v in options.physical if v.optional}, **params, **source.known}
     step = max(h, 0.125 / options.filter.cutoff_hz)
     n = n or len(s["w"])
     at = np.arange(n) + shift
@@ -354,13 +481,24 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
     for reg in source.regressions:
         if reg.equation in skip:  # not simulated: its state is its own (measured) instrument
             continue
-        eq = MODEL.equations[reg.equation]
+        eq = model.equations[reg.equation]
         sig = _signals_for(source, reg)
-        inputs = {x: sig[x] for x in reg.signals if x in MEASURED and x != eq.solves_for}
+        inputs = {x: sig[x] for x in reg.signals if x in measured(model) and x != eq.solves_for}
         # a torque signal replaces normaliser * output: simulate with the normaliser at 1
         values = dict(par, **{eq.normaliser: 1.0}) if source.overrides[reg.equation] else par
         out[eq.solves_for] = simulate((reg.equation,), inputs, values, h, {eq.solves_for: sig[eq.solves_for][0]},
-                                      step, at=at)[eq.solves_for]
+                                      step, at=at, model=model)[eq.solves_for]
+    # a state that the regressors use but whose own equation gives no regression (the PMSM's i_d: all the d-axis
+    # equation's parameters come from the q axis) is simulated from its equation too, so no regressor keeps its noise
+    used = {x for reg in source.regressions for x in reg.signals}
+    for eq in model.equations.values():
+        if eq.solves_for in out or eq.solves_for not in used or eq.name in skip or eq.solves_for not in s:
+            continue
+        syms = {x.name() for x in ca.symvar(equation_residual(model, eq.name))}
+        names = [x for x in measured(model) if x != eq.solves_for and model.variables[x].sym.name() in syms]
+        if all(x in s for x in names):
+            out[eq.solves_for] = simulate((eq.name,), {x: s[x] for x in names}, par, h,
+                                          {eq.solves_for: s[eq.solves_for][0]}, step, at=at, model=model)[eq.solves_for]
     for k in list(out):
         d, valid = zero_forcing_derivative(out[k], h)
         out["D" + k] = np.concatenate([np.full(valid.start, d[0]), d, np.full(n - valid.stop, d[-1])])
@@ -374,7 +512,8 @@ def split_halves(data: MotionData) -> tuple[MotionData, MotionData]:
     def half(k: int) -> MotionData:
         return MotionData(2 * data.h, *(None if x is None else x[k::2] for x in
                                         (data.u, data.i, data.w, data.position, data.torque)), data.t0 + k * data.h,
-                          data.delays)  # the delays are in seconds: the same for either half
+                          data.delays,  # the delays are in seconds: the same for either half
+                          {n: x[k::2] for n, x in data.signals.items()})
     return half(1), half(0)
 
 
@@ -401,6 +540,10 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     cur = start
     for it in range(1, options.iv_iterations + 1):
         params = cur.as_dict()
+        for k, half in enumerate(halves):  # outputs with parameters of other equations follow their estimates
+            half.constants.update({n: v for n, v in params.items() if n in half.constants})
+            measured.update({(reg.equation, k): reg.evaluate(_signals_for(half, reg))
+                             for reg in half.regressions if reg.constants})
         z = (instruments(halves[1], params, options, +0.5, len(halves[0].signals["w"]), skip),
              instruments(halves[0], params, options, -0.5, len(halves[1].signals["w"]), skip))
         fits = {}
@@ -409,7 +552,7 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
                       half.rows[reg.equation]) for k, (half, zh) in enumerate(zip(halves, z))]
             fits[reg.equation] = _solve(reg, parts, halves[0].block, options,
                                         _column_reference(reg, _signals_for(halves[0], reg), halves[0].h))
-        new = _combine("iv", halves[0], fits, it)
+        new = _combine("iv", halves[0], fits, it, constant_sensitivities(halves[0].regressions, list(halves), fits))
         change = np.max(np.abs(new.values - cur.values) / np.maximum(np.abs(cur.values), 1e-12))
         cur = new
         if change < options.iv_tolerance:
@@ -457,4 +600,5 @@ def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOpt
         from feeddrive.estimator.oe import output_error
 
         oe = output_error(p, iv, options)
-    return MotionEstimate(options.method, float(data.t0), float(data.t0 + (data.n - 1) * data.h), ls, iv, oe)
+    out = MotionEstimate(options.method, float(data.t0), float(data.t0 + (data.n - 1) * data.h), ls, iv, oe)
+    return replace(out, derived=derived_estimates(out.result, options.model))
