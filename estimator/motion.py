@@ -27,6 +27,8 @@ SAMPLING_DELAY = {"instant": 0.0, "mean": 0.5}
 MEASURED = ("u", "i", "w")
 #: Physical parameters of the model in model order (T0 and other optional terms on request).
 PHYSICAL = [v for v in MODEL.parameters if v.kind == "physical"]
+#: physical parameter names of every drive kind, DC first (the order of reports and pooled results)
+ORDER = tuple(dict.fromkeys(v.name for kind in DRIVES for v in drive_model(kind).of_kind("physical")))
 #: MotionData's own signal fields (the DC drive's names; other models' signals go in ``signals``)
 FIELDS = ("u", "i", "w", "position", "torque")
 
