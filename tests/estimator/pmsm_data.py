@@ -12,6 +12,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+import plant_data
 
 from feeddrive.estimator import FilterSpec
 from feeddrive.estimator.design import simulate_closed_loop
@@ -44,9 +45,4 @@ def closed_loop(kind: str = "pmsm", params: tuple = ()) -> dict[str, np.ndarray]
 
 def add_noise(data: dict, snr_db: float, seed: int) -> dict:
     """White Gaussian noise on every measured signal at ``snr_db`` (signal RMS over noise RMS)."""
-    rng = np.random.default_rng(seed)
-    out = dict(data)
-    for name in MEASURED:
-        x = data[name]
-        out[name] = x + rng.standard_normal(x.size) * np.sqrt(np.mean(x ** 2)) / 10 ** (snr_db / 20)
-    return out
+    return plant_data.add_noise(data, snr_db, seed, MEASURED)
