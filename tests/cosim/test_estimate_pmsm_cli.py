@@ -12,8 +12,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "estimator"))
 from pmsm_data import closed_loop  # noqa: E402
+from test_estimate_cli import run  # noqa: E402
 
-from feeddrive.cosim.cli import main  # noqa: E402
 from feeddrive.models.drives import drive_model  # noqa: E402
 
 TRUTH = drive_model("pmsm").nominal(("physical",))
@@ -25,18 +25,11 @@ MAP = ["--map", "time=time", "speed=n_act", "position=pos", "i_q=iq", "i_d=id", 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> Path:
     d = closed_loop()
-    rpm = d["w"] * 60 / (2 * math.pi)
-    pos_mm = d["theta"] / (2 * math.pi) * 10.0  # 10 mm pitch
+    columns = [d["t"], d["w"] * 60 / (2 * math.pi), d["theta"] / (2 * math.pi) * 10.0,  # rpm; mm at a 10 mm pitch
+               *(d[k] for k in ("i_q", "i_d", "u_q", "u_d"))]
     path = tmp_path_factory.mktemp("rec") / "pmsm_axis.csv"
-    np.savetxt(path, np.column_stack([d["t"], rpm, pos_mm, d["i_q"], d["i_d"], d["u_q"], d["u_d"]]), delimiter=",",
-               header=HEADER, comments="", fmt="%.12g")
+    np.savetxt(path, np.column_stack(columns), delimiter=",", header=HEADER, comments="", fmt="%.12g")
     return path
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main(["estimate", *map(str, argv)])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_pmsm_recording_gives_every_parameter_with_its_unit_and_kt_ke(recording, capsys):
