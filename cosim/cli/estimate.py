@@ -144,21 +144,7 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
     if not results:
         raise NothingEstimated(f"{path}: no motion could be estimated (see above)")
     # -- model check on the recording's own residue (estimator/adequacy.py, issue 22 item 5) --
-    return side, results, recording_json(rec), [check_motion(data, options) if drive == "dc" else NotChecked(drive)
-                                                for data in datas]
-
-
-class NotChecked:
-    """Stands in for the model check on a drive whose equations ``estimator.adequacy`` does not test (a PMSM)."""
-
-    def __init__(self, drive: str) -> None:
-        self.reason = f"model check not available for the {drive} drive (estimator/adequacy.py tests the DC equations)"
-
-    def line(self) -> str:
-        return self.reason
-
-    def to_dict(self) -> dict:
-        return {"verdict": "not checked", "reason": self.reason}
+    return side, results, recording_json(rec), [check_motion(data, options) for data in datas]
 
 
 def main(args: argparse.Namespace) -> int:
@@ -195,7 +181,7 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"the recordings are on different sides ({', '.join(sorted(sides))}): give --pitch or "
                          f"units that agree")
     side = sides.pop()
-    units = parameter_units(side, "linear" if side == "table" else "rotary") | model_units(getattr(args, "drive", "dc"))
+    units = model_units(getattr(args, "drive", "dc")) | parameter_units(side, "linear" if side == "table" else "rotary")
     if len(per_file) == 1:
         results, rec_keys, checks = per_file[0][2:]
         if args.json:

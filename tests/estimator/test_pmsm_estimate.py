@@ -8,6 +8,7 @@ import pytest
 from pmsm_data import FILTER, H, add_noise, closed_loop
 
 from feeddrive.estimator import EstimationOptions, EstimatorInputError, MotionData, estimate_motion
+from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.models.drives import differentiated, drive_model, measured
 
@@ -96,6 +97,17 @@ def test_per_parameter_estimate_and_physical_flags_work_per_model():
     # no d-axis voltage equation needed: u_d is not a regression signal, the q axis gives R, L_d, L_q, psi_f
     no_ud = MotionData(H, w=d["w"], signals={k: d[k] for k in ("u_q", "i_d", "i_q")})
     assert rel_errors(estimate_motion(no_ud, EstimationOptions(model="pmsm", filter=FILTER)))["L_d"] < 0.005
+
+
+def test_model_check_on_the_pmsm_equations_finds_a_missing_offset():
+    """The residue check (estimator/adequacy.py) on the PMSM's own regressions: adequate on the model's data; a
+    constant load torque of 0.5 N.m the model lacks (no ``offset``) is a mismatch of the mechanical equation."""
+    ok = check_motion(motion(closed_loop()), EstimationOptions(model="pmsm", filter=FILTER))
+    assert ok.verdict == "adequate", ok.reason
+    assert set(ok.equations) == {"electrical_q", "electrical_d", "mechanical"}
+    loaded = check_motion(motion(closed_loop("pmsm", (("T0", 0.5),))), EstimationOptions(model="pmsm", filter=FILTER))
+    assert loaded.verdict == "model mismatch" and "mechanical equation" in loaded.reason, loaded.reason
+    assert "offset (constant)" in loaded.reason
 
 
 def test_bad_signals_are_named():
