@@ -27,8 +27,23 @@ SAMPLING_DELAY = {"instant": 0.0, "mean": 0.5}
 MEASURED = ("u", "i", "w")
 #: Physical parameters of the model in model order (T0 and other optional terms on request).
 PHYSICAL = [v for v in MODEL.parameters if v.kind == "physical"]
-#: physical parameter names of every drive kind, DC first (the order of reports and pooled results)
-ORDER = tuple(dict.fromkeys(v.name for kind in DRIVES for v in drive_model(kind).of_kind("physical")))
+
+
+def _merged_order() -> tuple[str, ...]:
+    """Every drive kind's physical parameter names, each kind's own order kept (a new name right after the one
+    it follows in its model): R, L_d, L_q, L, K, psi_f, Jt, ft, Cd, T0 sorts the DC and the PMSM sets alike."""
+    order: list[str] = []
+    for kind in DRIVES:
+        prev = None
+        for v in drive_model(kind).of_kind("physical"):
+            if v.name not in order:
+                order.insert(order.index(prev) + 1 if prev else 0, v.name)
+            prev = v.name
+    return tuple(order)
+
+
+#: physical parameter names of every drive kind (the order of pooled results and of the bounds' names)
+ORDER = _merged_order()
 #: MotionData's own signal fields (the DC drive's names; other models' signals go in ``signals``)
 FIELDS = ("u", "i", "w", "position", "torque")
 
