@@ -1,7 +1,9 @@
 """``cosim estimate DATA.csv --map ROLE=COLUMN ...``: R, L, K, Jt, ft, Cd from a recorded CSV.
 
 Roles: ``time``, ``voltage`` [V], ``current`` [A], ``speed``, ``position``, ``torque``, ``state``
-(NC state, 1 = rapid). Columns are converted to SI from the unit in their header (``x [mm]``) or an
+(NC state, 1 = rapid). ``--drive pmsm`` (or ``pmsm-spm``) estimates a PMSM's R, L_d, L_q, psi_f, Jt, ft, Cd
+(and K_t = 1.5 p psi_f, K_e = p psi_f, ``"derived"`` in the JSON) from the roles ``u_q, u_d`` [V] and
+``i_q, i_d`` [A] in place of voltage and current, with ``--pole-pairs N`` (or ``--known p=N``). Columns are converted to SI from the unit in their header (``x [mm]``) or an
 explicit ``--map ROLE=COLUMN*SCALE``. The mechanical parameters are estimated on the side the data are
 on: the motor side (position in rad, speed in rad/s, torque in N.m: Jt in kg.m2, ft in N.m.s/rad, Cd in
 N.m), or the table side of a linear axis when the headers say m, m/s or N (Jt is then the moving mass
