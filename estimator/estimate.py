@@ -26,6 +26,8 @@ from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation,
 from feeddrive.estimator.model_terms import (
     constant_sensitivities,
     derived_estimates,
+    find_partners,
+    ls_parts,
     owners,
     signals_for,
     too_short,
@@ -162,8 +164,9 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     block = max(1, int(round(options.block() / h)))
     regressions = [r for r in regressions if r.equation in rows]
     constants = {v.name: float(options.known.get(v.name, v.nominal or 0.0)) for v in options.physical}
+    partners = find_partners(model, regressions, free, options.known, sig, rows, overrides)
     return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused, notes, constants,
-                    tuple(v.name for v in options.physical))
+                    tuple(v.name for v in options.physical), partners)
 
 
 @dataclass
@@ -337,9 +340,8 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
     """Ordinary least squares of every regression (eq. 4, 5)."""
     fits, refused = {}, []
     for reg in p.regressions:  # every equation is checked, so a refusal names all it cannot identify
-        y, Phi = reg.evaluate(_signals_for(p, reg))
         try:
-            fits[reg.equation] = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, options,
+            fits[reg.equation] = _solve(reg, ls_parts(p, reg), p.block, options,
                                         _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
         except NotEnoughExcitation as exc:
             refused.append(exc)
@@ -445,6 +447,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
         for reg in halves[0].regressions:
             parts = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
                       half.rows[reg.equation]) for k, (half, zh) in enumerate(zip(halves, z))]
+            if reg.equation in halves[0].partners:  # the partner's sample sets, instruments from the other half too
+                parts += [part for half, zh in zip(halves, z) for part in ls_parts(half, reg, zh)[1:]]
             fits[reg.equation] = _solve(reg, parts, halves[0].block, options,
                                         _column_reference(reg, _signals_for(halves[0], reg), halves[0].h))
         new = _combine("iv", halves[0], fits, it, constant_sensitivities(halves[0].regressions, list(halves), fits))

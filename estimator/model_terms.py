@@ -129,3 +129,39 @@ def constant_sensitivities(regressions: list[Regression], sources: list[Prepared
                 dys.append((y1 - y0) / d)
             out.setdefault(reg.equation, {})[c] = fit.lin(dys)
     return out
+
+
+def find_partners(model, regressions: list[Regression], free: list[str], known: Mapping[str, float],
+                  sig: Mapping[str, np.ndarray], rows: dict, overrides: dict) -> dict[str, Regression]:
+    """``Prepared.partners``: host equation -> the regression of an equation whose free parameters one other,
+    unscaled equation estimates (the PMSM's d axis: R, L_d, L_q are the q axis's). Its rows (all samples) and
+    overrides (none) are added to ``rows`` and ``overrides``."""
+    owner = owners(model)
+    partners = {}
+    for eq in model.equations.values():  # an equation whose parameters one other (unscaled) equation all estimates
+        held = [n for n in equation_parameters(model, eq.name) if n in free]
+        hosts = {owner.get(n) for n in held}
+        host = next((r for r in regressions if r.equation in hosts and r.normaliser is None), None)
+        if held and len(hosts) == 1 and host is not None and host.equation != eq.name and "sgn_w" not in host.signals:
+            reg = derive_regression(model, eq.name, list(host.names), dict(known))
+            if reg.names and not reg.constants and all(sig.get(x) is not None for x in reg.signals):
+                partners[host.equation] = reg
+                rows[eq.name], overrides[eq.name] = np.ones(len(sig["w"]), dtype=bool), {}
+    return partners
+
+
+def ls_parts(p: Prepared, reg: Regression, instruments: Mapping[str, np.ndarray] | None = None) -> list[tuple]:
+    """The sample sets ``(y, Phi, Z, rows)`` of one regression: its own, and its partner's (``Prepared.partners``)
+    with the columns in its order; ``instruments`` (IV) give Z, else Z is None (LS)."""
+    out = []
+    for r in (reg, p.partners.get(reg.equation)):
+        if r is None:
+            continue
+        y, Phi = r.evaluate(signals_for(p, r))
+        Z = None if instruments is None else r.evaluate(signals_for(p, r, instruments))[1]
+        if r is not reg:  # the partner's columns where the host has them, zero for the others (psi_f)
+            idx = [r.names.index(n) if n in r.names else None for n in reg.names]
+            Phi, Z = ([np.zeros(len(y)) if j is None else M[:, j] for j in idx] for M in (Phi, Z if Z is not None else Phi))
+            Phi, Z = np.column_stack(Phi), (None if instruments is None else np.column_stack(Z))
+        out.append((y, Phi, Z, p.rows[r.equation]))
+    return out

@@ -16,7 +16,7 @@ from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.regression import Regression
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.models import Model
-from feeddrive.models.drives import DRIVES, drive_model, with_design
+from feeddrive.models.drives import DRIVES, drive_model, parameter_order, with_design
 
 METHODS = ("ls", "iv", "oe")
 #: fraction of the sampling period by which a sampling mode's samples lag their time stamps: an interval
@@ -27,23 +27,8 @@ SAMPLING_DELAY = {"instant": 0.0, "mean": 0.5}
 MEASURED = ("u", "i", "w")
 #: Physical parameters of the model in model order (T0 and other optional terms on request).
 PHYSICAL = [v for v in MODEL.parameters if v.kind == "physical"]
-
-
-def _merged_order() -> tuple[str, ...]:
-    """Every drive kind's physical parameter names, each kind's own order kept (a new name right after the one
-    it follows in its model): R, L_d, L_q, L, K, psi_f, Jt, ft, Cd, T0 sorts the DC and the PMSM sets alike."""
-    order: list[str] = []
-    for kind in DRIVES:
-        prev = None
-        for v in drive_model(kind).of_kind("physical"):
-            if v.name not in order:
-                order.insert(order.index(prev) + 1 if prev else 0, v.name)
-            prev = v.name
-    return tuple(order)
-
-
 #: physical parameter names of every drive kind (the order of pooled results and of the bounds' names)
-ORDER = _merged_order()
+ORDER = parameter_order()
 #: MotionData's own signal fields (the DC drive's names; other models' signals go in ``signals``)
 FIELDS = ("u", "i", "w", "position", "torque")
 
@@ -395,6 +380,9 @@ class Prepared:
     constants: dict[str, float] = field(default_factory=dict)
     #: the model's physical parameters in model order (empty: the DC drive's ``PHYSICAL``)
     order: tuple[str, ...] = ()
+    #: equation -> the regression of an equation that estimates nothing of its own (the PMSM's d axis: R, L_d, L_q
+    #: are the q axis's), fitted jointly with it as a second sample set of the same parameters
+    partners: dict[str, Regression] = field(default_factory=dict)
 
 
 def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags: int) -> np.ndarray:

@@ -42,6 +42,7 @@ from feeddrive.estimator.estimate import (
     derived_estimates,
     fell_back,
     instrumental_variables,
+    ls_parts,
     prepare,
     update_constants,
 )
@@ -161,9 +162,10 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
             continue
         fits, again = {}, False
         for reg in p.regressions:
-            y, Phi = reg.evaluate(_signals_for(p, reg))
+            parts = ls_parts(p, reg)  # with its partner equation's samples (the PMSM's d axis)
+            y, Phi = parts[0][:2]
             try:
-                fit = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, opts,
+                fit = _solve(reg, parts, p.block, opts,
                              _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
             except NotEnoughExcitation as exc:
                 again |= _weak(exc, reg, fixed, refused, lumped)

@@ -130,3 +130,16 @@ def derived_quantities(model: Model) -> dict[str, tuple[str, str, ca.SX]]:
     """Derived quantity -> ``(unit, description, expression)`` in the model's parameter symbols; {} for DC."""
     s = {v.name: v.sym for v in model.variables.values()}
     return {k: (unit, text, f(s)) for k, (unit, text, f) in _DERIVED.get(model.name, {}).items()}
+
+
+def parameter_order() -> tuple[str, ...]:
+    """Every drive kind's physical parameter names, each kind's own order kept (a new name right after the one
+    it follows in its model): R, L_d, L_q, psi_f, L, K, Jt, ft, Cd, T0 sorts the DC and the PMSM sets alike."""
+    order: list[str] = []
+    for kind in DRIVES:
+        prev = None
+        for v in drive_model(kind).of_kind("physical"):
+            if v.name not in order:
+                order.insert(order.index(prev) + 1 if prev else 0, v.name)
+            prev = v.name
+    return tuple(order)

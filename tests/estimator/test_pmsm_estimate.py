@@ -82,8 +82,9 @@ def test_white_noise_30db_iv_within_two_percent_and_intervals_cover():
         for n, p in est.parameters.items():
             errors[n].append(p.value / TRUTH[n] - 1)
             covered[n].append(p.ci95[0] <= TRUTH[n] <= p.ci95[1])
-    for n in ("R", "L_q", "psi_f", "Jt"):
-        assert abs(np.mean(errors[n])) < 0.02, (n, np.mean(errors[n]))
+    for n in ("R", "L_q", "psi_f", "Jt"):  # every motion (over 100 motions the largest errors were 1.4 % and less)
+        assert np.max(np.abs(errors[n])) < 0.02, (n, np.max(np.abs(errors[n])))
+        assert abs(np.mean(errors[n])) < 0.005, (n, np.mean(errors[n]))
     for n in SEVEN:
         assert np.mean(covered[n]) >= 0.85, (n, np.mean(covered[n]))
 
