@@ -1,5 +1,6 @@
 """What the estimator needs from a model beyond its regressions: which equation estimates each parameter,
-the other equations' estimates as constants (with their errors), derived quantities (K_t, K_e), and why a
+the other equations' estimates as constants (with their errors), the equations fitted jointly with another
+(a partner whose parameters are all its host's: the PMSM's d axis), derived quantities (K_t, K_e), and why a
 motion is too short. Model-generic: nothing here names a motor (see ``models.drives``).
 """
 from __future__ import annotations
