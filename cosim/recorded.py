@@ -117,7 +117,7 @@ class Recording:
 #: position / speed / torque puts the data on the table side of a linear axis.
 SI_UNITS = {"time": ("s",), "voltage": ("V",), "voltage_ref": ("V",), "current": ("A",), "current1": ("A",),
             "current2": ("A",), "speed": ("rad/s", "m/s"), "position": ("rad", "m"), "torque": ("N*m", "N"),
-            "state": ()}
+            "state": (), "i_d": ("A",), "i_q": ("A",), "u_d": ("V",), "u_q": ("V",)}  # PMSM dq (cosim estimate --drive)
 SI_SIDE = {"rad/s": "motor", "rad": "motor", "N*m": "motor", "m/s": "table", "m": "table", "N": "table"}
 #: Largest magnitude accepted: the estimator squares and sums the samples, 1e300 would overflow
 MAX_ABS = 1e100

@@ -64,6 +64,9 @@ WEAK_INSTRUMENT = 0.5
 DERIVATIVE_TERMS = ("L", "Jt")
 #: level of the check when the caller gives none (``check_motion``: ``cosim estimate``)
 ALPHA = 0.01
+#: marks a model term whose parameter another equation estimates (the PMSM's reluctance torque in the mechanical
+#: equation, the whole d-axis equation): fitted, but not required to be determined by this one
+SHARED = " (shared)"
 #: verdicts, in precedence (``not checked``: ``check_motion`` on signals that allow no test)
 VERDICTS = ("model mismatch", "not enough excitation", "adequate", "not checked")
 
@@ -177,13 +180,14 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
         return beta, M @ (G.T @ G) @ M.T
 
     # the model's coefficients and their standard errors (excitation)
-    undetermined = [nm for nm in names if nm not in ("constant", "T0")]
+    undetermined = [nm for nm in names if nm not in ("constant", "T0") and not nm.endswith(SHARED)]
     if X.shape[1] == 0:
         undetermined = []
     elif k >= X.shape[1] + 2:
         beta, cov = iv(Xs, Zs)
         se = np.sqrt(np.clip(np.diag(cov) * k / (k - X.shape[1]), 0.0, None))
-        undetermined = [nm for nm, b, s in zip(names, beta, se) if nm not in ("constant", "T0") and not abs(b) * max_relative_std > s]
+        undetermined = [nm for nm, b, s in zip(names, beta, se)
+                        if nm not in ("constant", "T0") and not nm.endswith(SHARED) and not abs(b) * max_relative_std > s]
     Zs = Zs.copy()
     for j in [j for j, nm in enumerate(names) if nm in undetermined]:
         # an undetermined term with a weak instrument (a derivative at constant speed, mostly noise) made
@@ -240,7 +244,9 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                    w: np.ndarray | None = None, torque: np.ndarray | None = None,
                    position: np.ndarray | None = None, alpha: float = 0.01, filter: FilterSpec | None = None,
                    speed_fraction: float = 0.03, blocks: int = 30, max_relative_std: float = 0.3,
-                   known: Mapping[str, float] | None = None, offset: bool = False) -> AdequacyResult:
+                   known: Mapping[str, float] | None = None, offset: bool = False,
+                   signals: Mapping[str, np.ndarray] | None = None, model_terms=None,  # noqa: ANN001
+                   states: tuple[str, ...] = ("i", "w")) -> AdequacyResult:
     """Is the DC model adequate for this recording? (lack-of-fit test, see the module docstring)
 
     Parameters
@@ -268,6 +274,11 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     offset : bool
         The mechanical equation has a constant torque offset ``T0`` (the estimator's ``offset``); else a
         constant is a nuisance term (an offset the model lacks).
+    signals, model_terms, states
+        Another drive model (:func:`check_model_motion`): its measured signals by name, the states to
+        differentiate, and ``model_terms(s) -> [(equation, output, y, {parameter: regressor}, friction)]`` in
+        place of the DC equations; each is tested against ``output^2`` and ``output x |speed|`` (and the
+        position polynomials when ``friction``: the equation holding sign(w)).
 
     Returns
     -------
@@ -278,7 +289,7 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     if not 0 < alpha < 0.5:
         raise EstimatorInputError(f"check_adequacy: alpha must be in (0, 0.5), got {alpha}")
     raw = {k: v for k, v in (("u", u), ("i", i), ("w", w), ("torque", torque), ("position", position))
-           if v is not None}
+           if v is not None} | dict(signals or {})
     if "w" not in raw and "position" in raw:  # an encoder alone: its differentiated angle
         raw["w"] = np.gradient(np.asarray(raw["position"], dtype=float), h)
     if "w" not in raw:
@@ -299,7 +310,7 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     if "position" not in f:  # the integral of the speed: a position-dependent load needs no gear ratio
         f["position"] = np.concatenate([[0.0], np.cumsum(0.5 * (f["w"][1:] + f["w"][:-1])) * h])
     sl = slice(PAST, n - FUTURE)
-    d = {"D" + k: zero_forcing_derivative(f[k], h)[0] for k in ("i", "w") if k in f}
+    d = {"D" + k: zero_forcing_derivative(f[k], h)[0] for k in states if k in f}
     s = {k: matched_average(v)[sl] for k, v in f.items()} | d
     # nuisance terms are read LAG samples away (the position only before): the filtered noise of a
     # signal is correlated over about 1 / cutoff, and a nuisance term carrying the noise of the residue
@@ -349,12 +360,21 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         checks[name] = (output, y, X, instruments(X), list(terms), N,
                         ["offset (constant)"] * len(constant) + [f"known {p} off" for p in fixed] + labels)
 
-    if "u" in s and "i" in s:
+    scale = {"electrical": s.get("u"), "mechanical": s.get("torque", s.get("i"))}
+    for name, output, y, terms, friction in (model_terms(s | {"sgn_w": sgn}) if model_terms else []):
+        position = shifted(s["position"], lag)
+        legendre_terms = [lambda yhat, d=d: _legendre(position, rows, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
+        equation(name, output, y, terms, (legendre_terms if friction else [])
+                 + [lambda yhat: around(yhat * aw), lambda yhat: around(yhat ** 2)],
+                 [f"position-dependent torque (gravity) P{d}" for d in (1, 2, 3) if friction]
+                 + [f"{output} x |speed|", "output^2"])
+        scale[name] = y
+    if "u" in s and "i" in s and not model_terms:
         equation("electrical", "u", s["u"], {"L": s["Di"], "R": s["i"], "K": s["w"]},
                  [lambda yhat: around(yhat ** 2), lambda yhat: around(s["i"] * aw)],
                  ["amplifier nonlinearity (u^2)", "current x |speed|"])
     out = "torque" if "torque" in s else "i" if "i" in s else None
-    if out is not None:
+    if out is not None and not model_terms:
         y = s[out]
         if out == "i":  # i = (Jt Dw + ft w + Cd sign w) / K: the mechanical parameters need K
             if "K" in known:
@@ -370,7 +390,6 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                  ["position-dependent torque (gravity) P1", "position-dependent torque (gravity) P2",
                   "position-dependent torque (gravity) P3", f"{'current' if out == 'i' else 'torque'} x |speed|",
                   "output^2"])
-    scale = {"electrical": s.get("u"), "mechanical": s.get("torque", s.get("i"))}
     checks = {k: (o, y[rows], X[rows], Z[rows], nm, N[rows], t, scale[k][rows] * (known.get("K", 1.0) if o == "K i" else 1))
               for k, (o, y, X, Z, nm, N, t) in checks.items()}
     if not checks:
@@ -423,8 +442,54 @@ def check_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estimator.M
     """``check_adequacy`` on one motion as the estimator sees it (``MotionData`` and ``EstimationOptions``:
     its signals, filter, speed fraction and known parameters), at level ``ALPHA``. Signals that allow no
     test give the verdict ``not checked`` with the reason (never an exception: the estimate stands)."""
+    from feeddrive.estimator.simulation import MODEL
+
+    if options.model is not MODEL:
+        return check_model_motion(data, options)
     if data.w is None and data.position is None or data.torque is None and data.i is None:
         return AdequacyResult("not checked", None, ALPHA, "needs a speed (or position) and a current or torque")
     return check_adequacy(data.h, u=data.u, i=data.i, w=data.w, torque=data.torque, position=data.position,
                           alpha=ALPHA, filter=options.filter, speed_fraction=options.speed_fraction,
                           known=options.known, offset=options.offset)
+
+
+def check_model_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estimator.MotionData, EstimationOptions
+    """``check_motion`` for a model other than the DC drive (``options.model``, e.g. the PMSM): each equation's
+    regression derived from the model with all its parameters free (collinear columns, the PMSM's reluctance
+    term through L_d and L_q, kept once), tested for a lack of fit as the DC equations are."""
+    from feeddrive.estimator.model_terms import owners
+    from feeddrive.estimator.regression import derive_regression, equation_parameters
+    from feeddrive.models.drives import differentiated
+
+    model = options.model
+    owner = owners(model)
+    regressions = []
+    for eq in model.equations.values():
+        free = [n for n in equation_parameters(model, eq.name)
+                if n not in options.known and (options.offset or not model.variables[n].optional)]
+        reg = derive_regression(model, eq.name, free, dict(options.known))
+        regressions.append((reg, eq.output))
+
+    def terms(s: dict) -> list:
+        found = []
+        for reg, out in regressions:
+            if not reg.names or any(s.get(x) is None for x in reg.signals):
+                continue
+            y, Phi = reg.evaluate(s)
+            keep: list[int] = []
+            for j in range(Phi.shape[1]):  # a column in the span of the kept ones adds nothing to the model
+                A = Phi[:, keep + [j]]
+                if np.linalg.matrix_rank(A / np.linalg.norm(A, axis=0).clip(1e-300), tol=1e-9) == len(keep) + 1:
+                    keep.append(j)
+            names = [n if owner.get(n) == reg.equation else n + SHARED for n in reg.names]
+            found.append((reg.equation, out, y, {names[j]: Phi[:, j] for j in keep}, "sgn_w" in reg.signals))
+        return found
+
+    if data.w is None and data.position is None:
+        return AdequacyResult("not checked", None, ALPHA, "needs a speed (or position)")
+    try:
+        return check_adequacy(data.h, w=data.w, position=data.position, signals=data.signals, alpha=ALPHA,
+                              filter=options.filter, speed_fraction=options.speed_fraction, offset=options.offset,
+                              model_terms=terms, states=differentiated(model))
+    except EstimatorInputError as exc:
+        return AdequacyResult("not checked", None, ALPHA, str(exc))

@@ -43,7 +43,7 @@ PHYSICAL = tuple(v.name for v in MODEL.parameters if v.kind == "physical" and no
 
 
 def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float] | None = None,
-                         substeps: int = 10) -> dict[str, np.ndarray]:
+                         substeps: int = 10, model=MODEL) -> dict[str, np.ndarray]:
     """Noise-free closed-loop plant driven by a speed reference, no load torque.
 
     Parameters
@@ -58,6 +58,8 @@ def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float
         Model parameters overriding the nominal ones.
     substeps : int
         RK4 substeps per sample.
+    model : models.Model
+        The drive (default the DC feed drive; ``models.drives.drive_model("pmsm")`` for the PMSM).
 
     Returns
     -------
@@ -68,19 +70,19 @@ def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float
     w_ref = np.asarray(w_ref, dtype=float)
     if w_ref.ndim != 1 or not np.all(np.isfinite(w_ref)):
         raise EstimatorInputError(f"w_ref must be a finite 1-D array, got shape {w_ref.shape}")
-    nominal = MODEL.nominal()
+    nominal = model.nominal()
     unknown = sorted(set(params or {}) - set(nominal))
     if unknown:
         raise EstimatorInputError(f"unknown model parameters {unknown}")
-    p = np.array([(dict(nominal) | dict(params or {}))[v.name] for v in MODEL.parameters])
+    p = np.array([(dict(nominal) | dict(params or {}))[v.name] for v in model.parameters])
     n = len(w_ref)
-    U = np.zeros((len(MODEL.inputs), n + 1))
-    U[[v.name for v in MODEL.inputs].index("w_ref")] = np.append(w_ref, w_ref[-1])
-    rollout = rk4_step(MODEL.rhs_function(), substeps).mapaccum("rollout", n, [0], [0])
-    X = rollout(np.zeros(len(MODEL.states)), np.vstack([U[:, :-1], U[:, 1:]]), p, h)
-    X = np.hstack([np.zeros((len(MODEL.states), 1)), np.asarray(X)])
-    Y = np.asarray(MODEL.output_function().map(n + 1)(X, U, np.tile(p, (n + 1, 1)).T))
-    return {v.name: Y[k] for k, v in enumerate(MODEL.outputs)}
+    U = np.zeros((len(model.inputs), n + 1))
+    U[[v.name for v in model.inputs].index("w_ref")] = np.append(w_ref, w_ref[-1])
+    rollout = rk4_step(model.rhs_function(), substeps).mapaccum("rollout", n, [0], [0])
+    X = rollout(np.zeros(len(model.states)), np.vstack([U[:, :-1], U[:, 1:]]), p, h)
+    X = np.hstack([np.zeros((len(model.states), 1)), np.asarray(X)])
+    Y = np.asarray(model.output_function().map(n + 1)(X, U, np.tile(p, (n + 1, 1)).T))
+    return {v.name: Y[k] for k, v in enumerate(model.outputs)}
 
 
 def _error_gains(reg, theta: np.ndarray) -> dict[str, float]:

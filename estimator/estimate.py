@@ -1,4 +1,5 @@
-"""One high-speed motion -> R, L, K, Jt, ft, Cd with uncertainties (paper sections 3-5).
+"""One high-speed motion -> R, L, K, Jt, ft, Cd with uncertainties (paper sections 3-5); or the parameters of
+any other drive model (``EstimationOptions.model``: the PMSM's R, L_d, L_q, psi_f, Jt, ft, Cd) by the same code.
 
 Pipeline: identical low-pass of every signal (eq. 8) -> zero-forcing derivatives (eq. 3) ->
 regressions derived from the model (eq. 4, 5) -> least squares, then instrumental variables with
@@ -13,16 +14,27 @@ as independent.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
+import casadi as ca
 import numpy as np
 from scipy.ndimage import binary_erosion
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
+from feeddrive.estimator.model_terms import (
+    constant_sensitivities,
+    derived_estimates,
+    find_partners,
+    ls_parts,
+    owners,
+    signals_for,
+    too_short,
+    update_constants,
+)
 from feeddrive.estimator.motion import (
-    MEASURED,
+    FIELDS,
     METHODS,
     PHYSICAL,
     EstimationOptions,
@@ -35,12 +47,16 @@ from feeddrive.estimator.motion import (
     parameter_covariance,
     stationary_score_covariance,
 )
-from feeddrive.estimator.regression import Regression, derive_regression
+from feeddrive.estimator.regression import Regression, derive_regression, equation_parameters, equation_residual
 from feeddrive.estimator.simulation import MODEL, simulate
+from feeddrive.models.drives import differentiated, measured
+
+_signals_for = signals_for  # its former private name, still imported by partial and physical
 
 # the data types live in .motion; they are re-exported here, where users have always found them
 __all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionData", "MotionEstimate",
-           "ParameterEstimate", "Prepared", "estimate_motion", "instrumental_variables", "least_squares", "prepare"]
+           "ParameterEstimate", "Prepared", "constant_sensitivities", "derived_estimates", "estimate_motion",
+           "instrumental_variables", "least_squares", "owners", "prepare", "too_short", "update_constants"]
 
 
 def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -> Prepared:
@@ -54,9 +70,15 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     Prepared
     """
     h = data.h
-    raw = {k: getattr(data, k) for k in ("u", "i", "w", "position", "torque") if getattr(data, k) is not None}
-    if data.w is not None:
+    model = options.model
+    raw = data.raw()
+    if "w" in raw:
         raw.pop("position", None)  # a tachometer is preferred to the differentiated encoder
+    unknown = sorted(set(raw) - set(FIELDS) - set(measured(model)))
+    if unknown or (model is not MODEL and ("torque" in raw or set(raw) & {"u", "i"} - set(measured(model)))):
+        bad = (unknown or sorted({"torque", "u", "i"} & set(raw)))[0]
+        raise EstimatorInputError(f"signal {bad!r} is not measured on the {model.name} model: expected "
+                                  f"{', '.join(measured(model))} (and position)")
     edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
     if options.filter.zero_phase and data.n <= 3 * (2 * len(options.filter.sos(h)) + 1):  # sosfiltfilt's padding
         raise too_short(data, options, edge)
@@ -73,7 +95,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     if "w" not in f:
         raise EstimatorInputError("the motion has neither a speed nor a position signal")
     sig = {}
-    for state in ("i", "w"):
+    for state in differentiated(model):
         if state in f:
             sig["D" + state], valid = zero_forcing_derivative(f[state], h)
     # the other signals as the derivative operator sees them (its gain error, see matched_average)
@@ -88,17 +110,23 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
             raise too_short(data, options, edge)
         sig = {k: v[keep] for k, v in sig.items()}
     sig["sgn_w"] = np.sign(sig["w"])
-    free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
+    free = [v.name for v in options.physical if (options.offset or not v.optional) and v.name not in options.known]
+    owner = owners(model)
     regressions, overrides = [], {}
-    for eq in MODEL.equations.values():
+    for eq in model.equations.values():
         known, over = dict(options.known), {}
         if eq.normaliser and "torque" in sig:
             known[eq.normaliser] = 1.0  # the torque signal is the normaliser times the output (K i)
             over[eq.output] = sig["torque"]
-        reg = derive_regression(MODEL, eq.name, free, known)
-        if reg.names and all({**sig, **over}.get(x) is not None for x in reg.signals):
+        mine = [n for n in free if owner.get(n) == eq.name or n == eq.normaliser]
+        borrowed = tuple(n for n in equation_parameters(model, eq.name) if n in free and n not in mine)
+        reg = derive_regression(model, eq.name, mine, known, borrowed)
+        if reg.names and all({**sig, **over}.get(x) is not None for x in reg.signals if x not in reg.constants):
             regressions.append(reg)
             overrides[eq.name] = over
+    if not regressions and model is not MODEL:
+        raise EstimatorInputError(f"no equation of the {model.name} model can be used with the signals {sorted(raw)}: "
+                                  f"expected {', '.join(measured(model))} (a speed or a position at least)")
     if not regressions:
         raise EstimatorInputError(
             f"no model equation can be used with the signals {sorted(raw)}: the electrical equation "
@@ -135,36 +163,10 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
         rows[reg.equation] = r
     block = max(1, int(round(options.block() / h)))
     regressions = [r for r in regressions if r.equation in rows]
-    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused, notes)
-
-
-def too_short(data: MotionData, options: EstimationOptions, edge: int) -> NotEnoughExcitation:
-    """Why a motion is too short, in one line: what each equation needs at this rate, and what is left."""
-    h, n = data.h, data.n
-    free = [v.name for v in PHYSICAL if (options.offset or not v.optional) and v.name not in options.known]
-    have = {k for k in ("u", "i", "w", "torque") if getattr(data, k) is not None}
-    have |= {"w"} if data.position is not None else set()
-    needs, wanted = [], []
-    for eq in MODEL.equations.values():
-        reg = derive_regression(MODEL, eq.name, free, dict(options.known))
-        base = {x[1:] if x.startswith("D") else x for x in reg.signals if x != "sgn_w"}
-        if eq.normaliser and "torque" in have:
-            base = (base - {eq.output}) | {"torque"}
-        names = reg.names if base <= have else ()
-        if names:
-            wanted += [n for n in (*names, reg.normaliser) if n and n not in wanted]
-            need = 2 * edge + 20 * len(names) + PAST + FUTURE
-            needs.append(f"the {eq.name} equation needs {need} ({need * h:.3g} s)")
-    order = [v.name for v in PHYSICAL]
-    return NotEnoughExcitation(
-        sorted(wanted, key=order.index) or free,
-        f"motion too short: {n} samples ({n * h:.3g} s at {1 / h:.3g} Hz); the filter's start-up (cut-off "
-        f"{options.filter.cutoff_hz:.3g} Hz) takes {edge} at each end; " + ", ".join(needs)
-        + ": nothing can be estimated from this motion")
-
-
-def _signals_for(p: Prepared, reg: Regression, instruments: Mapping[str, np.ndarray] | None = None) -> dict:
-    return {**p.signals, **(instruments or {}), **p.overrides[reg.equation]}
+    constants = {v.name: float(options.known.get(v.name, v.nominal or 0.0)) for v in options.physical}
+    partners = find_partners(model, regressions, free, options.known, sig, rows, overrides)
+    return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused, notes, constants,
+                    tuple(v.name for v in options.physical), partners)
 
 
 @dataclass
@@ -175,6 +177,8 @@ class _Fit:
     cond: float
     fit: float
     theta_dof: np.ndarray  # (p,) effective dof of each theta's variance
+    #: d theta for a change dy of the outputs (one array per sample set, all samples): theta is linear in y
+    lin: Callable[[list[np.ndarray]], np.ndarray] | None = None
 
 
 def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: float) -> np.ndarray:
@@ -261,13 +265,24 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         Wf = np.zeros((len(y), p))
         Wf[r] = W
         stationary.append((Wf, ef))
-    cov, dof, nb = parameter_covariance(G, np.linalg.inv(A), block, stationary_score_covariance(stationary, block))
+    Ai = np.linalg.inv(A)
+    cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
+
+    def lin(dys: list[np.ndarray]) -> np.ndarray:
+        return Ai @ sum(W.T @ rows(dy, r) for W, dy, (*_, r) in zip(Ws, dys, parts)) / scale
+
     return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
-                float(np.sqrt(res2 / out2)), dof)
+                float(np.sqrt(res2 / out2)), dof, lin)
 
 
-def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 1) -> MethodResult:
-    """Physical parameters from the per-equation theta: p_j = theta_j n for a normalised equation (delta method)."""
+def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 1,
+             sensitivities: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> MethodResult:
+    """Physical parameters from the per-equation theta: p_j = theta_j n for a normalised equation (delta method).
+
+    ``sensitivities`` (:func:`constant_sensitivities`): an equation whose output holds another equation's
+    estimates (``Regression.constants``) inherits their errors, ``d theta_r = d theta_r0 + S d c``; the
+    covariance of the stacked theta is ``M C0 M^T`` with ``C0`` the equations' own (independent) blocks.
+    """
     theta, cov_blocks, names_t = [], [], []
     for reg in p.regressions:
         theta.extend(fits[reg.equation].theta)
@@ -279,8 +294,16 @@ def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 
         C[k:k + len(c), k:k + len(c)] = c
         k += len(c)
     theta = np.array(theta)
+    if sensitivities:
+        M = np.eye(len(theta))
+        for reg in p.regressions:  # model order: an equation's constants come from the equations before it
+            for c, sens in sensitivities.get(reg.equation, {}).items():
+                jc = next(j for j, (e, n) in enumerate(names_t) if n == c and e != reg.equation)
+                rows_r = [names_t.index((reg.equation, n)) for n in reg.names]
+                M[rows_r] += np.outer(sens, M[jc])
+        C = M @ C @ M.T
     where = {n: j for j, (_, n) in enumerate(names_t)}
-    names = [v.name for v in PHYSICAL if v.name in where]
+    names = [n for n in (p.order or [v.name for v in PHYSICAL]) if n in where]
     values = np.array([theta[where[n]] for n in names])
     J = np.zeros((len(names), len(theta)))
     for a, n in enumerate(names):
@@ -317,17 +340,18 @@ def least_squares(p: Prepared, options: EstimationOptions) -> MethodResult:
     """Ordinary least squares of every regression (eq. 4, 5)."""
     fits, refused = {}, []
     for reg in p.regressions:  # every equation is checked, so a refusal names all it cannot identify
-        y, Phi = reg.evaluate(_signals_for(p, reg))
         try:
-            fits[reg.equation] = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, options,
+            fits[reg.equation] = _solve(reg, ls_parts(p, reg), p.block, options,
                                         _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
         except NotEnoughExcitation as exc:
             refused.append(exc)
+            continue
+        update_constants(p, reg, fits[reg.equation].theta)
     if refused:
         raise NotEnoughExcitation([n for exc in refused for n in exc.unidentifiable],
                                   "; ".join(exc.reason for exc in refused),
                                   max(exc.condition_number for exc in refused))
-    res = _combine("ls", p, fits)
+    res = _combine("ls", p, fits, sensitivities=constant_sensitivities(p.regressions, [p], fits))
     check_result(res, options)
     return res
 
@@ -345,8 +369,8 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
     dict of str to ndarray, shape (n,)
         ``i``, ``w``, ``Di``, ``Dw``, ``sgn_w`` (those that can be simulated).
     """
-    s, h = source.signals, source.h
-    par = {**{v.name: v.nominal for v in PHYSICAL if v.optional}, **params, **source.known}
+    s, h, model = source.signals, source.h, options.model
+    par = {**{v.name: v.nominal for v in options.physical if v.optional}, **params, **source.known}
     step = max(h, 0.125 / options.filter.cutoff_hz)
     n = n or len(s["w"])
     at = np.arange(n) + shift
@@ -354,13 +378,24 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
     for reg in source.regressions:
         if reg.equation in skip:  # not simulated: its state is its own (measured) instrument
             continue
-        eq = MODEL.equations[reg.equation]
+        eq = model.equations[reg.equation]
         sig = _signals_for(source, reg)
-        inputs = {x: sig[x] for x in reg.signals if x in MEASURED and x != eq.solves_for}
+        inputs = {x: sig[x] for x in reg.signals if x in measured(model) and x != eq.solves_for}
         # a torque signal replaces normaliser * output: simulate with the normaliser at 1
         values = dict(par, **{eq.normaliser: 1.0}) if source.overrides[reg.equation] else par
         out[eq.solves_for] = simulate((reg.equation,), inputs, values, h, {eq.solves_for: sig[eq.solves_for][0]},
-                                      step, at=at)[eq.solves_for]
+                                      step, at=at, model=model)[eq.solves_for]
+    # a state that the regressors use but whose own equation gives no regression (the PMSM's i_d: all the d-axis
+    # equation's parameters come from the q axis) is simulated from its equation too, so no regressor keeps its noise
+    used = {x for reg in source.regressions for x in reg.signals}
+    for eq in model.equations.values():
+        if eq.solves_for in out or eq.solves_for not in used or eq.name in skip or eq.solves_for not in s:
+            continue
+        syms = {x.name() for x in ca.symvar(equation_residual(model, eq.name))}
+        names = [x for x in measured(model) if x != eq.solves_for and model.variables[x].sym.name() in syms]
+        if all(x in s for x in names):
+            out[eq.solves_for] = simulate((eq.name,), {x: s[x] for x in names}, par, h,
+                                          {eq.solves_for: s[eq.solves_for][0]}, step, at=at, model=model)[eq.solves_for]
     for k in list(out):
         d, valid = zero_forcing_derivative(out[k], h)
         out["D" + k] = np.concatenate([np.full(valid.start, d[0]), d, np.full(n - valid.stop, d[-1])])
@@ -374,7 +409,8 @@ def split_halves(data: MotionData) -> tuple[MotionData, MotionData]:
     def half(k: int) -> MotionData:
         return MotionData(2 * data.h, *(None if x is None else x[k::2] for x in
                                         (data.u, data.i, data.w, data.position, data.torque)), data.t0 + k * data.h,
-                          data.delays)  # the delays are in seconds: the same for either half
+                          data.delays,  # the delays are in seconds: the same for either half
+                          {n: x[k::2] for n, x in data.signals.items()})
     return half(1), half(0)
 
 
@@ -401,15 +437,21 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     cur = start
     for it in range(1, options.iv_iterations + 1):
         params = cur.as_dict()
+        for k, half in enumerate(halves):  # outputs with parameters of other equations follow their estimates
+            half.constants.update({n: v for n, v in params.items() if n in half.constants})
+            measured.update({(reg.equation, k): reg.evaluate(_signals_for(half, reg))
+                             for reg in half.regressions if reg.constants})
         z = (instruments(halves[1], params, options, +0.5, len(halves[0].signals["w"]), skip),
              instruments(halves[0], params, options, -0.5, len(halves[1].signals["w"]), skip))
         fits = {}
         for reg in halves[0].regressions:
             parts = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
                       half.rows[reg.equation]) for k, (half, zh) in enumerate(zip(halves, z))]
+            if reg.equation in halves[0].partners:  # the partner's sample sets, instruments from the other half too
+                parts += [part for half, zh in zip(halves, z) for part in ls_parts(half, reg, zh)[1:]]
             fits[reg.equation] = _solve(reg, parts, halves[0].block, options,
                                         _column_reference(reg, _signals_for(halves[0], reg), halves[0].h))
-        new = _combine("iv", halves[0], fits, it)
+        new = _combine("iv", halves[0], fits, it, constant_sensitivities(halves[0].regressions, list(halves), fits))
         change = np.max(np.abs(new.values - cur.values) / np.maximum(np.abs(cur.values), 1e-12))
         cur = new
         if change < options.iv_tolerance:
@@ -457,4 +499,5 @@ def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOpt
         from feeddrive.estimator.oe import output_error
 
         oe = output_error(p, iv, options)
-    return MotionEstimate(options.method, float(data.t0), float(data.t0 + (data.n - 1) * data.h), ls, iv, oe)
+    out = MotionEstimate(options.method, float(data.t0), float(data.t0 + (data.n - 1) * data.h), ls, iv, oe)
+    return replace(out, derived=derived_estimates(out.result, options.model))

@@ -15,6 +15,8 @@ from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.regression import Regression
 from feeddrive.estimator.simulation import MODEL
+from feeddrive.models import Model
+from feeddrive.models.drives import DRIVES, drive_model, parameter_order, with_design
 
 METHODS = ("ls", "iv", "oe")
 #: fraction of the sampling period by which a sampling mode's samples lag their time stamps: an interval
@@ -25,6 +27,15 @@ SAMPLING_DELAY = {"instant": 0.0, "mean": 0.5}
 MEASURED = ("u", "i", "w")
 #: Physical parameters of the model in model order (T0 and other optional terms on request).
 PHYSICAL = [v for v in MODEL.parameters if v.kind == "physical"]
+#: physical parameter names of every drive kind (the order of pooled results and of the bounds' names)
+ORDER = parameter_order()
+#: MotionData's own signal fields (the DC drive's names; other models' signals go in ``signals``)
+FIELDS = ("u", "i", "w", "position", "torque")
+
+
+def physical(model: Model) -> list:
+    """Physical parameters (``Variable``) of a model, in model order (``PHYSICAL`` for the DC drive)."""
+    return PHYSICAL if model is MODEL else [v for v in model.parameters if v.kind == "physical"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +58,9 @@ class MotionData:
         Signal name -> how long [s] its samples lag their time stamps: ``h / 2`` for a sample that is the
         mean over the interval before its time stamp (``SAMPLING_DELAY``); default 0 (instantaneous).
         The estimator aligns every signal to its time stamp before the regression.
+    signals : mapping of str to ndarray, each shape (n,)
+        Other models' measured signals by model signal name (PMSM: ``u_d, u_q`` [V], ``i_d, i_q`` [A];
+        the speed stays in ``w``), checked like the fields above.
     """
 
     h: float
@@ -57,13 +71,18 @@ class MotionData:
     torque: np.ndarray | None = None
     t0: float = 0.0
     delays: Mapping[str, float] = field(default_factory=dict)
+    signals: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.h) and self.h > 0):
             raise EstimatorInputError(f"MotionData: h must be a positive sampling period [s], got {self.h}")
         n = None
-        for name in ("u", "i", "w", "position", "torque"):
-            x = getattr(self, name)
+        extra = dict(self.signals)
+        clash = sorted(set(extra) & set(FIELDS))
+        if clash:
+            raise EstimatorInputError(f"MotionData: signals: {clash[0]!r} is a field of its own, give it as {clash[0]}=")
+        for name in FIELDS + tuple(extra):
+            x = extra[name] if name in extra else getattr(self, name)
             if x is None:
                 continue
             x = np.asarray(x, dtype=float)
@@ -74,18 +93,27 @@ class MotionData:
             if n is not None and x.size != n:
                 raise EstimatorInputError(f"MotionData: {name} has {x.size} samples, the other signals {n}")
             n = x.size
-            object.__setattr__(self, name, x)
+            if name in extra:
+                extra[name] = x
+            else:
+                object.__setattr__(self, name, x)
         if n is None:
             raise EstimatorInputError("MotionData: no signal given")
+        object.__setattr__(self, "signals", extra)
         for name, d in dict(self.delays).items():
-            if name not in ("u", "i", "w", "position", "torque") or not (np.isfinite(d) and 0 <= d <= 10 * self.h):
-                raise EstimatorInputError(f"MotionData: delays: expected u, i, w, position or torque -> a delay in "
-                                          f"[0, 10 h] s, got {name!r}: {d!r}")
+            if name not in FIELDS + tuple(extra) or not (np.isfinite(d) and 0 <= d <= 10 * self.h):
+                raise EstimatorInputError(f"MotionData: delays: expected u, i, w, position, torque or a name of "
+                                          f"signals -> a delay in [0, 10 h] s, got {name!r}: {d!r}")
         object.__setattr__(self, "delays", dict(self.delays))
 
     @property
     def n(self) -> int:
-        return next(len(x) for x in (self.u, self.i, self.w, self.position, self.torque) if x is not None)
+        return next(len(x) for x in (self.u, self.i, self.w, self.position, self.torque, *self.signals.values())
+                    if x is not None)
+
+    def raw(self) -> dict[str, np.ndarray]:
+        """Every given signal by name: the fields that are not None, then ``signals``."""
+        return {k: getattr(self, k) for k in FIELDS if getattr(self, k) is not None} | dict(self.signals)
 
 
 @dataclass(frozen=True)
@@ -127,6 +155,10 @@ class EstimationOptions:
         Block length of the long-run covariance [s]; None: ``max(0.05, 5 / cutoff)``.
     oe_rate_hz : float
         Sampling rate the output-error refinement decimates to [Hz].
+    model : Model or str
+        The drive's model, or a kind of ``models.drives.DRIVES`` (``"dc"``, ``"pmsm"``, ``"pmsm-spm"``);
+        default the DC feed drive. Known design parameters in ``known`` (the PMSM's pole pairs ``p``)
+        replace the model's nominal values (``models.drives.with_design``) and leave ``known``.
     """
 
     method: str = "iv"
@@ -144,21 +176,36 @@ class EstimationOptions:
     max_relative_std: float = 0.3
     block_seconds: float | None = None
     oe_rate_hz: float = 1000.0
+    model: Model | str = MODEL
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise EstimatorInputError(f"method must be one of {METHODS}, got {self.method!r}")
-        names = {v.name for v in PHYSICAL}
+        model = self.model
+        if isinstance(model, str):
+            if model not in DRIVES:
+                raise EstimatorInputError(f"drive must be one of {sorted(DRIVES)}, got {model!r}")
+            model = drive_model(model)
+        names = {v.name for v in physical(model)}
+        design = {v.name for v in model.of_kind("design")}
         for k, v in self.known.items():
-            if k not in names:
-                raise EstimatorInputError(f"known parameter {k!r} is not one of {sorted(names)}")
+            if k not in names and k not in design:
+                raise EstimatorInputError(f"known parameter {k!r} is not one of {sorted(names)} "
+                                          f"(or a design parameter of {model.name})")
             if not np.isfinite(v):
                 raise EstimatorInputError(f"known parameter {k!r} must be finite, got {v}")
+        model = with_design(model, {k: v for k, v in self.known.items() if k in design})
+        object.__setattr__(self, "model", model)
+        object.__setattr__(self, "known", {k: v for k, v in self.known.items() if k not in design})
         if self.speed_threshold is not None and not self.speed_threshold >= 0:
             raise EstimatorInputError(f"speed_threshold must be >= 0 {self.speed_unit}, got {self.speed_threshold}")
         if not 0 <= self.speed_fraction < 1:
             raise EstimatorInputError(f"speed_fraction must be in [0, 1), got {self.speed_fraction}")
-        object.__setattr__(self, "known", dict(self.known))
+
+    @property
+    def physical(self) -> list:
+        """The model's physical parameters (``Variable``), in model order."""
+        return physical(self.model)
 
     def block(self) -> float:
         return self.block_seconds or max(0.05, 5.0 / self.filter.cutoff_hz)
@@ -243,6 +290,8 @@ class MotionEstimate:
     oe: MethodResult | None
     #: refused parameter -> the rule and its numbers (``estimator.partial``; empty from ``estimate_motion``)
     refused: Mapping[str, str] = field(default_factory=dict)
+    #: quantities derived from the parameters (PMSM: K_t, K_e) with their standard errors, by the delta method
+    derived: Mapping[str, ParameterEstimate] = field(default_factory=dict)
     #: given parameter outside its physical range or the user's bounds -> why (never validated)
     flags: Mapping[str, str] = field(default_factory=dict)
     #: parameter -> value of the bounded least squares fit, offered when something is flagged
@@ -292,6 +341,8 @@ class MotionEstimate:
         # the keys below appear only when they have something to say
         if self.method_used != self.method:
             out |= {"method_requested": self.method, "fallback": self.result.message}
+        if self.derived:
+            out["derived"] = {n: {"value": p.value, "ci95": list(p.ci95)} for n, p in self.derived.items()}
         if self.refused:
             out["refused"] = dict(self.refused)
         if self.fixed:
@@ -324,6 +375,14 @@ class Prepared:
     refused: dict[str, str] = field(default_factory=dict)
     #: equation -> how many samples are usable and why the others are not (for the messages)
     notes: dict[str, str] = field(default_factory=dict)
+    #: parameter -> its current value, for the regressions that take it as a constant (``Regression.constants``:
+    #: estimated by another equation; the nominal value until that equation's estimate is known)
+    constants: dict[str, float] = field(default_factory=dict)
+    #: the model's physical parameters in model order (empty: the DC drive's ``PHYSICAL``)
+    order: tuple[str, ...] = ()
+    #: equation -> the regression of an equation that estimates nothing of its own (the PMSM's d axis: R, L_d, L_q
+    #: are the q axis's), fitted jointly with it as a second sample set of the same parameters
+    partners: dict[str, Regression] = field(default_factory=dict)
 
 
 def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags: int) -> np.ndarray:
@@ -441,7 +500,7 @@ def long_run_covariance(G: np.ndarray, block: int) -> tuple[np.ndarray, int]:
 def check_result(result: MethodResult, options: EstimationOptions) -> None:
     """Refuse parameters that must be positive but whose relative standard error is too large."""
     std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
-    strict = {v.name for v in PHYSICAL if v.lower_strict}
+    strict = {v.name for v in options.physical if v.lower_strict}
     bad = [n for n, v, s in zip(result.names, result.values, std)
            if n in strict and not (v > 0 and s / v <= options.max_relative_std)]
     if bad:

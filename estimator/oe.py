@@ -20,33 +20,42 @@ import numpy as np
 
 from feeddrive.estimator.errors import NotEnoughExcitation
 from feeddrive.estimator.motion import (
-    PHYSICAL,
     EstimationOptions,
     MethodResult,
     Prepared,
     check_result,
     parameter_covariance,
 )
-from feeddrive.estimator.simulation import MODEL, _ode, _rollout
+from feeddrive.estimator.simulation import _ode, _rollout
+from feeddrive.models.drives import differentiated, measured
 
 MAX_ITERATIONS = 30
 OE_W_EPS = 0.01
 
 
+def _signals(model) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(outputs, inputs) of the simulation: the equations' states (DC ``i, w``), the other measured signals (``u``)."""
+    states = differentiated(model)
+    return states, tuple(sorted(x for x in measured(model) if x not in states))
+
+
 @lru_cache(maxsize=8)
-def _sensitivities(n: int, free: tuple[str, ...]) -> tuple[ca.Function, ca.Function]:
-    """``f(q, U (2, n-1), fixed, h) -> X (2, n-1)`` and ``(X, dX/dq)``; q = free parameters, i0, w0."""
-    roll = _rollout(MODEL, ("electrical", "mechanical"), ("u",), n, 2)
-    _, states, phys, _ = _ode(MODEL, ("electrical", "mechanical"), ("u",))
-    q = ca.MX.sym("q", len(free) + 2)
+def _sensitivities(n: int, free: tuple[str, ...], model) -> tuple[ca.Function, ca.Function]:
+    """``f(q, U (2 m, n-1), fixed, h) -> X (k, n-1)`` and ``(X, dX/dq)``; q = free parameters, then the initial
+    states in ``_signals(model)[0]`` order (DC: ``i0, w0``); m inputs, k states."""
+    outputs, inputs = _signals(model)
+    equations = tuple(model.equations)
+    roll = _rollout(model, equations, inputs, n, 2)
+    _, states, phys, _ = _ode(model, equations, inputs)
+    q = ca.MX.sym("q", len(free) + len(outputs))
     fixed = ca.MX.sym("fixed", len(phys) + 1)  # every physical parameter and w_eps; free ones overwritten
     p = ca.vertcat(*[q[free.index(v.name)] if v.name in free else fixed[j] for j, v in enumerate(phys)],
                    fixed[len(phys)])
-    U, h = ca.MX.sym("U", 2, n - 1), ca.MX.sym("h")
-    x0 = ca.vertcat(*[q[len(free) + ["i", "w"].index(s)] for s in states])
+    U, h = ca.MX.sym("U", 2 * len(inputs), n - 1), ca.MX.sym("h")
+    x0 = ca.vertcat(*[q[len(free) + outputs.index(s)] for s in states])
     X = roll(x0, U, p, h)
-    if states != ("i", "w"):
-        X = X[[states.index("i"), states.index("w")], :]
+    if states != outputs:
+        X = X[[states.index(s) for s in outputs], :]
     return (ca.Function("oe_sim", [q, U, fixed, h], [X]),
             ca.Function("oe_jac", [q, U, fixed, h], [X, ca.jacobian(ca.vec(X), q)]))
 
@@ -76,23 +85,26 @@ def _output_error(p: Prepared, start: MethodResult, options: EstimationOptions) 
     def fallback(reason: str) -> MethodResult:
         return _fallback(start, reason)
 
-    s = p.signals
-    if {r.equation for r in p.regressions} != {"electrical", "mechanical"} or any(p.overrides.values()):
-        return fallback("needs voltage, current and speed, with K i (not a torque signal)")
+    s, model = p.signals, options.model
+    outputs, inputs = _signals(model)
+    owned = {n for r in p.regressions if r.normaliser is None for n in r.names}
+    if (any(x not in s for x in outputs + inputs) or any(p.overrides.values())
+            or any(r.normaliser and r.normaliser not in owned for r in p.regressions)):
+        return fallback(f"needs {', '.join(measured(model))} (voltage, current and speed), with no torque signal")
     k = max(1, int(round(1.0 / (options.oe_rate_hz * p.h))))
-    u, y = s["u"][::k], np.vstack([s["i"][::k], s["w"][::k]])
-    n, h = u.size, k * p.h
+    u, y = np.vstack([s[x][::k] for x in inputs]), np.vstack([s[x][::k] for x in outputs])
+    n, h = u.shape[1], k * p.h
     free = start.names
-    sim, sens = _sensitivities(n, free)
-    values = {**{v.name: v.nominal for v in PHYSICAL}, **p.known, **start.as_dict()}
-    fixed = [float(values[v.name]) for v in PHYSICAL] + [OE_W_EPS]
-    U = np.vstack([u[:-1], u[1:]])
+    sim, sens = _sensitivities(n, free, model)
+    values = {**{v.name: v.nominal for v in options.physical}, **p.known, **start.as_dict()}
+    fixed = [float(values[v.name]) for v in options.physical] + [OE_W_EPS]
+    U = np.vstack([u[:, :-1], u[:, 1:]])
     q = np.concatenate([start.values, y[:, 0]])
     scale = np.concatenate([np.abs(start.values).clip(1e-9), np.sqrt(np.mean(y ** 2, axis=1)).clip(1e-9)])
 
     def jacobian(q):
         X, J = sens(q, U, fixed, h)
-        return np.asarray(X), np.asarray(ca.densify(J)).reshape(2, n - 1, -1, order="F")
+        return np.asarray(X), np.asarray(ca.densify(J)).reshape(len(outputs), n - 1, -1, order="F")
 
     X, J = jacobian(q)
     if not (np.all(np.isfinite(X)) and np.all(np.isfinite(J))):

@@ -28,6 +28,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import replace
 
+import casadi as ca
 import numpy as np
 from scipy import stats
 
@@ -37,12 +38,16 @@ from feeddrive.estimator.estimate import (
     _combine,
     _signals_for,
     _solve,
+    constant_sensitivities,
+    derived_estimates,
     fell_back,
     instrumental_variables,
+    ls_parts,
     prepare,
+    update_constants,
 )
 from feeddrive.estimator.identifiability import lag_reason, second_lag
-from feeddrive.estimator.motion import PHYSICAL, EstimationOptions, MethodResult, MotionData, MotionEstimate
+from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
 
 #: Smallest spread of |w| (5th to 95th percentile, relative to the 95th) that separates ft from Cd.
@@ -52,7 +57,8 @@ MIN_TAU_SAMPLES = 1.0
 #: Fewest usable samples of the minority direction for Cd to be told from an offset.
 MIN_REVERSED = 20
 #: Parameters that may be fixed (at 0) in the re-fit of the others when the data cannot determine them.
-FIXABLE = ("L", "Jt", "ft", "T0")
+#: (the PMSM's L_d when the d axis is not excited: its term p w L_d i_d is then zero whatever its value)
+FIXABLE = ("L", "L_d", "L_q", "Jt", "ft", "T0")
 
 
 def _apriori(p, options: EstimationOptions, fixed: dict, refused: dict, lumped: set) -> bool:
@@ -156,9 +162,10 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
             continue
         fits, again = {}, False
         for reg in p.regressions:
-            y, Phi = reg.evaluate(_signals_for(p, reg))
+            parts = ls_parts(p, reg)  # with its partner equation's samples (the PMSM's d axis)
+            y, Phi = parts[0][:2]
             try:
-                fit = _solve(reg, [(y, Phi, None, p.rows[reg.equation])], p.block, opts,
+                fit = _solve(reg, parts, p.block, opts,
                              _column_reference(reg, _signals_for(p, reg), p.h), p.notes.get(reg.equation, ""))
             except NotEnoughExcitation as exc:
                 again |= _weak(exc, reg, fixed, refused, lumped)
@@ -180,6 +187,7 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
                 continue
             _lag_rule(p, reg, y, Phi, fit, refused, lumped)
             fits[reg.equation] = fit
+            update_constants(p, reg, fit.theta)
         if again:
             continue
         # an equation scaled by a parameter that is refused cannot give its parameters
@@ -196,7 +204,7 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
         if not usable:
             return p, None, fixed, refused, lumped
         p = replace(p, regressions=usable)
-        return p, _combine("ls", p, fits), fixed, refused, lumped
+        return p, _combine("ls", p, fits, sensitivities=constant_sensitivities(usable, [p], fits)), fixed, refused, lumped
     raise EstimatorInputError("the re-fits without the refused parameters did not settle")  # pragma: no cover
 
 
@@ -303,11 +311,12 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
         flags = physical_flags(shown, bounds or {})
         bounded = bounded_fit(p, {**options.known, **fixed}, bounds or {}, given) if flags else {}
     start, end = float(data.t0), float(data.t0 + (data.n - 1) * data.h)
-    order = [v.name for v in PHYSICAL]
+    order = [v.name for v in options.physical]
     refused = {n: refused[n] for n in sorted(refused, key=order.index) if n not in options.known}
     return MotionEstimate(options.method, start, end, subsets["ls"], subsets["iv"], subsets["oe"], refused=refused,
                           flags=flags, bounded=bounded, fixed={n: v for n, v in fixed.items() if n in refused},
-                          joint=_subset(unconditional, list(shown.names)))
+                          joint=_subset(unconditional, list(shown.names)),
+                          derived=derived_estimates(shown, options.model))
 
 
 def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float],
@@ -315,7 +324,13 @@ def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: M
     """IV from ``ls``, or ``ls`` labelled ``iv`` with the reason it could not run."""
     # an equation whose derivative coefficient is fixed at 0 cannot be simulated: its measured state is its own
     # instrument (IV = LS for it), the other equation still gets simulated instruments
-    dynamic = {eq: n for eq, n in (("electrical", "L"), ("mechanical", "Jt")) if fixed.get(n) == 0.0}
+    model = options.model
+    dynamic = {}
+    for eq in model.equations.values():  # the parameter that multiplies the equation's derivative (L, L_q, Jt)
+        slope = ca.jacobian(eq.residual, model.derivative[eq.solves_for])
+        n = next((v.name for v in model.of_kind("physical") if ca.depends_on(slope, v.sym)), None)
+        if n is not None and fixed.get(n) == 0.0:
+            dynamic[eq.name] = n
     if equations <= set(dynamic):
         return fell_back(ls, "iv", f"IV fell back to LS: {', '.join(dynamic.values())} fixed at 0, the instruments "
                                    f"cannot be simulated")

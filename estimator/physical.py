@@ -14,17 +14,20 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from feeddrive.estimator.errors import EstimatorInputError
-from feeddrive.estimator.motion import PHYSICAL, MethodResult
+from feeddrive.estimator.motion import ORDER, MethodResult
+from feeddrive.models.drives import DRIVES, drive_model
 
 #: parameter -> (lower or None, upper or None)
 Bounds = Mapping[str, tuple[float | None, float | None]]
-STRICT = tuple(v.name for v in PHYSICAL if v.lower_strict)  # R, L, K, Jt: > 0
-NON_NEGATIVE = tuple(v.name for v in PHYSICAL if v.lower is not None and not v.lower_strict)  # ft, Cd: >= 0
+#: every drive kind's physical parameters (a name means the same quantity in every model: R, Jt, ft, Cd)
+_VARIABLES = {v.name: v for kind in DRIVES for v in drive_model(kind).of_kind("physical")}
+STRICT = tuple(n for n, v in _VARIABLES.items() if v.lower_strict)  # R, L, K, Jt (L_d, L_q, psi_f): > 0
+NON_NEGATIVE = tuple(n for n, v in _VARIABLES.items() if v.lower is not None and not v.lower_strict)  # ft, Cd
 
 
 def parse_bounds(items: list[str], where: str = "--bounds") -> dict[str, tuple[float | None, float | None]]:
     """``["Jt=1e-5:1", "ft=0:"]`` -> ``{"Jt": (1e-5, 1.0), "ft": (0.0, None)}`` (one clear error otherwise)."""
-    names = [v.name for v in PHYSICAL]
+    names = list(ORDER)
     out = {}
     for item in items:
         name, sep, rng = item.partition("=")

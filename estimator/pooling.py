@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from feeddrive.estimator.motion import PHYSICAL, MethodResult, ParameterEstimate
+from feeddrive.estimator.motion import ORDER, MethodResult, ParameterEstimate
 
 
 @dataclass(frozen=True)
@@ -80,7 +80,7 @@ def _dof(r: MethodResult, n: str) -> float:
 
 def pool(results: list[MethodResult], alpha: float = 0.01) -> Pooled:
     """Pool ``results`` (each with its own given parameters) and test their agreement (module docstring)."""
-    order = [v.name for v in PHYSICAL]
+    order = list(ORDER)
     names = sorted({n for r in results for n in r.names}, key=order.index)
     params, count, per, dofs = {}, {}, {}, {}
     for n in names:

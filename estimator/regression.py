@@ -93,6 +93,10 @@ class Regression:
         ``signals (len(signals),) -> [y, phi_1, ..., phi_p]``.
     vectorised : callable or None
         ``numpy_function(function)``: the same on arrays (len(signals), n) -> (1 + p, n).
+    constants : tuple of str
+        Parameters among ``signals``: estimated by another equation (``borrowed``) and given as constant
+        arrays at evaluation (the PMSM's reluctance torque ``1.5 p (L_d - L_q) i_d i_q / psi_f`` on the
+        output side of the mechanical regression).
     """
 
     equation: str
@@ -101,6 +105,7 @@ class Regression:
     signals: tuple[str, ...]
     function: ca.Function
     vectorised: Callable[[np.ndarray], np.ndarray] | None = field(default=None, compare=False, repr=False)
+    constants: tuple[str, ...] = ()
 
     def evaluate(self, values: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """Evaluate output and regressors on sampled signals.
@@ -126,12 +131,35 @@ class Regression:
         return out[0], out[1:].T
 
 
-def derive_regression(model, equation: str, free: list[str], known: Mapping[str, float]) -> Regression:
-    return _derive(model, equation, tuple(free), tuple(sorted(known.items())))
+def derive_regression(model, equation: str, free: list[str], known: Mapping[str, float],
+                      borrowed: tuple[str, ...] = ()) -> Regression:
+    return _derive(model, equation, tuple(free), tuple(sorted(known.items())), tuple(borrowed))
+
+
+def equation_residual(model, equation: str) -> ca.SX:
+    """The residual of one equation as the estimator sees it: no load (inputs zero), and the algebraic
+    signals defined from physical parameters (the PMSM's air-gap torque) replaced by their definition."""
+    from feeddrive.models.drives import parameter_defined
+
+    residual = model.equations[equation].residual
+    inputs = [v.sym for v in model.inputs]
+    residual = ca.substitute(residual, ca.vertcat(*inputs), ca.DM.zeros(len(inputs)))
+    subs = [n for n in parameter_defined(model) if ca.depends_on(residual, model.variables[n].sym)]
+    if subs:
+        residual = ca.substitute(residual, ca.vertcat(*[model.variables[n].sym for n in subs]),
+                                 ca.vertcat(*[model._substitute_algebraic(model.algebraic[n]) for n in subs]))
+    return residual
+
+
+def equation_parameters(model, equation: str) -> tuple[str, ...]:
+    """Physical parameters the equation's residual (:func:`equation_residual`) depends on, in model order."""
+    r = equation_residual(model, equation)
+    return tuple(v.name for v in model.of_kind("physical") if ca.depends_on(r, v.sym))
 
 
 @lru_cache(maxsize=64)
-def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple) -> Regression:
+def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple, borrowed: tuple[str, ...] = ()
+            ) -> Regression:
     """Derive the regression of one model equation.
 
     Parameters
@@ -145,6 +173,8 @@ def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple) -> 
         take their nominal value (optional terms such as ``T0`` are 0 unless requested).
     known : mapping of str to float
         Parameters fixed to a known value.
+    borrowed : tuple of str
+        Parameters estimated by another equation: kept as symbols, evaluated as constant signals.
 
     Returns
     -------
@@ -152,13 +182,11 @@ def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple) -> 
     """
     known = dict(known_items)
     eq = model.equations[equation]
-    residual = eq.residual
     # no machining during a high-speed motion: inputs (load torque) are zero
-    inputs = [v.sym for v in model.inputs]
-    residual = ca.substitute(residual, ca.vertcat(*inputs), ca.DM.zeros(len(inputs)))
+    residual = equation_residual(model, equation)
     params = [v for v in model.parameters if ca.depends_on(residual, v.sym)]
-    names = [v.name for v in params if v.name in free and v.name not in known]
-    fixed = [v for v in params if v.name not in names]
+    names = [v.name for v in params if v.name in free and v.name not in known and v.name not in borrowed]
+    fixed = [v for v in params if v.name not in names and v.name not in borrowed]
     residual = ca.substitute(residual, ca.vertcat(*[v.sym for v in fixed]),
                              ca.DM([float(known.get(v.name, v.nominal)) for v in fixed])) if fixed else residual
     p = ca.vertcat(*[model.variables[n].sym for n in names])
@@ -174,10 +202,13 @@ def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple) -> 
         coef = ca.jacobian(phis[k], out)
         if not coef.is_constant() or not _is_zero(phis[k] - coef * out):
             raise EstimatorInputError(f"equation {equation!r}: the {normaliser} term is not {normaliser}*{eq.output}")
-        if not _is_zero(r0):
+        held = [model.variables[b].sym for b in borrowed]
+        if not _is_zero(r0) and not any(ca.depends_on(r0, b) for b in held):
             raise EstimatorInputError(
                 f"equation {equation!r}: fixing other parameters needs a known {normaliser} (or a torque signal)")
-        y = out
+        # terms in parameters of other equations go to the output side, scaled by the normaliser's value
+        # (given, like them, as a constant): out + r0 / (coef n) = sum_j (p_j / n) (-phi_j / coef)
+        y = out if _is_zero(r0) else out + r0 / (coef * model.variables[normaliser].sym)
         phis = [-phi / coef for j, phi in enumerate(phis) if j != k]
         names = [n for n in names if n != normaliser]
     else:
@@ -187,4 +218,5 @@ def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple) -> 
     lookup = signal_names(model)
     sig = tuple(lookup[s.name()] for s in syms)
     fun = ca.Function(f"{equation}_regression", [ca.vertcat(*syms)], [expr])
-    return Regression(equation, tuple(names), normaliser, sig, fun, numpy_function(fun))
+    constants = tuple(x for x in sig if x in model.variables and model.variables[x].is_parameter)
+    return Regression(equation, tuple(names), normaliser, sig, fun, numpy_function(fun), constants)

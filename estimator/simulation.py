@@ -15,9 +15,9 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
-from feeddrive.models import feed_drive
+from feeddrive.models.drives import drive_model
 
-MODEL = feed_drive()
+MODEL = drive_model("dc")  # the DC feed drive, the default model (the same object as EstimationOptions(model="dc"))
 #: Default smoothing speed of sign(w) in simulations [rad/s]: well below the estimator's speed threshold.
 W_EPS = 0.1
 

@@ -1,7 +1,9 @@
 """``cosim estimate DATA.csv --map ROLE=COLUMN ...``: R, L, K, Jt, ft, Cd from a recorded CSV.
 
 Roles: ``time``, ``voltage`` [V], ``current`` [A], ``speed``, ``position``, ``torque``, ``state``
-(NC state, 1 = rapid). Columns are converted to SI from the unit in their header (``x [mm]``) or an
+(NC state, 1 = rapid). ``--drive pmsm`` (or ``pmsm-spm``) estimates a PMSM's R, L_d, L_q, psi_f, Jt, ft, Cd
+(and K_t = 1.5 p psi_f, K_e = p psi_f, ``"derived"`` in the JSON) from the roles ``u_q, u_d`` [V] and
+``i_q, i_d`` [A] in place of voltage and current, with ``--pole-pairs N`` (or ``--known p=N``). Columns are converted to SI from the unit in their header (``x [mm]``) or an
 explicit ``--map ROLE=COLUMN*SCALE``. The mechanical parameters are estimated on the side the data are
 on: the motor side (position in rad, speed in rad/s, torque in N.m: Jt in kg.m2, ft in N.m.s/rad, Cd in
 N.m), or the table side of a linear axis when the headers say m, m/s or N (Jt is then the moving mass
@@ -56,13 +58,16 @@ from feeddrive.estimator import (
     NotEnoughExcitation,
 )
 from feeddrive.estimator.adequacy import check_motion
-from feeddrive.estimator.motion import SAMPLING_DELAY
+from feeddrive.estimator.motion import FIELDS, SAMPLING_DELAY
 from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.estimator.physical import parse_bounds
 from feeddrive.estimator.pooling import pool
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
-         "state": None}
+         "state": None, "i_q": "i_q", "i_d": "i_d", "u_q": "u_q", "u_d": "u_d"}
+#: roles of each drive kind (``--drive``): the DC motor's voltage and current, or a PMSM's dq ones
+DRIVE_ROLES = {"dc": ("voltage", "current", "torque"), "pmsm": ("i_q", "i_d", "u_q", "u_d"),
+               "pmsm-spm": ("i_q", "i_d", "u_q", "u_d")}
 
 
 class NothingEstimated(InputError):
@@ -74,6 +79,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--known", action="append", default=[], metavar="NAME=VALUE",
                         help="a parameter known in advance, e.g. K=1.05 (mechanical equation only)")
     parser.add_argument("--offset", action="store_true", help="also estimate a constant torque offset T0")
+    parser.add_argument("--drive", choices=sorted(DRIVE_ROLES), default="dc",
+                        help="the motor's model: dc (roles voltage, current; default), pmsm (roles u_q, u_d, i_q, "
+                             "i_d in the dq frame, peak values; R, L_d, L_q, psi_f and K_t, K_e) or pmsm-spm "
+                             "(surface magnets, L_q = L_d)")
+    parser.add_argument("--pole-pairs", type=float, default=None, metavar="N",
+                        help="a PMSM's pole pairs (default: the model's 4; the same as --known p=N)")
     parser.add_argument("--bounds", action="extend", nargs="+", default=[], metavar="NAME=LOW:HIGH",
                         help="bounds on a parameter beyond its physical range, either side may be empty, e.g. "
                              "Jt=4e-6: (the rotor's own inertia) ft=0:1; an estimate outside is flagged and a "
@@ -100,12 +111,16 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
     the model checks on each motion's own residue).
     Motions of which nothing can be estimated are reported on stderr and left out; none left is an
     ``InputError``."""
-    roles = mapped_roles(args, ROLES)
+    drive = getattr(args, "drive", "dc")
+    roles = mapped_roles(args, [r for r in ROLES if r not in set().union(*DRIVE_ROLES.values()) - set(DRIVE_ROLES[drive])])
     rec = read_recording(args, roles, path)
     side = rec.side or "motor"
+    if side == "table" and drive != "dc":
+        raise InputError(f"{path}: a {drive} drive's voltage equations need the motor speed: map speed in rad/s or "
+                         f"rpm, or give --pitch (and --ratio) to convert the table-side columns")
     options = EstimationOptions(method=args.method, filter=FilterSpec(filter_cutoff(args, rec.h)), known=known,
                                 offset=args.offset, speed_threshold=args.speed_threshold,
-                                speed_unit="m/s" if side == "table" else "rad/s")
+                                speed_unit="m/s" if side == "table" else "rad/s", model=drive)
     modes = sampling_modes(args, {q: roles[q] for q in SAMPLED if q in roles}, path)
     delays = {SAMPLED[q]: SAMPLING_DELAY[m] * rec.h for q, m in modes.items() if SAMPLING_DELAY[m]}
     sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
@@ -118,7 +133,8 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
     results, datas = [], []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
-        data = MotionData(rec.h, t0=rec.time(seg.start), delays=delays, **part)
+        dq = {k: part.pop(k) for k in list(part) if k not in FIELDS}  # a PMSM's dq signals
+        data = MotionData(rec.h, t0=rec.time(seg.start), delays=delays, signals=dq, **part)
         try:
             results.append(estimate_parameters(data, options, bounds))
             datas.append(data)
@@ -140,6 +156,11 @@ def main(args: argparse.Namespace) -> int:
             known[name] = float(value)
         except ValueError:
             raise InputError(f"--known {name}={value!r}: expected a number") from None
+    if getattr(args, "pole_pairs", None) is not None:
+        if args.drive == "dc" or not args.pole_pairs > 0:
+            raise InputError(f"--pole-pairs {args.pole_pairs:g}: expected a positive number of pole pairs with "
+                             f"--drive pmsm or pmsm-spm")
+        known["p"] = args.pole_pairs
     try:
         bounds = parse_bounds(args.bounds)
     except EstimatorInputError as exc:
@@ -162,7 +183,7 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"the recordings are on different sides ({', '.join(sorted(sides))}): give --pitch or "
                          f"units that agree")
     side = sides.pop()
-    units = parameter_units(side, "linear" if side == "table" else "rotary")
+    units = model_units(getattr(args, "drive", "dc")) | parameter_units(side, "linear" if side == "table" else "rotary")
     if len(per_file) == 1:
         results, rec_keys, checks = per_file[0][2:]
         if args.json:
@@ -194,6 +215,15 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
+def model_units(drive: str) -> dict[str, str]:
+    """Units of a drive model's physical parameters and derived quantities (motor side: L_d, psi_f, K_t, ...)."""
+    from feeddrive.models.drives import derived_quantities, drive_model
+
+    model = drive_model(drive)
+    return ({v.name: v.unit for v in model.of_kind("physical")}
+            | {n: unit for n, (unit, _, _) in derived_quantities(model).items()})
+
+
 def _params(parameters: dict) -> dict:
     return {n: {"value": p.value, "ci95": list(p.ci95)} for n, p in parameters.items()}
 
@@ -206,6 +236,7 @@ def _units(params: dict, units: dict) -> dict:
 
 def _with_units(seg: dict, units: dict) -> dict:
     _units(seg["parameters"], units)
+    _units(seg.get("derived", {}), units)
     return seg
 
 
@@ -246,9 +277,13 @@ def table(results, units: dict[str, str]) -> str:  # noqa: ANN001 - list of esti
                      f"{r.condition_number:.3g}, fit error {r.fit_error:.3g}")
         if r.result.message:
             lines.append(f"  ({r.result.message})")
+        w = max([3, *map(len, r.parameters)])  # psi_f: a PMSM's names are longer than the DC drive's
         for name, p in r.parameters.items():
             flag = "  FLAGGED" if name in r.flags else ""
-            lines.append(f"  {name:3} {p.value:12.6g} {units[name]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]{flag}")
+            lines.append(f"  {name:{w}} {p.value:12.6g} {units[name]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]{flag}")
+        for name, p in r.derived.items():  # K_t = 1.5 p psi_f, K_e = p psi_f
+            lines.append(f"  {name:{w}} {p.value:12.6g} {units[name]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}] "
+                         f"(derived)")
         for name, why in r.refused.items():
             fixed = (f" (fixed at {r.fixed[name]:.4g} in the re-fit of the others: their intervals hold given this "
                      f"value)" if name in r.fixed else "")

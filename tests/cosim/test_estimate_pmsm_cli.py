@@ -1,0 +1,64 @@
+"""``cosim estimate --drive pmsm`` on a CSV written from the built-in PMSM drive at a servo drive's 8 kHz trace rate,
+the speed in rpm and the table position in mm (converted by the units in the headers)."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "estimator"))
+from pmsm_data import closed_loop  # noqa: E402
+from test_estimate_cli import run  # noqa: E402
+
+from feeddrive.models.drives import drive_model  # noqa: E402
+
+TRUTH = drive_model("pmsm").nominal(("physical",))
+HEADER = "time [s],n_act [rpm],pos [mm],iq [A],id [A],uq [V],ud [V]"
+MAP = ["--map", "time=time", "speed=n_act", "position=pos", "i_q=iq", "i_d=id", "u_q=uq", "u_d=ud",
+       "--drive", "pmsm", "--pitch", "0.01", "--filter-cutoff", "100"]
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    d = closed_loop()
+    columns = [d["t"], d["w"] * 60 / (2 * math.pi), d["theta"] / (2 * math.pi) * 10.0,  # rpm; mm at a 10 mm pitch
+               *(d[k] for k in ("i_q", "i_d", "u_q", "u_d"))]
+    path = tmp_path_factory.mktemp("rec") / "pmsm_axis.csv"
+    np.savetxt(path, np.column_stack(columns), delimiter=",", header=HEADER, comments="", fmt="%.12g")
+    return path
+
+
+def test_pmsm_recording_gives_every_parameter_with_its_unit_and_kt_ke(recording, capsys):
+    code, out, _ = run(capsys, recording, *MAP, "--pole-pairs", "4", "--json")
+    assert code == 0
+    (seg,) = json.loads(out)["segments"]
+    assert seg["method"] == "iv"
+    assert list(seg["parameters"]) == ["R", "L_d", "L_q", "psi_f", "Jt", "ft", "Cd"]
+    units = {n: p["unit"] for n, p in seg["parameters"].items()}
+    assert units == {"R": "Ohm", "L_d": "H", "L_q": "H", "psi_f": "Wb", "Jt": "kg.m2", "ft": "N.m.s/rad", "Cd": "N.m"}
+    for name, p in seg["parameters"].items():
+        assert p["value"] == pytest.approx(TRUTH[name], rel=0.005), name
+        assert p["ci95"][0] <= p["value"] <= p["ci95"][1]
+    assert seg["derived"]["K_t"]["value"] == pytest.approx(1.5 * 4 * 0.23, rel=0.005)
+    assert seg["derived"]["K_e"] | {"value": 0, "ci95": 0} == {"value": 0, "ci95": 0, "unit": "V.s/rad"}
+    assert seg["model_check"]["verdict"] == "adequate"  # the d, q and mechanical equations' own residues
+
+
+def test_pole_pairs_change_psi_f_not_the_torque_constant(recording, capsys):
+    code, out, _ = run(capsys, recording, *MAP, "--known", "p=2")
+    assert code == 0
+    psi = float(out.split("\n  psi_f")[1].split()[0])
+    k_t = float(out.split("\n  K_t")[1].split()[0])
+    assert psi == pytest.approx(0.23 * 2, rel=0.005) and k_t == pytest.approx(1.38, rel=0.005)
+    assert "N.m/A" in out and "(derived)" in out
+
+
+def test_dc_roles_with_a_pmsm_and_bad_pole_pairs_are_one_line_errors(recording, capsys):
+    code, _, err = run(capsys, recording, "--map", "time=time", "speed=n_act", "current=iq", "--drive", "pmsm")
+    assert code == 2 and "unknown role(s) ['current']" in err and "Traceback" not in err
+    code, _, err = run(capsys, recording, *MAP, "--pole-pairs", "0")
+    assert code == 2 and "--pole-pairs 0: expected a positive number" in err
