@@ -43,11 +43,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.polynomial import legendre
 from scipy import stats
-from scipy.ndimage import binary_erosion
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.kernels import erode
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
 MIN_DIRECTION = 1e-3
@@ -145,7 +145,7 @@ def _rows(w: np.ndarray, h: float, cutoff_hz: float, speed_fraction: float, lag:
     speed = np.abs(w)
     fast = (speed >= speed_fraction * float(speed.max(initial=0.0))) & (speed > 0)
     guard = int(np.ceil(2.0 / (cutoff_hz * h)))
-    keep = binary_erosion(fast, iterations=guard, border_value=True) if guard else fast
+    keep = erode(fast, guard, border=True)
     edge = max(int(np.ceil(3.0 / (cutoff_hz * h))), lag)
     keep[:edge] = False
     keep[max(0, keep.size - edge):] = False

@@ -17,10 +17,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.ndimage import binary_erosion
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
+from feeddrive.estimator.kernels import erode
 from feeddrive.estimator.motion import (
     MEASURED,
     METHODS,
@@ -126,7 +126,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
                 continue
             # the filter smears sign(w) over about 1/cutoff around each zero crossing: widen the gap
             guard = int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h)))
-            r &= binary_erosion(fast, iterations=guard, border_value=True)
+            r &= erode(fast, guard, border=True)
             notes[reg.equation] = (
                 f"{int(r.sum())} of {r.size} samples usable: {int((~fast).sum())} have |speed| < {threshold:.3g} "
                 f"{options.speed_unit}, {int((fast & ~r).sum())} more are within the sign guard of {guard} samples "

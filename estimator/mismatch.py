@@ -72,6 +72,7 @@ from scipy import ndimage, signal
 
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.kernels import erode
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.estimator.validation import MeasurementValidation, model_reference, noise_std
@@ -199,7 +200,7 @@ def speed_segments(w: np.ndarray, threshold: float, h: float, margin: int = 0) -
     the noise's)."""
     fast = np.abs(w) > threshold
     if margin > 0:
-        fast = ndimage.binary_erosion(fast, np.ones(2 * margin + 1, dtype=bool))
+        fast = erode(fast, margin, border=False)
     labels, n = ndimage.label(fast)
     sizes = np.bincount(labels.ravel(), minlength=n + 1)
     short = sizes < MIN_SEGMENT_S / h
