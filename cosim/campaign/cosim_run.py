@@ -155,10 +155,20 @@ run_cosim.validate = _validate
 
 
 def _prepare() -> None:
-    """The imports of a run, once per worker process before its runs are forked (cosim/supervise.py)."""
+    """What every run needs built, once per worker process before its runs are forked (cosim/supervise.py).
+
+    A forked child loses whatever it builds: the imports of the report page (matplotlib via the trend
+    plots, jinja2) and pint's unit registry, ~3 s of a 1.4 s run, were paid again by every run of a spawned
+    pool worker or Dask worker, which made 2 workers slower than 1 (issue 26). ``execute`` also resolves
+    each run's scenario in the worker (``run_cosim.validate``) for the same reason.
+    """
     import feeddrive.cosim.monitor
+    import feeddrive.cosim.report.page
     import feeddrive.cosim.run
     import feeddrive.estimator.estimate  # noqa: F401
+    from feeddrive.cosim.unit_map import _registry
+
+    _registry()
 
 
 run_cosim.prepare = _prepare

@@ -66,6 +66,9 @@ def execute(run: str | Callable[[RunSpec], dict], spec: RunSpec, timeout: float 
         prepare = getattr(fn, "prepare", None)
         if callable(prepare):  # imports done once in this worker, not again in every forked child
             prepare()
+        check = getattr(fn, "validate", None)
+        if callable(check):  # the scenario resolved here too: its FMU's description and units are then
+            check(spec)      # read once per worker and inherited by the run's child (a failure is the run's)
         outcome = supervise(_call, fn, spec, timeout=timeout)
         if outcome.status == "ok":
             result, status = json.loads(outcome.value), "ok"
