@@ -350,24 +350,12 @@ def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags
     (L: the current transients) rests on the few blocks that carry it and scatters by a factor of 3 from
     one noise draw to the next. The regressor's own structure is known exactly here.
     """
-    from scipy.fft import irfft, next_fast_len, rfft
-    from scipy.signal import fftconvolve
+    from feeddrive.estimator.kernels import toeplitz_score_covariance
 
     p = parts[0][0].shape[1]
     S = np.zeros((p, p))
     for W, e in parts:
-        n = len(e)
-        m = min(lags, n - 1)
-        used = (e != 0).astype(float)
-        # lags 0..m only: any length >= n + m + 1 has no wrap-around there (2-3 times faster than 2^k >= 2 n)
-        nfft = next_fast_len(n + m + 1, real=True)
-        fe, fu = rfft(e, nfft), rfft(used, nfft)
-        num = irfft(fe * np.conj(fe), nfft)[:m + 1]
-        pairs = np.rint(irfft(fu * np.conj(fu), nfft)[:m + 1])
-        gamma = np.where(pairs > 0, num / np.maximum(pairs, 1.0), 0.0)
-        kernel = np.r_[gamma[:0:-1], gamma]  # gamma(-m .. m)
-        GW = fftconvolve(W, kernel[:, None], mode="same", axes=0) if n > m else W * gamma[0]
-        S += W.T @ GW
+        S += toeplitz_score_covariance(W, e, lags)
     return 0.5 * (S + S.T)
 
 
