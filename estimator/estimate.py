@@ -200,7 +200,7 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
 
 
 def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
-           reference: np.ndarray | None = None, note: str = "") -> _Fit:
+           reference: np.ndarray | None = None, note: str = "", covariance: bool = True) -> _Fit:
     """LS or basic IV on the usable rows of one or more sample sets, column-scaled.
 
     Each part is ``(y (n,), Phi (n, p), Z (n, p) or None, rows (n,) bool)``. With ``Z`` None: LS
@@ -244,6 +244,8 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         zscale = np.sqrt(sum(np.einsum("ij,ij->j", Z, Z) for Z in Zr)).clip(1e-300)
         Ws = [Z / zscale for Z in Zr]
         theta_s = np.linalg.solve(sum(W.T @ X for W, X in zip(Ws, Xs)), sum(W.T @ y for W, y in zip(Ws, ys)))
+    if not covariance:  # an IV iteration that is not the last: its values only (the covariance was 2/3 of IV)
+        return _Fit(theta_s / scale, np.zeros((p, p)), 1, float(cond), float("nan"), np.ones(p))
     A = sum(W.T @ X for W, X in zip(Ws, Xs))
     n = min(len(y) for y, *_ in parts)
     G = np.zeros((n, p))
@@ -399,20 +401,27 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     measured = {(reg.equation, k): reg.evaluate(_signals_for(half, reg))
                 for k, half in enumerate(halves) for reg in half.regressions}
     cur = start
+    # the same in every iteration: computed once
+    reference = {reg.equation: _column_reference(reg, _signals_for(halves[0], reg), halves[0].h)
+                 for reg in halves[0].regressions}
     for it in range(1, options.iv_iterations + 1):
         params = cur.as_dict()
         z = (instruments(halves[1], params, options, +0.5, len(halves[0].signals["w"]), skip),
              instruments(halves[0], params, options, -0.5, len(halves[1].signals["w"]), skip))
-        fits = {}
+        fits, parts = {}, {}
         for reg in halves[0].regressions:
-            parts = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
-                      half.rows[reg.equation]) for k, (half, zh) in enumerate(zip(halves, z))]
-            fits[reg.equation] = _solve(reg, parts, halves[0].block, options,
-                                        _column_reference(reg, _signals_for(halves[0], reg), halves[0].h))
+            parts[reg.equation] = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
+                                    half.rows[reg.equation]) for k, (half, zh) in enumerate(zip(halves, z))]
+            fits[reg.equation] = _solve(reg, parts[reg.equation], halves[0].block, options, reference[reg.equation],
+                                        covariance=False)
         new = _combine("iv", halves[0], fits, it)
         change = np.max(np.abs(new.values - cur.values) / np.maximum(np.abs(cur.values), 1e-12))
         cur = new
-        if change < options.iv_tolerance:
+        if change < options.iv_tolerance or it == options.iv_iterations:
+            # the last iteration's fits again, with their covariance (the same theta: the same arithmetic)
+            cur = _combine("iv", halves[0], {reg.equation: _solve(reg, parts[reg.equation], halves[0].block, options,
+                                                                  reference[reg.equation])
+                                             for reg in halves[0].regressions}, it)
             break
     if check:
         check_result(cur, options)
