@@ -32,6 +32,7 @@ from feeddrive.cosim.monitor import MEASUREMENTS, MonitorConfig, MonitorPipeline
 from feeddrive.cosim.run import run_scenario
 from feeddrive.cosim.scenario import load_scenario
 from feeddrive.estimator.estimate import EstimationOptions, MotionData, prepare
+from feeddrive.estimator.filtering import clear_filter_memo
 from feeddrive.estimator.history import History
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,6 +84,7 @@ def main() -> int:
     base = min(lstsq)
 
     def run() -> dict:
+        clear_filter_memo()  # a new motion's signals: nothing filtered yet
         with History(":memory:") as history:
             return MonitorPipeline(config, history, "X").process(signals, h, 0.0, 1, 0.0).result
 

@@ -76,9 +76,22 @@ class FilterSpec:
                     raise EstimatorInputError(f"signal {name!r}: {x.size} samples, the zero-phase filter needs > {pad}")
                 same.setdefault(x.size, []).append(name)
             for names in same.values():
+                arrays = {k: np.asarray(signals[k], dtype=float) for k in names}
+                todo = []
+                for k in names:
+                    hit = _MEMO.get(_key(self, h, arrays[k]))
+                    if hit is not None and np.array_equal(hit[0], arrays[k]):
+                        out[k] = hit[1]
+                    else:
+                        todo.append(k)
+                if not todo:
+                    continue
                 # row by row the same arithmetic as one call per signal (tests/estimator/test_speed.py)
-                y = signal.sosfiltfilt(sos, np.vstack([np.asarray(signals[k], dtype=float) for k in names]), axis=-1)
-                out.update(zip(names, y))
+                y = signal.sosfiltfilt(sos, np.vstack([arrays[k] for k in todo]), axis=-1)
+                y.setflags(write=False)  # shared by the callers that filter the same array
+                for k, row in zip(todo, y):
+                    out[k] = row
+                    _remember(_key(self, h, arrays[k]), (arrays[k].copy(), row))
             return {k: out[k] for k in signals}
         for name, x in signals.items():
             if x is None:
@@ -102,3 +115,27 @@ def _butter_sos(order: int, cutoff_hz: float, h: float) -> np.ndarray:
     sos = signal.butter(order, cutoff_hz, fs=1.0 / h, output="sos")
     sos.setflags(write=False)
     return sos
+
+
+#: (spec, h, n, three samples) -> (the signal's values, filtered): a motion's treatment filters the same
+#: sensor signals several times (validation, the residue check, the estimator, the model check), not
+#: always as the same array object; every value is compared before a result is reused
+_MEMO: dict = {}
+_MEMO_SIZE = 24
+
+
+def _key(spec: FilterSpec, h: float, x: np.ndarray) -> tuple:
+    n = x.size
+    return spec, h, n, float(x[0]), float(x[n // 2]), float(x[-1])
+
+
+def _remember(key: tuple, value: tuple) -> None:
+    _MEMO.pop(key, None)
+    _MEMO[key] = value
+    while len(_MEMO) > _MEMO_SIZE:
+        _MEMO.pop(next(iter(_MEMO)))
+
+
+def clear_filter_memo() -> None:
+    """Forget the filtered signals kept for reuse (benchmarks: each timed motion is then filtered afresh)."""
+    _MEMO.clear()

@@ -6,6 +6,8 @@ tests/estimator/test_speed.py (identical booleans, floats within 1e-12 relative)
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 
@@ -138,3 +140,22 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
         weight[-1] /= 2.0
     FW = rfft(np.ascontiguousarray(W.T), nfft, axis=-1)
     return ((FW.conj() * weight) @ FW.T).real / nfft
+
+
+def bilinear_first_order(a1: float, a0: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """``scipy.signal.cont2discrete(([1], [a1, a0]), h, method="bilinear")``'s ``b`` (raveled) and ``a``.
+
+    The model checks discretise ``1 / (L s + R)`` and ``1 / (Jt s + ft)`` a dozen times per motion with the
+    same few parameter sets; scipy's general state-space route costs ~1 ms a call. The result is scipy's
+    own, kept per (a1, a0, h).
+    """
+    b, a = _bilinear(float(a1), float(a0), float(h))
+    return b.copy(), a.copy()
+
+
+@lru_cache(maxsize=256)
+def _bilinear(a1: float, a0: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+    from scipy import signal
+
+    b, a = signal.cont2discrete(([1.0], [a1, a0]), h, method="bilinear")[:2]
+    return np.ravel(b), np.asarray(a)
