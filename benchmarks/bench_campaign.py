@@ -5,11 +5,19 @@ The same small campaign (short tool changes of the built-in plant, monitor in th
 re-estimates) runs three times into fresh out dirs; the ratios are against the serial run measured in
 the same invocation. The aggregates of the three must be identical (checked).
 
-    python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
+On a shared machine the wall-time speed-up says more about the other users than about the campaign, so
+each mode's CPU time is measured too (this process and every process it waited for: workers and the
+runs they forked, ``getrusage``), and the speed-up the mode would have on ``--workers`` free cores is
+estimated as ``serial CPU / (this process's CPU + the workers' CPU / workers)`` (the runs spread evenly
+over the workers, which then start together). The load average is printed first.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
 """
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import sys
 import tempfile
 import time
@@ -23,6 +31,12 @@ BASE = {"name": "bench", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "built
         "nc": {"program": [{"dwell": {"time": 0.02}},
                            {"tool_change": {"position": 0.15, "v_max": 0.22, "accel": 0.8, "time": 0.02}}]},
         "monitor": {"baseline": "nominal"}}
+
+
+def _cpu() -> tuple[float, float]:
+    """CPU seconds (user + system) of this process, and of the child processes it has waited for."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
 
 
 def main() -> int:
@@ -39,19 +53,28 @@ def main() -> int:
     builtin_fmu()  # build outside the timings
     campaign = Campaign(name="bench", base=BASE, seed=1, repetitions=args.runs,
                         sweep={"plant.parameters.Cd": [1.3]}, run_options={"methods": ["ls", "iv"]})
-    times, aggregates = {}, {}
+    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
+          f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
+    times, aggregates, cpu = {}, {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for mode in ("serial", "pool", "dask"):
             out = Path(tmp, mode)
+            own, children = _cpu()
             if mode == "dask":
                 with LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster:
+                    own, children = _cpu()  # the cluster's start-up is not the campaign's
                     t = time.perf_counter()
                     res = run_campaign(campaign, out, scheduler=cluster.scheduler_address, plots=False)
                     times[mode] = time.perf_counter() - t
+                    own = _cpu()[0] - own
+                # the workers' CPU is known once they have exited (the cluster closed)
+                children = _cpu()[1] - children
             else:
                 t = time.perf_counter()
                 res = run_campaign(campaign, out, workers=1 if mode == "serial" else args.workers, plots=False)
                 times[mode] = time.perf_counter() - t
+                own, children = (a - b for a, b in zip(_cpu(), (own, children)))
+            cpu[mode] = (own, children)
             aggregates[mode] = res.aggregates
             if res.failed:
                 print(f"{mode}: {len(res.failed)} runs failed: {res.failed[0]['reason']}", file=sys.stderr)
@@ -59,9 +82,13 @@ def main() -> int:
     same = aggregates["pool"] == aggregates["serial"] == aggregates["dask"]
     print(f"campaign of {args.runs} runs (2 s tool change, monitor, LS + IV), {args.workers} workers; "
           f"aggregates identical: {same}")
-    print(f"{'mode':8} {'wall s':>8} {'runs/min':>9} {'speed-up':>9}")
+    print(f"{'mode':8} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'on free cores':>14}")
+    serial_cpu = sum(cpu["serial"])
     for mode, t in times.items():
-        print(f"{mode:8} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f}")
+        own, children = cpu[mode]
+        ideal = serial_cpu / (own + children / (1 if mode == "serial" else args.workers))
+        print(f"{mode:8} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
+              f"{ideal:14.2f}")
     if args.drift_motions:
         sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
         from drift import run_drift

@@ -215,8 +215,10 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
                                   f"motion too short: {used} usable samples in the {reg.equation} "
                                   f"equation, its {p} parameters ({', '.join(reg.names)}) need at least {20 * p}"
                                   + (f" ({note})" if note else ""))
-    def rows(x, r):
-        return x if r.all() else x[r]
+    index = {id(r): None if r.all() else np.flatnonzero(r) for *_, r in parts}
+
+    def rows(x, r):  # take() with the indices: the same rows as x[r], twice as fast on (n, p) arrays
+        return x if index[id(r)] is None else x.take(index[id(r)], axis=0)
 
     Xr = [rows(Phi, r) for _, Phi, _, r in parts]
     ys = [rows(y, r) for y, _, _, r in parts]
