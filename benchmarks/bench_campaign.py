@@ -6,10 +6,13 @@ re-estimates) runs three times into fresh out dirs; the ratios are against the s
 the same invocation. The aggregates of the three must be identical (checked).
 
 On a shared machine the wall-time speed-up says more about the other users than about the campaign, so
-each mode's CPU time is measured too (this process and every process it waited for: workers and the
-runs they forked, ``getrusage``), and the speed-up the mode would have on ``--workers`` free cores is
-estimated as ``serial CPU / (this process's CPU + the workers' CPU / workers)`` (the runs spread evenly
-over the workers, which then start together). The load average is printed first.
+each mode's CPU time is measured too (``getrusage``: this process and the processes it waited for, the
+pool's workers and the runs they forked; for Dask, read in each worker), and the speed-up the mode would
+have on ``--workers`` free cores is estimated as ``serial CPU / (this process's CPU + the workers' CPU /
+workers)`` (the runs spread evenly over the workers). The pool's workers are forked from this process
+once the run's imports are done; a fresh LocalCluster's workers import the stack with their first run
+(``dask``); ``dask warm`` is the same cluster after one campaign, as a long-lived cluster's workers are.
+The load average is printed first.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
 """
@@ -46,29 +49,34 @@ def main() -> int:
     parser.add_argument("--drift-motions", type=int, default=20, help="motions of the drift example (0: skip)")
     args = parser.parse_args()
     warnings.simplefilter("ignore")
-    from distributed import LocalCluster
+    from distributed import Client, LocalCluster
 
     from feeddrive.fmu_build import builtin_fmu
 
     builtin_fmu()  # build outside the timings
+    from feeddrive.cosim.campaign.cosim_run import run_cosim
+
+    run_cosim.prepare()  # this process's imports too: every mode starts from a process that has them
     campaign = Campaign(name="bench", base=BASE, seed=1, repetitions=args.runs,
                         sweep={"plant.parameters.Cd": [1.3]}, run_options={"methods": ["ls", "iv"]})
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
     times, aggregates, cpu = {}, {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        for mode in ("serial", "pool", "dask"):
-            out = Path(tmp, mode)
+        for mode in ("serial", "pool", "dask", "dask warm"):
+            out = Path(tmp, mode.replace(" ", "-"))
             own, children = _cpu()
-            if mode == "dask":
-                with LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster:
-                    own, children = _cpu()  # the cluster's start-up is not the campaign's
+            if mode.startswith("dask"):
+                with LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster, \
+                        Client(cluster) as client:
+                    if mode == "dask warm":  # a long-lived cluster: its workers ran a campaign before
+                        run_campaign(campaign, Path(tmp, "warm-up"), scheduler=cluster.scheduler_address, plots=False)
+                    # the cluster's start-up is not the campaign's; the workers' CPU is read in the workers
+                    own, workers = _cpu()[0], sum(map(sum, client.run(_cpu).values()))
                     t = time.perf_counter()
                     res = run_campaign(campaign, out, scheduler=cluster.scheduler_address, plots=False)
                     times[mode] = time.perf_counter() - t
-                    own = _cpu()[0] - own
-                # the workers' CPU is known once they have exited (the cluster closed)
-                children = _cpu()[1] - children
+                    own, children = _cpu()[0] - own, sum(map(sum, client.run(_cpu).values())) - workers
             else:
                 t = time.perf_counter()
                 res = run_campaign(campaign, out, workers=1 if mode == "serial" else args.workers, plots=False)
@@ -79,15 +87,15 @@ def main() -> int:
             if res.failed:
                 print(f"{mode}: {len(res.failed)} runs failed: {res.failed[0]['reason']}", file=sys.stderr)
                 return 1
-    same = aggregates["pool"] == aggregates["serial"] == aggregates["dask"]
+    same = all(a == aggregates["serial"] for a in aggregates.values())
     print(f"campaign of {args.runs} runs (2 s tool change, monitor, LS + IV), {args.workers} workers; "
           f"aggregates identical: {same}")
-    print(f"{'mode':8} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'on free cores':>14}")
+    print(f"{'mode':9} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'on free cores':>14}")
     serial_cpu = sum(cpu["serial"])
     for mode, t in times.items():
         own, children = cpu[mode]
         ideal = serial_cpu / (own + children / (1 if mode == "serial" else args.workers))
-        print(f"{mode:8} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
+        print(f"{mode:9} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
               f"{ideal:14.2f}")
     if args.drift_motions:
         sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
