@@ -90,13 +90,14 @@ def main() -> int:
     same = all(a == aggregates["serial"] for a in aggregates.values())
     print(f"campaign of {args.runs} runs (2 s tool change, monitor, LS + IV), {args.workers} workers; "
           f"aggregates identical: {same}")
-    print(f"{'mode':9} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'on free cores':>14}")
+    print(f"{'mode':9} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'(here':>6} {'workers)':>8} "
+          f"{'on free cores':>14}")
     serial_cpu = sum(cpu["serial"])
     for mode, t in times.items():
         own, children = cpu[mode]
         ideal = serial_cpu / (own + children / (1 if mode == "serial" else args.workers))
         print(f"{mode:9} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
-              f"{ideal:14.2f}")
+              f"{own:6.1f} {children:8.1f} {ideal:14.2f}")
     if args.drift_motions:
         sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
         from drift import run_drift
