@@ -122,6 +122,8 @@ def _butter_sos(order: int, cutoff_hz: float, h: float) -> np.ndarray:
 #: always as the same array object; every value is compared before a result is reused
 _MEMO: dict = {}
 _MEMO_SIZE = 24
+#: and at most this many bytes (values and results): a 30 s motion at 10 kHz keeps its last ten signals
+_MEMO_BYTES = 48 * 2 ** 20
 
 
 def _key(spec: FilterSpec, h: float, x: np.ndarray) -> tuple:
@@ -132,7 +134,7 @@ def _key(spec: FilterSpec, h: float, x: np.ndarray) -> tuple:
 def _remember(key: tuple, value: tuple) -> None:
     _MEMO.pop(key, None)
     _MEMO[key] = value
-    while len(_MEMO) > _MEMO_SIZE:
+    while len(_MEMO) > _MEMO_SIZE or sum(x.nbytes + y.nbytes for x, y in _MEMO.values()) > _MEMO_BYTES:
         _MEMO.pop(next(iter(_MEMO)))
 
 

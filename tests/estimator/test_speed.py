@@ -116,3 +116,22 @@ def test_compiled_rollout_is_casadi_mapaccum(monkeypatch: pytest.MonkeyPatch, eq
     for k in reference:
         assert np.all(np.isfinite(reference[k]))
         np.testing.assert_array_equal(compiled[k], reference[k])
+
+
+def test_filtered_signals_are_reused_only_for_the_same_values() -> None:
+    """A second stage filtering the same values (another array object) gets the first result; an array
+    changed in place since is filtered again."""
+    from feeddrive.estimator.filtering import clear_filter_memo
+
+    rng = np.random.default_rng(8)
+    h, spec = 1e-4, FilterSpec(100.0, 4)
+    sos = signal.butter(4, 100.0, fs=1 / h, output="sos")
+    clear_filter_memo()
+    x = rng.standard_normal(3000)
+    first = spec.apply({"x": x}, h)["x"]
+    again = spec.apply({"y": x.copy()}, h)["y"]
+    assert again is first and not first.flags.writeable  # shared, so read-only
+    x[1] += 1.0  # the key's samples (first, middle, last) unchanged, the values not
+    changed = spec.apply({"x": x}, h)["x"]
+    np.testing.assert_array_equal(changed, signal.sosfiltfilt(sos, x))
+    assert not np.array_equal(changed, first)
