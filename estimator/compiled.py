@@ -13,6 +13,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import platform
 import shlex
 import subprocess
 import tempfile
@@ -50,7 +51,10 @@ def _cache_root() -> Path:
 
 def _build(source: str) -> Path:
     """The shared library of ``source``, compiled into the cache unless it is there (atomic rename)."""
-    target = _cache_root() / f"{hashlib.sha256(source.encode()).hexdigest()[:20]}.so"
+    compiler = shlex.split(os.environ.get("CC") or "cc")  # as the FMU build's (estimator does not import it)
+    # the machine and the compiler are part of the name: a cache shared between machines keeps one of each
+    key = f"{source}/* {platform.machine()} {' '.join(compiler)} */"
+    target = _cache_root() / f"{hashlib.sha256(key.encode()).hexdigest()[:20]}.so"
     if target.is_file():
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -59,7 +63,6 @@ def _build(source: str) -> Path:
         c.write_text(source, encoding="utf-8")
         so = Path(tmp, "rollout.so")
         # -ffp-contract=off: no fused multiply-add, so that the results are CasADi's to the last bit
-        compiler = shlex.split(os.environ.get("CC") or "cc")  # as the FMU build's (estimator does not import it)
         subprocess.run([*compiler, "-O2", "-shared", "-fPIC", "-ffp-contract=off", "-o", str(so), str(c), "-lm"],
                        check=True, capture_output=True, timeout=120)
         os.replace(so, target)
