@@ -5,11 +5,22 @@ The same small campaign (short tool changes of the built-in plant, monitor in th
 re-estimates) runs three times into fresh out dirs; the ratios are against the serial run measured in
 the same invocation. The aggregates of the three must be identical (checked).
 
-    python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
+On a shared machine the wall-time speed-up says more about the other users than about the campaign, so
+each mode's CPU time is measured too (``getrusage``: this process and the processes it waited for, the
+pool's workers and the runs they forked; for Dask, read in each worker), and the speed-up the mode would
+have on ``--workers`` free cores is estimated as ``serial CPU / (this process's CPU + the workers' CPU /
+workers)`` (the runs spread evenly over the workers). The pool's workers are forked from this process
+once the run's imports are done; a fresh LocalCluster's workers import the stack with their first run
+(``dask``); ``dask warm`` is the same cluster after one campaign, as a long-lived cluster's workers are.
+The load average is printed first.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
 """
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import sys
 import tempfile
 import time
@@ -25,6 +36,12 @@ BASE = {"name": "bench", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "built
         "monitor": {"baseline": "nominal"}}
 
 
+def _cpu() -> tuple[float, float]:
+    """CPU seconds (user + system) of this process, and of the child processes it has waited for."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=8, help="runs in the campaign")
@@ -32,36 +49,55 @@ def main() -> int:
     parser.add_argument("--drift-motions", type=int, default=20, help="motions of the drift example (0: skip)")
     args = parser.parse_args()
     warnings.simplefilter("ignore")
-    from distributed import LocalCluster
+    from distributed import Client, LocalCluster
 
     from feeddrive.fmu_build import builtin_fmu
 
     builtin_fmu()  # build outside the timings
+    from feeddrive.cosim.campaign.cosim_run import run_cosim
+
+    run_cosim.prepare()  # this process's imports too: every mode starts from a process that has them
     campaign = Campaign(name="bench", base=BASE, seed=1, repetitions=args.runs,
                         sweep={"plant.parameters.Cd": [1.3]}, run_options={"methods": ["ls", "iv"]})
-    times, aggregates = {}, {}
+    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
+          f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
+    times, aggregates, cpu = {}, {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        for mode in ("serial", "pool", "dask"):
-            out = Path(tmp, mode)
-            if mode == "dask":
-                with LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster:
+        for mode in ("serial", "pool", "dask", "dask warm"):
+            out = Path(tmp, mode.replace(" ", "-"))
+            own, children = _cpu()
+            if mode.startswith("dask"):
+                with LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster, \
+                        Client(cluster) as client:
+                    if mode == "dask warm":  # a long-lived cluster: its workers ran a campaign before
+                        run_campaign(campaign, Path(tmp, "warm-up"), scheduler=cluster.scheduler_address, plots=False)
+                    # the cluster's start-up is not the campaign's; the workers' CPU is read in the workers
+                    own, workers = _cpu()[0], sum(map(sum, client.run(_cpu).values()))
                     t = time.perf_counter()
                     res = run_campaign(campaign, out, scheduler=cluster.scheduler_address, plots=False)
                     times[mode] = time.perf_counter() - t
+                    own, children = _cpu()[0] - own, sum(map(sum, client.run(_cpu).values())) - workers
             else:
                 t = time.perf_counter()
                 res = run_campaign(campaign, out, workers=1 if mode == "serial" else args.workers, plots=False)
                 times[mode] = time.perf_counter() - t
+                own, children = (a - b for a, b in zip(_cpu(), (own, children)))
+            cpu[mode] = (own, children)
             aggregates[mode] = res.aggregates
             if res.failed:
                 print(f"{mode}: {len(res.failed)} runs failed: {res.failed[0]['reason']}", file=sys.stderr)
                 return 1
-    same = aggregates["pool"] == aggregates["serial"] == aggregates["dask"]
+    same = all(a == aggregates["serial"] for a in aggregates.values())
     print(f"campaign of {args.runs} runs (2 s tool change, monitor, LS + IV), {args.workers} workers; "
           f"aggregates identical: {same}")
-    print(f"{'mode':8} {'wall s':>8} {'runs/min':>9} {'speed-up':>9}")
+    print(f"{'mode':9} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'(here':>6} {'workers)':>8} "
+          f"{'on free cores':>14}")
+    serial_cpu = sum(cpu["serial"])
     for mode, t in times.items():
-        print(f"{mode:8} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f}")
+        own, children = cpu[mode]
+        ideal = serial_cpu / (own + children / (1 if mode == "serial" else args.workers))
+        print(f"{mode:9} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
+              f"{own:6.1f} {children:8.1f} {ideal:14.2f}")
     if args.drift_motions:
         sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
         from drift import run_drift

@@ -73,8 +73,8 @@ class RunResult:
 
 
 def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: bool = False,
-                 overwrite: bool = False, plots: bool = True, default_history: str | Path | None = None
-                 ) -> RunResult:
+                 overwrite: bool = False, plots: bool = True, default_history: str | Path | None = None,
+                 page: bool = True) -> RunResult:
     """Run a scenario and write its output directory.
 
     Parameters
@@ -92,6 +92,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     default_history : path or None
         History file of a default monitor whose scenario names no ``monitor.db``; None keeps that
         history in memory (nothing persists). ``cosim run`` passes ``runs/history.sqlite``.
+    page : bool
+        Write report.html (False: a campaign run whose files are discarded; the page took a third of it).
 
     Returns
     -------
@@ -151,7 +153,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
                    "wall_time_s": round(_time.perf_counter() - wall, 3),
                    "recorded_until_s": float(rec.time[-1]) if rec is not None and rec.n else None}
         paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
-        _write_page(out_dir, report)
+        if page:
+            _write_page(out_dir, report)
         raise
     finally:
         master.terminate()
@@ -162,7 +165,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     report["files"] = {k: ([os.path.relpath(p, out_dir) for p in v] if k == "plots" else v.name)
                        for k, v in paths.items()}
     paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
-    _write_page(out_dir, report)
+    if page:
+        _write_page(out_dir, report)
     return RunResult(out_dir, recorder.time, signals, dict(zip(recorder.names, recorder.units)), report, paths)
 
 

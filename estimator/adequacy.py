@@ -43,11 +43,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.polynomial import legendre
 from scipy import stats
-from scipy.ndimage import binary_erosion
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.kernels import erode
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
 MIN_DIRECTION = 1e-3
@@ -148,7 +148,7 @@ def _rows(w: np.ndarray, h: float, cutoff_hz: float, speed_fraction: float, lag:
     speed = np.abs(w)
     fast = (speed >= speed_fraction * float(speed.max(initial=0.0))) & (speed > 0)
     guard = int(np.ceil(2.0 / (cutoff_hz * h)))
-    keep = binary_erosion(fast, iterations=guard, border_value=True) if guard else fast
+    keep = erode(fast, guard, border=True)
     edge = max(int(np.ceil(3.0 / (cutoff_hz * h))), lag)
     keep[:edge] = False
     keep[max(0, keep.size - edge):] = False
@@ -390,7 +390,9 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                  ["position-dependent torque (gravity) P1", "position-dependent torque (gravity) P2",
                   "position-dependent torque (gravity) P3", f"{'current' if out == 'i' else 'torque'} x |speed|",
                   "output^2"])
-    checks = {k: (o, y[rows], X[rows], Z[rows], nm, N[rows], t, scale[k][rows] * (known.get("K", 1.0) if o == "K i" else 1))
+    take = np.flatnonzero(rows)  # take() of the row indices: the same rows as [rows], in half the time
+    checks = {k: (o, y.take(take), X.take(take, axis=0), Z.take(take, axis=0), nm, N.take(take, axis=0), t,
+                  scale[k].take(take) * (known.get("K", 1.0) if o == "K i" else 1))
               for k, (o, y, X, Z, nm, N, t) in checks.items()}
     if not checks:
         raise EstimatorInputError("check_adequacy: neither the electrical (u, i, w) nor the mechanical "

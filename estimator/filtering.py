@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import signal
@@ -44,7 +45,7 @@ class FilterSpec:
         if self.cutoff_hz >= 0.45 * nyquist:
             raise EstimatorInputError(
                 f"filter cutoff {self.cutoff_hz} Hz must be below 0.45 x Nyquist ({0.45 * nyquist:g} Hz at h={h:g} s)")
-        return signal.butter(self.order, self.cutoff_hz, fs=1.0 / h, output="sos")
+        return _butter_sos(int(self.order), float(self.cutoff_hz), float(h)).copy()  # scipy wants it writable
 
     def apply(self, signals: Mapping[str, np.ndarray], h: float) -> dict[str, np.ndarray]:
         """Filter every signal identically.
@@ -63,18 +64,41 @@ class FilterSpec:
         """
         sos = self.sos(h)
         out = {}
+        if self.zero_phase:
+            pad = 3 * (2 * len(sos) + 1)
+            same: dict[int, list[str]] = {}  # signals of one length go through sosfiltfilt as one 2-D array
+            for name, x in signals.items():
+                if x is None:
+                    out[name] = None
+                    continue
+                x = np.asarray(x, dtype=float)
+                if x.size <= pad:
+                    raise EstimatorInputError(f"signal {name!r}: {x.size} samples, the zero-phase filter needs > {pad}")
+                same.setdefault(x.size, []).append(name)
+            for names in same.values():
+                arrays = {k: np.asarray(signals[k], dtype=float) for k in names}
+                todo = []
+                for k in names:
+                    hit = _MEMO.get(_key(self, h, arrays[k]))
+                    if hit is not None and np.array_equal(hit[0], arrays[k]):
+                        out[k] = hit[1]
+                    else:
+                        todo.append(k)
+                if not todo:
+                    continue
+                # row by row the same arithmetic as one call per signal (tests/estimator/test_speed.py)
+                y = signal.sosfiltfilt(sos, np.vstack([arrays[k] for k in todo]), axis=-1)
+                y.setflags(write=False)  # shared by the callers that filter the same array
+                for k, row in zip(todo, y):
+                    out[k] = row
+                    _remember(_key(self, h, arrays[k]), (arrays[k].copy(), row))
+            return {k: out[k] for k in signals}
         for name, x in signals.items():
             if x is None:
                 out[name] = None
                 continue
             x = np.asarray(x, dtype=float)
-            if self.zero_phase:
-                pad = 3 * (2 * len(sos) + 1)
-                if x.size <= pad:
-                    raise EstimatorInputError(f"signal {name!r}: {x.size} samples, the zero-phase filter needs > {pad}")
-                out[name] = signal.sosfiltfilt(sos, x)
-            else:
-                out[name] = signal.sosfilt(sos, x, zi=signal.sosfilt_zi(sos) * x[0])[0]
+            out[name] = signal.sosfilt(sos, x, zi=signal.sosfilt_zi(sos) * x[0])[0]
         return out
 
 
@@ -82,3 +106,38 @@ def lowpass(signals: Mapping[str, np.ndarray], h: float, cutoff_hz: float, order
             zero_phase: bool = True) -> dict[str, np.ndarray]:
     """Thin wrapper: ``FilterSpec(cutoff_hz, order, zero_phase).apply(signals, h)``."""
     return FilterSpec(cutoff_hz, order, zero_phase).apply(signals, h)
+
+
+@lru_cache(maxsize=64)
+def _butter_sos(order: int, cutoff_hz: float, h: float) -> np.ndarray:
+    """The Butterworth sections, designed once per (order, cut-off, rate): ``butter`` costs ~1 ms a call and
+    a motion's treatment asked for the same filter ten times. Read-only: the cached array is shared."""
+    sos = signal.butter(order, cutoff_hz, fs=1.0 / h, output="sos")
+    sos.setflags(write=False)
+    return sos
+
+
+#: (spec, h, n, three samples) -> (the signal's values, filtered): a motion's treatment filters the same
+#: sensor signals several times (validation, the residue check, the estimator, the model check), not
+#: always as the same array object; every value is compared before a result is reused
+_MEMO: dict = {}
+_MEMO_SIZE = 24
+#: and at most this many bytes (values and results): a 30 s motion at 10 kHz keeps its last ten signals
+_MEMO_BYTES = 48 * 2 ** 20
+
+
+def _key(spec: FilterSpec, h: float, x: np.ndarray) -> tuple:
+    n = x.size
+    return spec, h, n, float(x[0]), float(x[n // 2]), float(x[-1])
+
+
+def _remember(key: tuple, value: tuple) -> None:
+    _MEMO.pop(key, None)
+    _MEMO[key] = value
+    while len(_MEMO) > _MEMO_SIZE or sum(x.nbytes + y.nbytes for x, y in _MEMO.values()) > _MEMO_BYTES:
+        _MEMO.pop(next(iter(_MEMO)))
+
+
+def clear_filter_memo() -> None:
+    """Forget the filtered signals kept for reuse (benchmarks: each timed motion is then filtered afresh)."""
+    _MEMO.clear()

@@ -72,6 +72,7 @@ from scipy import ndimage, signal
 
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.kernels import bilinear_first_order, erode
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.estimator.validation import MeasurementValidation, model_reference, noise_std
@@ -199,7 +200,7 @@ def speed_segments(w: np.ndarray, threshold: float, h: float, margin: int = 0) -
     the noise's)."""
     fast = np.abs(w) > threshold
     if margin > 0:
-        fast = ndimage.binary_erosion(fast, np.ones(2 * margin + 1, dtype=bool))
+        fast = erode(fast, margin, border=False)
     labels, n = ndimage.label(fast)
     sizes = np.bincount(labels.ravel(), minlength=n + 1)
     short = sizes < MIN_SEGMENT_S / h
@@ -216,8 +217,7 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     segment's first sample."""
     K, Jt, ft, Cd = (float(params[k]) for k in ("K", "Jt", "ft", "Cd"))
     T0 = float(params.get("T0", 0.0))
-    b, a = signal.cont2discrete(([1.0], [Jt, ft]), h, method="bilinear")[:2]
-    b = np.ravel(b)
+    b, a = bilinear_first_order(Jt, ft, h)
     out = np.full(w.size, np.nan)
     for sl in ndimage.find_objects(labels):
         drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
@@ -231,7 +231,7 @@ def free_responses(labels: np.ndarray, params: Mapping[str, float], h: float) ->
 
     The start is one noisy measured sample: its error decays as ``exp(-ft t / Jt)`` through the segment
     (seconds), so it is not a constant; it is a nuisance of the speed residue's tests."""
-    b, a = signal.cont2discrete(([1.0], [float(params["Jt"]), float(params["ft"])]), h, method="bilinear")[:2]
+    b, a = bilinear_first_order(float(params["Jt"]), float(params["ft"]), h)
     pole = -float(np.ravel(a)[1])
     cols = []
     for sl in ndimage.find_objects(labels):

@@ -409,22 +409,12 @@ def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags
     (L: the current transients) rests on the few blocks that carry it and scatters by a factor of 3 from
     one noise draw to the next. The regressor's own structure is known exactly here.
     """
-    from scipy.signal import fftconvolve
+    from feeddrive.estimator.kernels import toeplitz_score_covariance
 
     p = parts[0][0].shape[1]
     S = np.zeros((p, p))
     for W, e in parts:
-        n = len(e)
-        m = min(lags, n - 1)
-        used = (e != 0).astype(float)
-        nfft = 1 << int(np.ceil(np.log2(2 * n)))
-        fe, fu = np.fft.rfft(e, nfft), np.fft.rfft(used, nfft)
-        num = np.fft.irfft(fe * np.conj(fe), nfft)[:m + 1]
-        pairs = np.rint(np.fft.irfft(fu * np.conj(fu), nfft)[:m + 1])
-        gamma = np.where(pairs > 0, num / np.maximum(pairs, 1.0), 0.0)
-        kernel = np.r_[gamma[:0:-1], gamma]  # gamma(-m .. m)
-        GW = fftconvolve(W, kernel[:, None], mode="same", axes=0) if n > m else W * gamma[0]
-        S += W.T @ GW
+        S += toeplitz_score_covariance(W, e, lags)
     return 0.5 * (S + S.T)
 
 

@@ -16,9 +16,9 @@ from scipy import linalg, stats
 # seconds at every `cosim run`)
 from statsmodels.regression.linear_model import GLSAR, OLS
 from statsmodels.stats.diagnostic import acorr_ljungbox
-from statsmodels.tsa.ar_model import ar_select_order
 
 from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.kernels import ar_order_bic
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
 MAX_AR = 12
@@ -226,8 +226,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
             # F-test rejected healthy motions at several times its level
             ar_order = 0
         else:
-            sel = ar_select_order(r0, maxlag=MAX_AR, ic="bic", trend="n")
-            ar_order = max(sel.ar_lags) if sel.ar_lags else 0
+            ar_order = ar_order_bic(r0, MAX_AR)  # statsmodels' ar_select_order(ic="bic", trend="n")
     if ar_order == 0 and segment_covariance is not None:
         fit = OLS(y, design).fit()
         whiten = np.asarray

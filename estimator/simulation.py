@@ -131,9 +131,9 @@ def simulate(equations: tuple[str, ...], inputs: Mapping[str, np.ndarray], param
     # mapaccum needs one step size: integrate the uniform part, the last (shorter) step separately
     uniform = hk == k * h
     m = int(uniform.sum()) + 1
-    roll = _rollout(model, tuple(equations), names, m, 2 if k > 1 else 1)
     x = np.array([float(x0[s]) for s in states])
-    X = np.asarray(roll(x, np.vstack([S[:, :m - 1], S[:, 1:m]]), values + [w_eps], k * h)).reshape(len(states), -1)
+    X = _roll(model, tuple(equations), names, m, 2 if k > 1 else 1, x, np.vstack([S[:, :m - 1], S[:, 1:m]]),
+              values + [w_eps], k * h)
     X = np.hstack([x[:, None], X])
     if m < len(idx):
         last = _rollout(model, tuple(equations), names, 2, 2)
@@ -220,3 +220,23 @@ def simulate_motor(u: np.ndarray, params: Mapping[str, float], h: float, i0: flo
     """
     x = simulate(("electrical", "mechanical"), {"u": u}, params, h, {"i": i0, "w": w0}, step, w_eps)
     return x["i"], x["w"]
+
+
+@lru_cache(maxsize=32)
+def _step(model, equations: tuple[str, ...], inputs: tuple[str, ...], substeps: int):
+    """The RK4 step of ``_rollout`` and its compiled rollout (None without a C compiler)."""
+    from feeddrive.estimator.compiled import compiled_step
+
+    step = rk4_step(_ode(model, equations, inputs)[0], substeps)
+    return step, compiled_step(step, f"{model.name}: {equations} from {inputs}, {substeps} RK4 substeps")
+
+
+def _roll(model, equations: tuple[str, ...], inputs: tuple[str, ...], m: int, substeps: int, x: np.ndarray,
+          S: np.ndarray, p: list[float], h: float) -> np.ndarray:
+    """States (nx, m - 1) after each of the m - 1 RK4 steps from x: compiled C when it could be built, else
+    the CasADi ``mapaccum`` (the same operations, tests/estimator/test_speed.py)."""
+    run = _step(model, equations, inputs, substeps)[1]
+    if run is not None:
+        return run(x, S, np.asarray(p, dtype=float), h)
+    roll = _rollout(model, equations, inputs, m, substeps)
+    return np.asarray(roll(x, S, p, h)).reshape(len(x), -1)

@@ -53,6 +53,7 @@ from statsmodels.regression.linear_model import OLS  # not statsmodels.api: seco
 
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.kernels import bilinear_first_order
 
 #: the redundant pairs: quantity -> (sensor 1, sensor 2)
 PAIRS: dict[str, tuple[str, str]] = {
@@ -318,8 +319,7 @@ def model_reference(quantity: str, filtered: Mapping[str, np.ndarray], h: float,
     R, L, K = (float(electrical[k]) for k in ("R", "L", "K"))
     if quantity == "current":
         v = filtered["u"] - K * filtered["w"]
-        b, a = signal.cont2discrete(([1.0], [L, R]), h, method="bilinear")[:2]
-        b = np.ravel(b)
+        b, a = bilinear_first_order(L, R, h)
         zi = signal.lfilter_zi(b, a) * v[0]  # start in steady state: i = v / R
         return signal.lfilter(b, a, v, zi=zi)[0]
     di = np.gradient(filtered["i"], h)

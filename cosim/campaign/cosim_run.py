@@ -101,7 +101,8 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
     methods = _methods(spec)
     scenario = _scenario(spec)
     with tempfile.TemporaryDirectory(prefix="campaign-run-") as tmp:
-        res = run_scenario(scenario, spec.out_dir or tmp, overwrite=True, plots=spec.out_dir is not None)
+        keep = spec.out_dir is not None  # else the files go with the temporary directory: no figures, no page
+        res = run_scenario(scenario, spec.out_dir or tmp, overwrite=True, plots=keep, page=keep)
     nominal = feed_drive().nominal(("physical",))
     nominal = {p: nominal[p] for p in PHYSICAL}
     truth0 = nominal | {k: float(v) for k, v in scenario.plant.parameters.items() if k in nominal}
@@ -148,6 +149,8 @@ def _methods(spec: RunSpec) -> list[str]:
 def _validate(spec: RunSpec) -> None:
     _methods(spec)
     _scenario(spec)
+    if spec.out_dir is not None:  # its report.html: matplotlib and jinja2 imported once per worker
+        import feeddrive.cosim.report.page  # noqa: F401
 
 
 #: ``run_campaign`` checks every pending run's options and scenario with it before running any
@@ -155,10 +158,19 @@ run_cosim.validate = _validate
 
 
 def _prepare() -> None:
-    """The imports of a run, once per worker process before its runs are forked (cosim/supervise.py)."""
+    """What every run needs built, once per worker process before its runs are forked (cosim/supervise.py).
+
+    A forked child loses whatever it builds: pint's unit registry and the scenario's resolution (~1.5 s of
+    a 1.4 s run) were paid again by every run of a spawned pool worker or Dask worker, which made 2 workers
+    slower than 1 (issue 26). ``execute`` also resolves each run's scenario in the worker
+    (``run_cosim.validate``, which imports the report page when the run keeps its files).
+    """
     import feeddrive.cosim.monitor
     import feeddrive.cosim.run
     import feeddrive.estimator.estimate  # noqa: F401
+    from feeddrive.cosim.unit_map import _registry
+
+    _registry()
 
 
 run_cosim.prepare = _prepare

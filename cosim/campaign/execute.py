@@ -11,7 +11,7 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
-from multiprocessing import get_context
+from multiprocessing import get_all_start_methods, get_context
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +66,9 @@ def execute(run: str | Callable[[RunSpec], dict], spec: RunSpec, timeout: float 
         prepare = getattr(fn, "prepare", None)
         if callable(prepare):  # imports done once in this worker, not again in every forked child
             prepare()
+        check = getattr(fn, "validate", None)
+        if callable(check):  # the scenario resolved here too: its FMU's description and units are then
+            check(spec)      # read once per worker and inherited by the run's child (a failure is the run's)
         outcome = supervise(_call, fn, spec, timeout=timeout)
         if outcome.status == "ok":
             result, status = json.loads(outcome.value), "ok"
@@ -136,9 +139,20 @@ def _local(run, specs, workers, on_done, timeout=None) -> None:
         for spec in specs:
             on_done(execute(run, spec, timeout))
         return
-    # spawn, not fork, for the pool: CasADi and the progress bar's thread do not survive a fork safely
-    # (each run then forks from its single-threaded worker, see cosim/supervise.py)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"))
+    # the workers are forked from this process once the run's imports are done here (its prepare hook):
+    # they start warm, where spawned workers imported the whole stack again (scipy.stats, statsmodels, the
+    # estimator: ~3 s each, several runs' worth, which kept 2 workers at 1.3 times one, issue 26). This
+    # process is as single-threaded as the one each run is forked from (cosim/supervise.py): the
+    # progress bar's monitor thread only sleeps.
+    fn = resolve_function(run) if isinstance(run, str) else run
+    prepare = getattr(fn, "prepare", None)
+    if callable(prepare):
+        try:
+            prepare()
+        except Exception:  # noqa: BLE001 - each worker calls it again and records the failure with the run
+            pass
+    context = "fork" if "fork" in get_all_start_methods() else "spawn"
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context(context))
     try:
         futures = {pool.submit(execute, run, spec, timeout): spec for spec in specs}
         for future in as_completed(futures):

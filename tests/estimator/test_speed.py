@@ -1,0 +1,137 @@
+"""The fast kernels of the per-motion path (issue 26) against the straightforward computations they replace.
+
+Timing is never asserted here (benchmarks/bench_monitor.py and bench_estimator.py measure it); these
+tests pin the results: identical booleans, the same floats to the last bit where the arithmetic is the
+same, within 1e-12 relative where the summation order differs.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy import ndimage, signal
+
+from feeddrive.estimator import simulation
+from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.kernels import ar_order_bic, erode, toeplitz_score_covariance
+
+PARAMS = {"R": 0.6, "L": 4e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
+
+
+@pytest.mark.parametrize("border", [True, False])
+def test_erode_is_scipy_binary_erosion(border: bool) -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(400):
+        n, radius = int(rng.integers(1, 120)), int(rng.integers(0, 15))
+        mask = rng.random(n) < rng.uniform(0.3, 1.0)
+        iterated = ndimage.binary_erosion(mask, iterations=radius, border_value=border) if radius else mask
+        window = ndimage.binary_erosion(mask, np.ones(2 * radius + 1, dtype=bool), border_value=border)
+        np.testing.assert_array_equal(erode(mask, radius, border), iterated)
+        np.testing.assert_array_equal(erode(mask, radius, border), window)
+
+
+def test_filter_in_one_call_is_one_call_per_signal() -> None:
+    """The signals of one length filtered as one 2-D array: bit for bit the 1-D sosfiltfilt of each."""
+    rng = np.random.default_rng(4)
+    h, spec = 1e-4, FilterSpec(100.0, 4)
+    raw = {"u": rng.standard_normal(5000), "i": np.cumsum(rng.standard_normal(5000)), "w": None,
+           "short": rng.standard_normal(700)}
+    out = spec.apply(raw, h)
+    sos = signal.butter(4, 100.0, fs=1 / h, output="sos")
+    assert list(out) == list(raw) and out["w"] is None
+    for k in ("u", "i", "short"):
+        np.testing.assert_array_equal(out[k], signal.sosfiltfilt(sos, raw[k]))
+    np.testing.assert_array_equal(spec.sos(h), sos)
+
+
+def _ar(rng: np.random.Generator, n: int, coefs: list[float]) -> np.ndarray:
+    x = np.zeros(n + 100)
+    e = rng.standard_normal(n + 100)
+    for t in range(n + 100):
+        x[t] = e[t] + sum(a * x[t - 1 - j] for j, a in enumerate(coefs) if t - 1 - j >= 0)
+    return x[100:]
+
+
+def test_ar_order_is_statsmodels_bic_choice() -> None:
+    from statsmodels.tsa.ar_model import ar_select_order
+
+    rng = np.random.default_rng(5)
+    cases = [_ar(rng, int(rng.integers(40, 600)), list(rng.uniform(-0.8, 0.8, int(rng.integers(0, 4)))))
+             for _ in range(60)]
+    cases += [np.cumsum(_ar(rng, 300, [0.5])), np.r_[np.ones(30), np.zeros(30)]]  # near unit root; degenerate
+    chosen = []
+    for x in cases:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            lags = ar_select_order(x, maxlag=12, ic="bic", trend="n").ar_lags
+            mine = ar_order_bic(x, 12)
+        assert mine == (max(lags) if lags else 0)
+        chosen.append(mine)
+    assert len(set(chosen)) >= 3  # the cases exercise several orders, not only 0
+
+
+def test_toeplitz_score_covariance_is_the_time_domain_sum() -> None:
+    """``W^T Gamma W`` with Gamma the Toeplitz matrix of the used pairs' mean lagged products."""
+    rng = np.random.default_rng(6)
+    n, p, lags = 900, 3, 40
+    e = np.convolve(rng.standard_normal(n), np.ones(15) / 15, mode="same")
+    W = rng.standard_normal((n, p)) * [1.0, 1e3, 1e-3]
+    for used_all in (True, False):
+        if not used_all:
+            e[100:180] = 0.0
+            W[100:180] = 0.0
+        used = e != 0
+        gamma = np.array([e[:n - k] @ e[k:] / max((used[:n - k] & used[k:]).sum(), 1) for k in range(lags + 1)])
+        lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+        Gamma = np.where(lag <= lags, gamma[np.minimum(lag, lags)], 0.0)
+        direct = W.T @ Gamma @ W
+        fast = toeplitz_score_covariance(W, e, lags)
+        scale = np.sqrt(np.outer(np.diag(direct), np.diag(direct)))
+        assert np.max(np.abs(fast - direct) / scale) < 1e-12
+
+
+@pytest.mark.parametrize("equations, inputs, x0, step", [
+    (("electrical",), ("u", "w"), {"i": 0.1}, None),
+    (("mechanical",), ("i",), {"w": 2.0}, 6e-4),
+    (("electrical", "mechanical"), ("u",), {"i": 0.0, "w": 0.0}, 6e-4),
+])
+def test_compiled_rollout_is_casadi_mapaccum(monkeypatch: pytest.MonkeyPatch, equations, inputs, x0, step) -> None:
+    """The RK4 rollout compiled from CasADi's generated C gives CasADi's own numbers, bit for bit."""
+    rng = np.random.default_rng(7)
+    n = 2000
+    signals = {"u": 20 * np.sin(np.arange(n) * 3e-3) + rng.standard_normal(n),
+               "w": 10 * np.sin(np.arange(n) * 3e-3), "i": 5 * np.sign(np.sin(np.arange(n) * 2e-3)) + 0.1}
+    given = {k: signals[k] for k in inputs}
+    simulation._step.cache_clear()
+    assert simulation._step(simulation.MODEL, equations, tuple(sorted(inputs)), 2 if step else 1)[1] is not None, \
+        "the C compiler could not build the rollout"
+    compiled = simulation.simulate(equations, given, PARAMS, 1e-4, x0, step)
+    monkeypatch.setenv("FEEDDRIVE_NO_COMPILED_ROLLOUT", "1")
+    simulation._step.cache_clear()
+    try:
+        reference = simulation.simulate(equations, given, PARAMS, 1e-4, x0, step)
+    finally:
+        simulation._step.cache_clear()
+    for k in reference:
+        assert np.all(np.isfinite(reference[k]))
+        np.testing.assert_array_equal(compiled[k], reference[k])
+
+
+def test_filtered_signals_are_reused_only_for_the_same_values() -> None:
+    """A second stage filtering the same values (another array object) gets the first result; an array
+    changed in place since is filtered again."""
+    from feeddrive.estimator.filtering import clear_filter_memo
+
+    rng = np.random.default_rng(8)
+    h, spec = 1e-4, FilterSpec(100.0, 4)
+    sos = signal.butter(4, 100.0, fs=1 / h, output="sos")
+    clear_filter_memo()
+    x = rng.standard_normal(3000)
+    first = spec.apply({"x": x}, h)["x"]
+    again = spec.apply({"y": x.copy()}, h)["y"]
+    assert again is first and not first.flags.writeable  # shared, so read-only
+    x[1] += 1.0  # the key's samples (first, middle, last) unchanged, the values not
+    changed = spec.apply({"x": x}, h)["x"]
+    np.testing.assert_array_equal(changed, signal.sosfiltfilt(sos, x))
+    assert not np.array_equal(changed, first)
