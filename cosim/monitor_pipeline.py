@@ -21,10 +21,10 @@ from feeddrive.cosim.monitor_config import MonitorConfig
 from feeddrive.estimator.adequacy import check_adequacy
 from feeddrive.estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
-from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
+from feeddrive.estimator.estimate import EstimationOptions, MotionData
 from feeddrive.estimator.history import History
 from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
-from feeddrive.estimator.physical import physical_flags
+from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
 
@@ -124,7 +124,7 @@ class MonitorPipeline:
         result: dict[str, Any] = {"motion": int(motion), "start": start, "end": start + (n - 1) * h,
                                   "method": self.config.method, "validated": False, "measurements_valid": None,
                                   "reference": None, "parameters": {}, "sensor_faults": [], "gain_ratio": None,
-                                  "residues": {}, "mismatch": None, "adequacy": None, "diagnosis": [], "notes": [],
+                                  "residues": {}, "refused": {}, "mismatch": None, "adequacy": None, "diagnosis": [], "notes": [],
                                   "error": None, "verdict": None,
                                   "not_checked": checks.not_checked(checks.present(signals), "torque" in signals)}
         if self.config.known:
@@ -196,8 +196,9 @@ class MonitorPipeline:
         except EstimatorInputError as exc:
             result["not_checked"]["model (own residue)"] = f"not checked: {exc}"
         try:
-            est = estimate_motion(MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
-                                  replace(self.estimation_options, offset=offset))
+            est = estimate_parameters(  # one parameter at a time: the refused ones named with their reason
+                MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
+                replace(self.estimation_options, offset=offset), dict(cfg.bounds))
         except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
             # this motion cannot be used (the next may); ValueError: a non-finite simulation of the instruments
             result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
@@ -211,18 +212,42 @@ class MonitorPipeline:
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
                                 for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
-        flags = physical_flags(est, dict(cfg.bounds))
+        result["refused"] = dict(est.refused)
+        if est.result.message:  # a fallback (IV -> LS) is stated with its reason
+            result["notes"].append(est.result.message)
+        flags = dict(est.flags)
         if flags:  # outside the physical range or the user's bounds: reported, never validated
             result["flags"] = flags
-        values = {k: p.value for k, p in params.items()} | known
-        if full and all(k in values for k in ("R", "L", "K", "Jt", "ft", "Cd")):
-            inputs, instruments, noise = check_signals(v, signals)
-            mismatch_result = check_model(inputs["u"], inputs["i"], inputs["w"], h, values, cfg.filter,
-                                          cfg.mismatch_alpha, covariance=est.covariance, names=est.names,
-                                          noise=noise, noise_dof=len(v.i), speed_threshold=cfg.speed_threshold,
-                                          speed_fraction=cfg.speed_fraction, instruments=instruments)
-            trace.mismatch = mismatch_result
-            result["mismatch"] = mismatch_result.to_dict()
+        # the model checks simulate the model as fitted: a refused parameter at the value the fit held it at
+        # (its own estimate, 0, or the lumped term); only the given parameters are validated and stored
+        fitted = {k: float(v) for k, v in {**est.fixed, **est.lumped}.items()}
+        if fitted:
+            result["fitted"] = fitted
+        values = {k: p.value for k, p in params.items()} | fitted | known
+        # the output-error simulation integrates both equations: it needs L > 0 and Jt > 0 (a fixed 0 has no
+        # dynamics, a negative one diverges)
+        derivative = [k for k in ("L", "Jt") if k in values and not values[k] > 0]
+        if full and derivative:
+            result["not_checked"]["model (paper, output error)"] = (
+                "not checked: the model check could not be run: its simulation needs "
+                + "; ".join(f"{k} > 0, the fit holds {k} = {values[k]:.4g} ({est.refused.get(k, 'given')})"
+                            for k in derivative))
+        elif full and all(k in values for k in ("R", "L", "K", "Jt", "ft", "Cd")):
+            try:  # an overflow ends as the NumericalFailure below, never a warning on the console
+                with np.errstate(all="ignore"):
+                    inputs, instruments, noise = check_signals(v, signals)
+                    mismatch_result = check_model(inputs["u"], inputs["i"], inputs["w"], h, values, cfg.filter,
+                                                  cfg.mismatch_alpha, covariance=est.covariance, names=est.names,
+                                                  noise=noise, noise_dof=len(v.i), instruments=instruments,
+                                                  speed_threshold=cfg.speed_threshold,
+                                                  speed_fraction=cfg.speed_fraction)
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # NumericalFailure: it diverged
+                # the check could not be run; the estimates stand, the residue check decides
+                result["not_checked"]["model (paper, output error)"] = (
+                    f"not checked: the model check could not be run: {exc}")
+            else:
+                trace.mismatch = mismatch_result
+                result["mismatch"] = mismatch_result.to_dict()
         else:
             result["not_checked"]["model (paper, output error)"] = (
                 "not checked: needs the current, the voltage and the speed" if not full
