@@ -29,14 +29,14 @@ from pydantic import ValidationError
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import InputError, ScenarioError
 from feeddrive.cosim.monitor_checks import centred_speed, interval_mean_speed
-from feeddrive.cosim.monitor_config import MonitorConfig
+from feeddrive.cosim.monitor_config import MonitorConfig, resolve_files
 from feeddrive.cosim.monitor_pipeline import MonitorPipeline, MotionTrace
 from feeddrive.cosim.nc import describe_validation_error
 from feeddrive.estimator.errors import HistoryError
 from feeddrive.estimator.history import History
 
 __all__ = ["MEASUREMENTS", "RAPID", "Monitor", "MonitorConfig", "MonitorPipeline", "MotionTrace", "centred_speed",
-           "interval_mean_speed"]
+           "interval_mean_speed", "resolve_files"]
 
 #: NC state of a high-speed motion without machining
 RAPID = 1

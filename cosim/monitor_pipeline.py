@@ -80,6 +80,8 @@ class MonitorPipeline:
         """
         if self.config.baseline == "nominal":
             return {k: (v, 0.0) for k, v in self.nominal.items()}
+        if self.config.stated_baseline is not None:  # a stated baseline FILE
+            return self.config.stated_baseline
         return make_baseline(self.baseline_sets) if self.baseline_sets else None
 
     def thresholds(self) -> dict:

@@ -86,6 +86,8 @@ def history_line(monitor: dict) -> str | None:
     t = monitor.get("diagnosis_thresholds") or {}
     if t.get("baseline_mode") == "nominal":
         return text + "; healthy baseline: the nominal parameters (monitor.baseline: nominal)"
+    if t.get("baseline_mode") not in (None, "motions"):
+        return text + f"; healthy baseline: stated in {t['baseline_mode']} (monitor.baseline)"
     n, k = t.get("baseline_motions"), t.get("baseline_learnt")
     if n is None or k is None:
         return text
