@@ -418,6 +418,10 @@ def split_halves(data: MotionData) -> tuple[MotionData, MotionData]:
     return half(1), half(0)
 
 
+#: an IV iteration that has not converged is kept when its last step is below this many standard errors
+UNSETTLED = 0.1
+
+
 def instrumental_variables(data: MotionData, start: MethodResult, options: EstimationOptions,
                            check: bool = True, skip: tuple[str, ...] = ()) -> MethodResult:
     """Split-sample IDIM-IV, iterated to convergence from ``start``.
@@ -430,6 +434,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     the next (not white) brings part of that bias back. The halves are sampled every 2 h, so the
     filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h). The equations in
     ``skip`` are not simulated (a derivative coefficient fixed at 0): their own state is its instrument.
+    Raises NumericalFailure when the iterates have not settled (relative change below ``iv_tolerance``)
+    after ``iv_iterations``: the callers fall back to LS with that reason.
     """
     odd, even = split_halves(data)
     halves = (prepare(odd, options, strict=check), prepare(even, options, strict=check))
@@ -438,7 +444,7 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
                                   "the odd and even samples do not allow the same equations")
     measured = {(reg.equation, k): reg.evaluate(_signals_for(half, reg))
                 for k, half in enumerate(halves) for reg in half.regressions}
-    cur = start
+    cur, step, change = start, None, np.inf
     # the same in every iteration: computed once
     reference = {reg.equation: _column_reference(reg, _signals_for(halves[0], reg), halves[0].h)
                  for reg in halves[0].regressions}
@@ -461,7 +467,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
             fits[reg.equation] = _solve(reg, parts[reg.equation], halves[0].block, options, reference[reg.equation],
                                         covariance=False)
         new = _combine("iv", halves[0], fits, it, constant_sensitivities(halves[0].regressions, list(halves), fits))
-        change = np.max(np.abs(new.values - cur.values) / np.maximum(np.abs(cur.values), 1e-12))
+        step = np.abs(new.values - cur.values)
+        change = np.max(step / np.maximum(np.abs(cur.values), 1e-12))
         cur = new
         if change < options.iv_tolerance or it == options.iv_iterations:
             # the last iteration's fits again, with their covariance (the same theta: the same arithmetic)
@@ -469,6 +476,23 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
                     for reg in halves[0].regressions}
             cur = _combine("iv", halves[0], last, it, constant_sensitivities(halves[0].regressions, list(halves), last))
             break
+    if not change < options.iv_tolerance:
+        # the last iterate of an iteration that does not settle is no estimate: on a record the model does not
+        # fit (REGBOT's lagged current) the instruments simulated from the previous iterate jump from one
+        # iterate to the next, and the 10th depends on the last bits of the data (a 1e-15 relative change of
+        # the samples moved K by +-30 %). A last step far inside every interval (under UNSETTLED standard
+        # errors) is kept, said so: the unsettled digits are noise (REGBOT's other file: 2e-4 relative)
+        if step is None:
+            raise NumericalFailure("IV: no iteration run (iv_iterations = 0)")
+        std = np.sqrt(np.clip(np.diag(cur.covariance), 0, None))
+        moved = float(np.max(step / np.maximum(std, 1e-300)))
+        if not moved < UNSETTLED:
+            raise NumericalFailure(f"IV did not converge in {options.iv_iterations} iterations (relative change "
+                                   f"of the parameters {change:.3g} at the last, {moved:.3g} standard errors; "
+                                   f"tolerance {options.iv_tolerance:g})")
+        cur = replace(cur, message=(cur.message + "; " if cur.message else "") +
+                      f"IV stopped after {options.iv_iterations} iterations: the last changed the parameters by "
+                      f"{change:.3g} (relative), {moved:.2g} of their standard errors")
     if check:
         check_result(cur, options)
     return cur

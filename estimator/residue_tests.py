@@ -12,11 +12,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg, stats
 
-# statsmodels' own modules, not statsmodels.api (which loads its datasets, formulas and pandas' whole API:
-# seconds at every `cosim run`)
-from statsmodels.regression.linear_model import GLSAR, OLS
-from statsmodels.stats.diagnostic import acorr_ljungbox
-
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.kernels import ar_order_bic
 
@@ -44,6 +39,30 @@ class TestResult:
 
     def to_dict(self) -> dict:
         return {"statistic": self.statistic, "df": list(self.df), "p_value": self.p_value}
+
+
+def ljung_box(x: np.ndarray, lags: int) -> float:
+    """p-value of the Ljung-Box test of whiteness of ``x`` up to ``lags`` (statsmodels' ``acorr_ljungbox``:
+    demeaned, biased autocovariances, chi2 with ``lags`` degrees of freedom)."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    n = x.size
+    acov = np.array([x[k:] @ x[:n - k] for k in range(lags + 1)]) / n
+    rho = acov[1:] / acov[0]
+    q = n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, lags + 1)))
+    return float(stats.chi2.sf(q, lags))
+
+
+def ols_f_test(y: np.ndarray, X: np.ndarray, R: np.ndarray) -> tuple[float, tuple[float, float], float]:
+    """F-test of ``R beta = 0`` in the OLS fit of ``y`` on ``X`` (statsmodels' ``OLS(y, X).fit().f_test(R)``:
+    pseudo-inverse fit, residual variance on ``n - rank(X)`` degrees of freedom). Returns (F, (q, dof), p)."""
+    pinv = np.linalg.pinv(X)
+    beta = pinv @ y
+    dof = float(X.shape[0] - np.linalg.matrix_rank(X))
+    scale = float(np.sum((y - X @ beta) ** 2) / dof)
+    rb = R @ beta
+    q = float(R.shape[0])
+    fvalue = float(rb @ np.linalg.pinv(scale * R @ (pinv @ pinv.T) @ R.T) @ rb / q)
+    return fvalue, (q, dof), float(stats.f.sf(fvalue, q, dof))
 
 
 def block_samples(rate_hz: float, h: float) -> int:
@@ -219,26 +238,27 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
         # prewhitening order chosen by an information criterion on the OLS residue: the open-loop residue
         # carries the integrated input noise, more colour than a fixed AR(2) whitens
         r0 = y - design @ np.linalg.lstsq(design, y, rcond=None)[0]
-        if segment_covariance is not None and acorr_ljungbox(r0, lags=[max(1, min(10, r0.size // 5))])[
-                "lb_pvalue"].iloc[0] >= WHITE_ALPHA:
+        if segment_covariance is not None and ljung_box(r0, max(1, min(10, r0.size // 5))) >= WHITE_ALPHA:
             # the null covariance already whitened the residue: an AR model chosen on a few dozen blocks
             # overfits (BIC picked AR(3) on 54 blocks of a healthy fast motion) and its feasible GLS
             # F-test rejected healthy motions at several times its level
             ar_order = 0
         else:
             ar_order = ar_order_bic(r0, MAX_AR)  # statsmodels' ar_select_order(ic="bic", trend="n")
-    if ar_order == 0 and segment_covariance is not None:
-        fit = OLS(y, design).fit()
-        whiten = np.asarray
-    else:
-        fit = GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
-        whiten = fit.model.whiten
     q = T.shape[1]
     restriction = np.zeros((q, design.shape[1]))
     restriction[:, -q:] = np.eye(q)
-    f = fit.f_test(restriction)
-    tests = {"independence": TestResult("independence", float(np.squeeze(f.fvalue)),
-                                        (float(f.df_num), float(f.df_denom)), float(np.squeeze(f.pvalue)))}
+    if ar_order == 0 and segment_covariance is not None:
+        fvalue, df, pvalue = ols_f_test(y, design, restriction)
+        whiten = np.asarray
+    else:
+        from statsmodels.regression.linear_model import GLSAR
+
+        fit = GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
+        whiten = fit.model.whiten
+        f = fit.f_test(restriction)
+        fvalue, df, pvalue = float(np.squeeze(f.fvalue)), (float(f.df_num), float(f.df_denom)), float(np.squeeze(f.pvalue))
+    tests = {"independence": TestResult("independence", fvalue, df, pvalue)}
     # the correlation plot: residue and inputs prewhitened by the fitted AR model, after the nuisance
     white = whiten(y - N @ np.linalg.lstsq(N, y, rcond=None)[0])
     wl = whiten(L)

@@ -49,7 +49,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import signal, stats
-from statsmodels.regression.linear_model import OLS  # not statsmodels.api: seconds of imports
 
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
@@ -359,6 +358,9 @@ def isolate(x1f: np.ndarray, x2f: np.ndarray, reference: np.ndarray, names: tupl
         raise EstimatorInputError(f"isolate: {ref.size} samples left after trimming {options.edge_s} s edges")
     X = np.column_stack([ref, np.ones(ref.size)])
     span = float(np.max(np.abs(ref)))
+    # not statsmodels.api (seconds of imports), and only here: isolating a faulty sensor is rare
+    from statsmodels.regression.linear_model import OLS
+
     fits = []
     for name, x in zip(names, (x1f, x2f)):
         res = OLS(x[sl], X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
