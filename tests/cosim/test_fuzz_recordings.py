@@ -7,7 +7,7 @@ stretches, spikes, dropped samples (the time column keeps its gaps), and a comma
 nonlinear amplifier. The record is written as a CSV and run through ``cosim estimate`` (one of ls, iv, oe,
 with ``--resample`` when samples were dropped) and ``cosim monitor``.
 
-The default run draws 6 examples (derandomised: the same ones every run); ``FUZZ_RECORDINGS=2000 pytest
+The default run draws 4 examples (derandomised: the same ones every run); ``FUZZ_RECORDINGS=2000 pytest
 tests/cosim/test_fuzz_recordings.py`` is the fuzz campaign. ``FUZZ_SEED=N`` draws another random sequence, so that
 shards in separate processes (``FUZZ_SEED=1 ... FUZZ_SEED=4``, 500 examples each) share the campaign.
 """
@@ -30,7 +30,7 @@ _spec = importlib.util.spec_from_file_location("synthetic", Path(__file__).paren
 synthetic = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(synthetic)
 
-EXAMPLES = int(os.environ.get("FUZZ_RECORDINGS", "6"))
+EXAMPLES = int(os.environ.get("FUZZ_RECORDINGS", "4"))
 SEED = os.environ.get("FUZZ_SEED")
 NAN = re.compile(r"\bnan\b", re.IGNORECASE)
 DAMAGES = ("none", "round3", "quantise", "saturate", "constant", "spikes")
