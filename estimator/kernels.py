@@ -159,3 +159,47 @@ def _bilinear(a1: float, a0: float, h: float) -> tuple[np.ndarray, np.ndarray]:
 
     b, a = signal.cont2discrete(([1.0], [a1, a0]), h, method="bilinear")[:2]
     return np.ravel(b), np.asarray(a)
+
+
+# --- the model's symbolic facts, derived once per model ---------------------------------------------------------
+# A model is data that no one changes after it is built (``models.drives.drive_model`` and ``with_design`` give one
+# object per kind and design), so what the estimator derives from its equations is kept per model object, as
+# ``regression._derive`` keeps its regressions: CasADi's depends_on/symvar over the residuals, asked again for every
+# signal of every half of every IV iteration, were ~45 ms of a 165 ms motion.
+
+@lru_cache(maxsize=32)
+def measured_signals(model) -> tuple[str, ...]:  # noqa: ANN001 - models.Model
+    """``models.drives.measured(model)``, derived once per model object."""
+    from feeddrive.models.drives import measured
+
+    return measured(model)
+
+
+@lru_cache(maxsize=64)
+def equation_parameters_of(model, equation: str) -> tuple[str, ...]:  # noqa: ANN001
+    """``regression.equation_parameters(model, equation)``, derived once per (model, equation)."""
+    from feeddrive.estimator.regression import equation_parameters
+
+    return equation_parameters(model, equation)
+
+
+@lru_cache(maxsize=64)
+def residual_symbols(model, equation: str) -> frozenset[str]:  # noqa: ANN001
+    """Names of the symbols of ``regression.equation_residual(model, equation)``, once per (model, equation)."""
+    import casadi as ca
+
+    from feeddrive.estimator.regression import equation_residual
+
+    return frozenset(x.name() for x in ca.symvar(equation_residual(model, equation)))
+
+
+def parameter_owners(model) -> dict[str, str]:  # noqa: ANN001
+    """``model_terms.owners(model)`` (a new dict: the caller may change it), derived once per model object."""
+    return dict(_owners(model))
+
+
+@lru_cache(maxsize=32)
+def _owners(model) -> tuple[tuple[str, str], ...]:  # noqa: ANN001
+    from feeddrive.estimator.model_terms import owners
+
+    return tuple(owners(model).items())

@@ -135,3 +135,27 @@ def test_filtered_signals_are_reused_only_for_the_same_values() -> None:
     changed = spec.apply({"x": x}, h)["x"]
     np.testing.assert_array_equal(changed, signal.sosfiltfilt(sos, x))
     assert not np.array_equal(changed, first)
+
+
+@pytest.mark.parametrize("kind", ["dc", "pmsm", "pmsm-spm"])
+def test_model_facts_kept_per_model_are_the_derived_ones(kind: str) -> None:
+    """The estimator's per-model facts (kernels: measured signals, owners, each equation's parameters and
+    residual symbols) are those derived from the equations, for every drive kind and a changed design."""
+    import casadi as ca
+
+    from feeddrive.estimator import kernels
+    from feeddrive.estimator.model_terms import owners
+    from feeddrive.estimator.regression import equation_parameters, equation_residual
+    from feeddrive.models.drives import drive_model, measured, with_design
+
+    base = drive_model(kind)
+    models = [base] + ([with_design(base, {"p": 4})] if kind != "dc" else [])
+    for model in models:
+        assert kernels.measured_signals(model) == measured(model)
+        assert kernels.parameter_owners(model) == owners(model)
+        assert kernels.parameter_owners(model) is not kernels.parameter_owners(model)  # callers may change theirs
+        for eq in model.equations:
+            assert kernels.equation_parameters_of(model, eq) == equation_parameters(model, eq)
+            assert kernels.residual_symbols(model, eq) == {x.name() for x in ca.symvar(equation_residual(model, eq))}
+    expected = {"dc": ("i", "w", "u"), "pmsm": ("i_q", "i_d", "w", "u_d", "u_q")}
+    assert kernels.measured_signals(base) == expected.get(kind, expected["pmsm"])
