@@ -47,7 +47,7 @@ from scipy import stats
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
-from feeddrive.estimator.kernels import erode
+from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
 MIN_DIRECTION = 1e-3
@@ -155,12 +155,6 @@ def _rows(w: np.ndarray, h: float, cutoff_hz: float, speed_fraction: float, lag:
     return keep
 
 
-def _block_sums(x: np.ndarray, k: int) -> np.ndarray:
-    """Sums over ``k`` consecutive blocks of equal length (the remainder goes to the last block), shape (k, ...)."""
-    edges = np.linspace(0, x.shape[0], k + 1).astype(int)
-    return np.add.reduceat(x, edges[:-1], axis=0)
-
-
 def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], N: np.ndarray, terms: list[str],
                  blocks: int, max_relative_std: float, y_scale: np.ndarray) -> tuple[float | None, float | None, tuple | None, tuple,
                                                                str | None, tuple, str]:
@@ -168,16 +162,10 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     module docstring. Returns ``(p, F, df, undetermined, strongest, terms tested, reason)``."""
     n = y.size
     k = min(blocks, n // 8)
-    scale_x = np.linalg.norm(X, axis=0)
-    scale_x[scale_x == 0] = 1.0
-    Xs, Zs = X / scale_x, Z / np.where(np.linalg.norm(Z, axis=0) > 0, np.linalg.norm(Z, axis=0), 1.0)
+    Xs, Zs = X / nonzero_norms(X), Z / nonzero_norms(Z)
 
     def iv(W: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """IV estimate with instruments V for W, and its batch-means covariance (k blocks)."""
-        M = np.linalg.pinv(V.T @ W)
-        beta = M @ (V.T @ y)
-        G = _block_sums(V * (y - W @ beta)[:, None], k)
-        return beta, M @ (G.T @ G) @ M.T
+        return block_iv(y, [W], [V], k)
 
     # the model's coefficients and their standard errors (excitation)
     undetermined = [nm for nm in names if nm not in ("constant", "T0") and not nm.endswith(SHARED)]
@@ -201,7 +189,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
             Zs[:, j] = Xs[:, j]
     # nuisance: what the model's regressors cannot represent, orthonormal; orthogonal to the instruments,
     # not to the regressors, whose noise (the derivative's) would pass into the directions and bias them
-    Nn = N / np.where(np.linalg.norm(N, axis=0) > 0, np.linalg.norm(N, axis=0), 1.0)
+    Nn = N / nonzero_norms(N)
     Q = np.linalg.qr(Zs)[0] if Zs.shape[1] else np.zeros((n, 0))
     R_ = Nn - Q @ (Q.T @ Nn)
     _, s, Vt = np.linalg.svd(R_, full_matrices=False)
@@ -217,7 +205,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     # along a nuisance term leaves a structured residue that inflates its own variance)
     D = Vt[keep].T / s[keep]
     B = Nn @ D
-    beta, cov = iv(np.column_stack([Xs, B]), np.column_stack([Zs, B]))
+    beta, cov = block_iv(y, [Xs, B], [Zs, B], k)  # [Xs B] with instruments [Zs B], never stacked (n x 10 twice)
     c, S = beta[-q:], cov[-q:, -q:]
     try:
         t2 = float(c @ np.linalg.solve(S, c))
@@ -322,8 +310,8 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                               f"{int(rows.sum())} samples with |speed| above {speed_fraction:g} of its peak")
     sgn, aw = np.sign(s["w"]), np.abs(s["w"])
 
-    def fitted(X: np.ndarray, y: np.ndarray) -> np.ndarray:
-        Z = instruments(X)[rows]
+    def fitted(X: np.ndarray, Z: np.ndarray, y: np.ndarray) -> np.ndarray:
+        Z = Z[rows]
         return X @ np.linalg.lstsq(Z.T @ X[rows], Z.T @ y[rows], rcond=None)[0]
 
     def shifted(x: np.ndarray, k: int) -> np.ndarray:
@@ -349,7 +337,8 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
             fixed[p] = terms.pop(p)
             y = y - known[p] * fixed[p]
         X = np.column_stack(list(terms.values())) if terms else np.zeros((y.size, 0))
-        yhat = fitted(X, y) if terms else np.zeros_like(y)
+        Z = instruments(X)  # once: the fit and the test use the same instruments
+        yhat = fitted(X, Z, y) if terms else np.zeros_like(y)
         # a known parameter's own term is a nuisance too: a wrong value, or a logged command taken for the
         # voltage, leaves a lack of fit along it. A derivative is read LAG away (its noise is the residue's);
         # the others as they are (read away, their curvature between t - LAG and t + LAG was itself a
@@ -357,7 +346,7 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         constant = [] if "T0" in terms else [np.ones_like(y)]  # the offset: a nuisance unless modelled
         N = np.column_stack(constant + [around(x) if p in DERIVATIVE_TERMS else x for p, x in fixed.items()]
                             + [f(yhat) for f in nuisance])
-        checks[name] = (output, y, X, instruments(X), list(terms), N,
+        checks[name] = (output, y, X, Z, list(terms), N,
                         ["offset (constant)"] * len(constant) + [f"known {p} off" for p in fixed] + labels)
 
     scale = {"electrical": s.get("u"), "mechanical": s.get("torque", s.get("i"))}

@@ -159,3 +159,41 @@ def test_model_facts_kept_per_model_are_the_derived_ones(kind: str) -> None:
             assert kernels.residual_symbols(model, eq) == {x.name() for x in ca.symvar(equation_residual(model, eq))}
     expected = {"dc": ("i", "w", "u"), "pmsm": ("i_q", "i_d", "w", "u_d", "u_q")}
     assert kernels.measured_signals(base) == expected.get(kind, expected["pmsm"])
+
+
+def test_column_norms_are_numpy_norms() -> None:
+    from feeddrive.estimator.kernels import column_norms, nonzero_norms
+
+    rng = np.random.default_rng(9)
+    A = rng.standard_normal((5000, 6)) * [1.0, 1e-8, 1e8, 3.0, 0.0, 1.0]
+    ref = np.linalg.norm(A, axis=0)
+    np.testing.assert_allclose(column_norms(A), ref, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(nonzero_norms(A), np.where(ref > 0, ref, 1.0), rtol=1e-14, atol=0)
+
+
+def test_block_iv_is_the_stacked_iv() -> None:
+    """The lack-of-fit test's IV from the blocks' products equals the IV of the stacked matrices (pinv of
+    ``Vs^T Ws``, batch-means covariance over k blocks), a single block bit for bit."""
+    from feeddrive.estimator.kernels import block_iv, block_sums
+
+    rng = np.random.default_rng(10)
+    n, k = 7001, 30
+    X = rng.standard_normal((n, 3))
+    Z = X + 0.3 * rng.standard_normal((n, 3))
+    B = rng.standard_normal((n, 4)) @ rng.standard_normal((4, 4))
+    y = X @ [1.0, -2.0, 0.5] + B @ [0.1, 0.0, -0.3, 0.2] + np.convolve(rng.standard_normal(n), np.ones(9), "same")
+
+    def stacked(W: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        M = np.linalg.pinv(V.T @ W)
+        beta = M @ (V.T @ y)
+        G = block_sums(V * (y - W @ beta)[:, None], k)
+        return beta, M @ (G.T @ G) @ M.T
+
+    for fast, ref in ((block_iv(y, [X], [Z], k), stacked(X, Z)),):
+        np.testing.assert_array_equal(fast[0], ref[0])
+        np.testing.assert_array_equal(fast[1], ref[1])
+    fast = block_iv(y, [X, B], [Z, B], k)
+    ref = stacked(np.column_stack([X, B]), np.column_stack([Z, B]))
+    np.testing.assert_allclose(fast[0], ref[0], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(fast[1], ref[1], rtol=1e-11, atol=1e-12 * np.abs(ref[1]).max())
+    assert block_sums(np.arange(10.0), 3).tolist() == [3.0, 12.0, 30.0]  # 10 rows in blocks of 3, 3, 4
