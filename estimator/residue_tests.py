@@ -18,7 +18,7 @@ from statsmodels.regression.linear_model import GLSAR, OLS
 from statsmodels.stats.diagnostic import acorr_ljungbox
 
 from feeddrive.estimator.errors import EstimatorInputError
-from feeddrive.estimator.kernels import ar_order_bic
+from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
 MAX_AR = 12
@@ -233,12 +233,8 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     else:
         fit = GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
         whiten = fit.model.whiten
-    q = T.shape[1]
-    restriction = np.zeros((q, design.shape[1]))
-    restriction[:, -q:] = np.eye(q)
-    f = fit.f_test(restriction)
-    tests = {"independence": TestResult("independence", float(np.squeeze(f.fvalue)),
-                                        (float(f.df_num), float(f.df_denom)), float(np.squeeze(f.pvalue)))}
+    F, df_num, df_denom, p_value = last_columns_f_test(fit, T.shape[1])  # fit.f_test([0 I]), bit for bit
+    tests = {"independence": TestResult("independence", F, (df_num, df_denom), p_value)}
     # the correlation plot: residue and inputs prewhitened by the fitted AR model, after the nuisance
     white = whiten(y - N @ np.linalg.lstsq(N, y, rcond=None)[0])
     wl = whiten(L)

@@ -197,3 +197,42 @@ def test_block_iv_is_the_stacked_iv() -> None:
     np.testing.assert_allclose(fast[0], ref[0], rtol=1e-12, atol=0)
     np.testing.assert_allclose(fast[1], ref[1], rtol=1e-11, atol=1e-12 * np.abs(ref[1]).max())
     assert block_sums(np.arange(10.0), 3).tolist() == [3.0, 12.0, 30.0]  # 10 rows in blocks of 3, 3, 4
+
+
+def test_noise_std_is_scipy_mad() -> None:
+    from scipy import special, stats
+
+    from feeddrive.estimator.validation import NORMAL_MAD, noise_std
+
+    assert NORMAL_MAD == special.ndtri(0.75)
+    rng = np.random.default_rng(11)
+    for n in (2, 3, 10, 1001, 34879):
+        x = np.cumsum(rng.standard_normal(n)) * 1e-3 + rng.standard_normal(n)
+        assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
+    assert np.isnan(noise_std(np.array([0.0, np.nan, 1.0, 2.0])))
+
+
+def test_last_columns_f_test_is_statsmodels_f_test() -> None:
+    """The residue tests' F test of the last q coefficients: statsmodels' f_test bit for bit, for OLS and
+    GLSAR fits and a rank-deficient covariance block."""
+    from statsmodels.regression.linear_model import GLSAR, OLS
+
+    from feeddrive.estimator.kernels import last_columns_f_test
+
+    rng = np.random.default_rng(12)
+    n = 300
+    X = rng.standard_normal((n, 7))
+    y = X @ [0.5, 1.0, 0.0, 0.0, 0.1, 0.0, 0.02] + np.convolve(rng.standard_normal(n), [1, 0.6], "same")
+    collinear = np.column_stack([X, X[:, -1]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # statsmodels' warnings on the rank-deficient design, wanted here
+        cases = ((OLS(y, X).fit(), 4), (OLS(y, X).fit(), 1), (GLSAR(y, X, rho=2).iterative_fit(maxiter=6), 3),
+                 (OLS(y, collinear).fit(), 3))
+        for fit, q in cases:
+            R = np.zeros((q, fit.params.size))
+            R[:, -q:] = np.eye(q)
+            ref = fit.f_test(R)
+            expected = (float(np.squeeze(ref.fvalue)), float(ref.df_num), float(ref.df_denom),
+                        float(np.squeeze(ref.pvalue)))
+            assert last_columns_f_test(fit, q) == expected
+    assert last_columns_f_test(cases[-1][0], 3)[1] == 2.0  # the rank, as statsmodels
