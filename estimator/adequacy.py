@@ -221,9 +221,9 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     return p, F, (q, k - q), tuple(undetermined), strongest, tuple(terms), effect
 
 
-def _legendre(x: np.ndarray, rows: np.ndarray, degrees: range) -> np.ndarray:
-    """Legendre polynomials of ``x`` scaled to [-1, 1] over ``x[rows]``, shape (n, len(degrees))."""
-    lo, hi = float(x[rows].min()), float(x[rows].max())
+def _legendre(x: np.ndarray, degrees: range) -> np.ndarray:
+    """Legendre polynomials of ``x`` (the rows tested) scaled to [-1, 1] over its range, shape (n, len(degrees))."""
+    lo, hi = float(x.min()), float(x.max())
     t = 2 * (x - lo) / (hi - lo) - 1 if hi > lo else np.zeros_like(x)
     return np.column_stack([legendre.legval(t, np.eye(d + 1)[d]) for d in degrees])
 
@@ -310,15 +310,18 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                               f"{int(rows.sum())} samples with |speed| above {speed_fraction:g} of its peak")
     sgn, aw = np.sign(s["w"]), np.abs(s["w"])
 
-    def fitted(X: np.ndarray, Z: np.ndarray, y: np.ndarray) -> np.ndarray:
-        Z = Z[rows]
-        return X @ np.linalg.lstsq(Z.T @ X[rows], Z.T @ y[rows], rcond=None)[0]
+    # everything tested is read on the rows only: a term read LAG samples away is taken there (the rows keep
+    # LAG samples from both ends, so the indices stay inside; the values of np.roll(x, +-LAG)[rows], bit for bit)
+    take = np.flatnonzero(rows)  # take() of the row indices: the same rows as [rows], in half the time
 
-    def shifted(x: np.ndarray, k: int) -> np.ndarray:
-        return np.roll(x, k)  # the rows keep LAG samples from both ends: nothing wraps round into them
+    def fitted(X: np.ndarray, Xr: np.ndarray, Zr: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return X @ np.linalg.lstsq(Zr.T @ Xr, Zr.T @ y.take(take), rcond=None)[0]
+
+    def before(x: np.ndarray) -> np.ndarray:
+        return x.take(take - lag)  # x LAG samples earlier, on the rows
 
     def around(x: np.ndarray) -> np.ndarray:
-        return 0.5 * (shifted(x, lag) + shifted(x, -lag))
+        return 0.5 * (before(x) + x.take(take + lag))
 
     def instruments(X: np.ndarray) -> np.ndarray:  # noqa: N803
         # the regressors read LAG samples either side: their noise (the derivative's above all) is not
@@ -337,22 +340,22 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
             fixed[p] = terms.pop(p)
             y = y - known[p] * fixed[p]
         X = np.column_stack(list(terms.values())) if terms else np.zeros((y.size, 0))
-        Z = instruments(X)  # once: the fit and the test use the same instruments
-        yhat = fitted(X, Z, y) if terms else np.zeros_like(y)
+        Xr, Zr = X.take(take, axis=0), instruments(X)  # once: the fit and the test use the same instruments
+        yhat = fitted(X, Xr, Zr, y) if terms else np.zeros_like(y)
         # a known parameter's own term is a nuisance too: a wrong value, or a logged command taken for the
         # voltage, leaves a lack of fit along it. A derivative is read LAG away (its noise is the residue's);
         # the others as they are (read away, their curvature between t - LAG and t + LAG was itself a
         # lack of fit that hid a K 10 % off)
-        constant = [] if "T0" in terms else [np.ones_like(y)]  # the offset: a nuisance unless modelled
-        N = np.column_stack(constant + [around(x) if p in DERIVATIVE_TERMS else x for p, x in fixed.items()]
+        constant = [] if "T0" in terms else [np.ones(take.size)]  # the offset: a nuisance unless modelled
+        N = np.column_stack(constant + [around(x) if p in DERIVATIVE_TERMS else x.take(take) for p, x in fixed.items()]
                             + [f(yhat) for f in nuisance])
-        checks[name] = (output, y, X, Z, list(terms), N,
+        checks[name] = (output, y.take(take), Xr, Zr, list(terms), N,
                         ["offset (constant)"] * len(constant) + [f"known {p} off" for p in fixed] + labels)
 
     scale = {"electrical": s.get("u"), "mechanical": s.get("torque", s.get("i"))}
     for name, output, y, terms, friction in (model_terms(s | {"sgn_w": sgn}) if model_terms else []):
-        position = shifted(s["position"], lag)
-        legendre_terms = [lambda yhat, d=d: _legendre(position, rows, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
+        position = before(s["position"])
+        legendre_terms = [lambda yhat, d=d: _legendre(position, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
         equation(name, output, y, terms, (legendre_terms if friction else [])
                  + [lambda yhat: around(yhat * aw), lambda yhat: around(yhat ** 2)],
                  [f"position-dependent torque (gravity) P{d}" for d in (1, 2, 3) if friction]
@@ -370,18 +373,16 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                 y, out = known["K"] * y, "K i"
             else:
                 ignored += [p for p in ("Jt", "ft", "Cd") if p in known]
-        position = shifted(s["position"], lag)
+        position = before(s["position"])
         # one direction only: sign(w) is the constant (Cd and an offset confounded, the offset not tested)
         terms = {"Jt": s["Dw"], "ft": s["w"], "Cd": sgn} | ({"T0": np.ones_like(sgn)} if offset else {})
         equation("mechanical", out, y, terms,
-                 [lambda yhat, d=d: _legendre(position, rows, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
+                 [lambda yhat, d=d: _legendre(position, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
                  + [lambda yhat: around(yhat * aw), lambda yhat: around(yhat ** 2)],
                  ["position-dependent torque (gravity) P1", "position-dependent torque (gravity) P2",
                   "position-dependent torque (gravity) P3", f"{'current' if out == 'i' else 'torque'} x |speed|",
                   "output^2"])
-    take = np.flatnonzero(rows)  # take() of the row indices: the same rows as [rows], in half the time
-    checks = {k: (o, y.take(take), X.take(take, axis=0), Z.take(take, axis=0), nm, N.take(take, axis=0), t,
-                  scale[k].take(take) * (known.get("K", 1.0) if o == "K i" else 1))
+    checks = {k: (o, y, X, Z, nm, N, t, scale[k].take(take) * (known.get("K", 1.0) if o == "K i" else 1))
               for k, (o, y, X, Z, nm, N, t) in checks.items()}
     if not checks:
         raise EstimatorInputError("check_adequacy: neither the electrical (u, i, w) nor the mechanical "

@@ -236,3 +236,24 @@ def test_last_columns_f_test_is_statsmodels_f_test() -> None:
                         float(np.squeeze(ref.pvalue)))
             assert last_columns_f_test(fit, q) == expected
     assert last_columns_f_test(cases[-1][0], 3)[1] == 2.0  # the rank, as statsmodels
+
+
+@pytest.mark.parametrize("lag", [1, 40, 400])
+def test_adequacy_rows_read_lagged_terms_as_np_roll(lag: int) -> None:
+    """check_adequacy reads its lagged terms on the tested rows only (``x[rows -+ lag]``): the rows that
+    ``_rows`` keeps leave ``lag`` samples at both ends, so these are np.roll's values there, bit for bit."""
+    from feeddrive.estimator.adequacy import _legendre, _rows
+
+    rng = np.random.default_rng(13)
+    n, h = 6000, 1e-4
+    w = np.sin(np.linspace(0, 9, n)) + 0.01 * rng.standard_normal(n)
+    x = rng.standard_normal(n)
+    rows = _rows(w, h, 100.0, 0.03, lag)
+    take = np.flatnonzero(rows)
+    assert take.size > 100 and take[0] >= lag and take[-1] + lag < n
+    rolled = 0.5 * (np.roll(x, lag) + np.roll(x, -lag))
+    np.testing.assert_array_equal(0.5 * (x.take(take - lag) + x.take(take + lag)), rolled[rows])
+    position = np.roll(np.cumsum(w), lag)
+    lo, hi = position[rows].min(), position[rows].max()
+    full = np.polynomial.legendre.legval(2 * (position - lo) / (hi - lo) - 1, [0, 0, 1])  # P2 over the rows' range
+    np.testing.assert_array_equal(_legendre(np.cumsum(w).take(take - lag), range(2, 3))[:, 0], full[rows])
