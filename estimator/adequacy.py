@@ -449,12 +449,13 @@ def check_model_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estim
     """``check_motion`` for a model other than the DC drive (``options.model``, e.g. the PMSM): each equation's
     regression derived from the model with all its parameters free (collinear columns, the PMSM's reluctance
     term through L_d and L_q, kept once), tested for a lack of fit as the DC equations are."""
-    from feeddrive.estimator.kernels import equation_parameters_of, parameter_owners
+    from feeddrive.estimator.kernels import equation_parameters_of
+    from feeddrive.estimator.model_terms import owners
     from feeddrive.estimator.regression import derive_regression
     from feeddrive.models.drives import differentiated
 
     model = options.model
-    owner = parameter_owners(model)
+    owner = owners(model)
     regressions = []
     for eq in model.equations.values():
         free = [n for n in equation_parameters_of(model, eq.name)

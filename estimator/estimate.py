@@ -21,13 +21,7 @@ import numpy as np
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
-from feeddrive.estimator.kernels import (
-    equation_parameters_of,
-    erode,
-    measured_signals,
-    parameter_owners,
-    residual_symbols,
-)
+from feeddrive.estimator.kernels import equation_parameters_of, erode, measured_signals, residual_symbols
 from feeddrive.estimator.model_terms import (
     constant_sensitivities,
     derived_estimates,
@@ -117,7 +111,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
         sig = {k: v[keep] for k, v in sig.items()}
     sig["sgn_w"] = np.sign(sig["w"])
     free = [v.name for v in options.physical if (options.offset or not v.optional) and v.name not in options.known]
-    owner = parameter_owners(model)
+    owner = owners(model)  # cheap: each equation's parameters are kept per model (kernels)
     regressions, overrides = [], {}
     for eq in model.equations.values():
         known, over = dict(options.known), {}

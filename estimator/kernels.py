@@ -193,18 +193,6 @@ def residual_symbols(model, equation: str) -> frozenset[str]:  # noqa: ANN001
     return frozenset(x.name() for x in ca.symvar(equation_residual(model, equation)))
 
 
-def parameter_owners(model) -> dict[str, str]:  # noqa: ANN001
-    """``model_terms.owners(model)`` (a new dict: the caller may change it), derived once per model object."""
-    return dict(_owners(model))
-
-
-@lru_cache(maxsize=32)
-def _owners(model) -> tuple[tuple[str, str], ...]:  # noqa: ANN001
-    from feeddrive.estimator.model_terms import owners
-
-    return tuple(owners(model).items())
-
-
 def column_norms(A: np.ndarray) -> np.ndarray:
     """Euclidean norm of each column of ``A`` (n, p): ``np.linalg.norm(A, axis=0)`` to rounding (1e-15 relative),
     in one pass without the n x p temporary of squares (0.2 ms instead of 0.8 ms at 30000 x 10)."""
