@@ -47,7 +47,7 @@ from scipy import stats
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
-from feeddrive.estimator.kernels import erode
+from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
 MIN_DIRECTION = 1e-3
@@ -155,12 +155,6 @@ def _rows(w: np.ndarray, h: float, cutoff_hz: float, speed_fraction: float, lag:
     return keep
 
 
-def _block_sums(x: np.ndarray, k: int) -> np.ndarray:
-    """Sums over ``k`` consecutive blocks of equal length (the remainder goes to the last block), shape (k, ...)."""
-    edges = np.linspace(0, x.shape[0], k + 1).astype(int)
-    return np.add.reduceat(x, edges[:-1], axis=0)
-
-
 def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], N: np.ndarray, terms: list[str],
                  blocks: int, max_relative_std: float, y_scale: np.ndarray) -> tuple[float | None, float | None, tuple | None, tuple,
                                                                str | None, tuple, str]:
@@ -168,16 +162,10 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     module docstring. Returns ``(p, F, df, undetermined, strongest, terms tested, reason)``."""
     n = y.size
     k = min(blocks, n // 8)
-    scale_x = np.linalg.norm(X, axis=0)
-    scale_x[scale_x == 0] = 1.0
-    Xs, Zs = X / scale_x, Z / np.where(np.linalg.norm(Z, axis=0) > 0, np.linalg.norm(Z, axis=0), 1.0)
+    Xs, Zs = X / nonzero_norms(X), Z / nonzero_norms(Z)
 
     def iv(W: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """IV estimate with instruments V for W, and its batch-means covariance (k blocks)."""
-        M = np.linalg.pinv(V.T @ W)
-        beta = M @ (V.T @ y)
-        G = _block_sums(V * (y - W @ beta)[:, None], k)
-        return beta, M @ (G.T @ G) @ M.T
+        return block_iv(y, [W], [V], k)
 
     # the model's coefficients and their standard errors (excitation)
     undetermined = [nm for nm in names if nm not in ("constant", "T0") and not nm.endswith(SHARED)]
@@ -201,7 +189,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
             Zs[:, j] = Xs[:, j]
     # nuisance: what the model's regressors cannot represent, orthonormal; orthogonal to the instruments,
     # not to the regressors, whose noise (the derivative's) would pass into the directions and bias them
-    Nn = N / np.where(np.linalg.norm(N, axis=0) > 0, np.linalg.norm(N, axis=0), 1.0)
+    Nn = N / nonzero_norms(N)
     Q = np.linalg.qr(Zs)[0] if Zs.shape[1] else np.zeros((n, 0))
     R_ = Nn - Q @ (Q.T @ Nn)
     _, s, Vt = np.linalg.svd(R_, full_matrices=False)
@@ -217,7 +205,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     # along a nuisance term leaves a structured residue that inflates its own variance)
     D = Vt[keep].T / s[keep]
     B = Nn @ D
-    beta, cov = iv(np.column_stack([Xs, B]), np.column_stack([Zs, B]))
+    beta, cov = block_iv(y, [Xs, B], [Zs, B], k)  # [Xs B] with instruments [Zs B], never stacked (n x 10 twice)
     c, S = beta[-q:], cov[-q:, -q:]
     try:
         t2 = float(c @ np.linalg.solve(S, c))
@@ -233,9 +221,9 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     return p, F, (q, k - q), tuple(undetermined), strongest, tuple(terms), effect
 
 
-def _legendre(x: np.ndarray, rows: np.ndarray, degrees: range) -> np.ndarray:
-    """Legendre polynomials of ``x`` scaled to [-1, 1] over ``x[rows]``, shape (n, len(degrees))."""
-    lo, hi = float(x[rows].min()), float(x[rows].max())
+def _legendre(x: np.ndarray, degrees: range) -> np.ndarray:
+    """Legendre polynomials of ``x`` (the rows tested) scaled to [-1, 1] over its range, shape (n, len(degrees))."""
+    lo, hi = float(x.min()), float(x.max())
     t = 2 * (x - lo) / (hi - lo) - 1 if hi > lo else np.zeros_like(x)
     return np.column_stack([legendre.legval(t, np.eye(d + 1)[d]) for d in degrees])
 
@@ -322,15 +310,18 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                               f"{int(rows.sum())} samples with |speed| above {speed_fraction:g} of its peak")
     sgn, aw = np.sign(s["w"]), np.abs(s["w"])
 
-    def fitted(X: np.ndarray, y: np.ndarray) -> np.ndarray:
-        Z = instruments(X)[rows]
-        return X @ np.linalg.lstsq(Z.T @ X[rows], Z.T @ y[rows], rcond=None)[0]
+    # everything tested is read on the rows only: a term read LAG samples away is taken there (the rows keep
+    # LAG samples from both ends, so the indices stay inside; the values of np.roll(x, +-LAG)[rows], bit for bit)
+    take = np.flatnonzero(rows)  # take() of the row indices: the same rows as [rows], in half the time
 
-    def shifted(x: np.ndarray, k: int) -> np.ndarray:
-        return np.roll(x, k)  # the rows keep LAG samples from both ends: nothing wraps round into them
+    def fitted(X: np.ndarray, Xr: np.ndarray, Zr: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return X @ np.linalg.lstsq(Zr.T @ Xr, Zr.T @ y.take(take), rcond=None)[0]
+
+    def before(x: np.ndarray) -> np.ndarray:
+        return x.take(take - lag)  # x LAG samples earlier, on the rows
 
     def around(x: np.ndarray) -> np.ndarray:
-        return 0.5 * (shifted(x, lag) + shifted(x, -lag))
+        return 0.5 * (before(x) + x.take(take + lag))
 
     def instruments(X: np.ndarray) -> np.ndarray:  # noqa: N803
         # the regressors read LAG samples either side: their noise (the derivative's above all) is not
@@ -349,21 +340,22 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
             fixed[p] = terms.pop(p)
             y = y - known[p] * fixed[p]
         X = np.column_stack(list(terms.values())) if terms else np.zeros((y.size, 0))
-        yhat = fitted(X, y) if terms else np.zeros_like(y)
+        Xr, Zr = X.take(take, axis=0), instruments(X)  # once: the fit and the test use the same instruments
+        yhat = fitted(X, Xr, Zr, y) if terms else np.zeros_like(y)
         # a known parameter's own term is a nuisance too: a wrong value, or a logged command taken for the
         # voltage, leaves a lack of fit along it. A derivative is read LAG away (its noise is the residue's);
         # the others as they are (read away, their curvature between t - LAG and t + LAG was itself a
         # lack of fit that hid a K 10 % off)
-        constant = [] if "T0" in terms else [np.ones_like(y)]  # the offset: a nuisance unless modelled
-        N = np.column_stack(constant + [around(x) if p in DERIVATIVE_TERMS else x for p, x in fixed.items()]
+        constant = [] if "T0" in terms else [np.ones(take.size)]  # the offset: a nuisance unless modelled
+        N = np.column_stack(constant + [around(x) if p in DERIVATIVE_TERMS else x.take(take) for p, x in fixed.items()]
                             + [f(yhat) for f in nuisance])
-        checks[name] = (output, y, X, instruments(X), list(terms), N,
+        checks[name] = (output, y.take(take), Xr, Zr, list(terms), N,
                         ["offset (constant)"] * len(constant) + [f"known {p} off" for p in fixed] + labels)
 
     scale = {"electrical": s.get("u"), "mechanical": s.get("torque", s.get("i"))}
     for name, output, y, terms, friction in (model_terms(s | {"sgn_w": sgn}) if model_terms else []):
-        position = shifted(s["position"], lag)
-        legendre_terms = [lambda yhat, d=d: _legendre(position, rows, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
+        position = before(s["position"])
+        legendre_terms = [lambda yhat, d=d: _legendre(position, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
         equation(name, output, y, terms, (legendre_terms if friction else [])
                  + [lambda yhat: around(yhat * aw), lambda yhat: around(yhat ** 2)],
                  [f"position-dependent torque (gravity) P{d}" for d in (1, 2, 3) if friction]
@@ -381,18 +373,16 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                 y, out = known["K"] * y, "K i"
             else:
                 ignored += [p for p in ("Jt", "ft", "Cd") if p in known]
-        position = shifted(s["position"], lag)
+        position = before(s["position"])
         # one direction only: sign(w) is the constant (Cd and an offset confounded, the offset not tested)
         terms = {"Jt": s["Dw"], "ft": s["w"], "Cd": sgn} | ({"T0": np.ones_like(sgn)} if offset else {})
         equation("mechanical", out, y, terms,
-                 [lambda yhat, d=d: _legendre(position, rows, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
+                 [lambda yhat, d=d: _legendre(position, range(d, d + 1))[:, 0] for d in (1, 2, 3)]
                  + [lambda yhat: around(yhat * aw), lambda yhat: around(yhat ** 2)],
                  ["position-dependent torque (gravity) P1", "position-dependent torque (gravity) P2",
                   "position-dependent torque (gravity) P3", f"{'current' if out == 'i' else 'torque'} x |speed|",
                   "output^2"])
-    take = np.flatnonzero(rows)  # take() of the row indices: the same rows as [rows], in half the time
-    checks = {k: (o, y.take(take), X.take(take, axis=0), Z.take(take, axis=0), nm, N.take(take, axis=0), t,
-                  scale[k].take(take) * (known.get("K", 1.0) if o == "K i" else 1))
+    checks = {k: (o, y, X, Z, nm, N, t, scale[k].take(take) * (known.get("K", 1.0) if o == "K i" else 1))
               for k, (o, y, X, Z, nm, N, t) in checks.items()}
     if not checks:
         raise EstimatorInputError("check_adequacy: neither the electrical (u, i, w) nor the mechanical "
@@ -459,15 +449,16 @@ def check_model_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estim
     """``check_motion`` for a model other than the DC drive (``options.model``, e.g. the PMSM): each equation's
     regression derived from the model with all its parameters free (collinear columns, the PMSM's reluctance
     term through L_d and L_q, kept once), tested for a lack of fit as the DC equations are."""
+    from feeddrive.estimator.kernels import equation_parameters_of
     from feeddrive.estimator.model_terms import owners
-    from feeddrive.estimator.regression import derive_regression, equation_parameters
+    from feeddrive.estimator.regression import derive_regression
     from feeddrive.models.drives import differentiated
 
     model = options.model
     owner = owners(model)
     regressions = []
     for eq in model.equations.values():
-        free = [n for n in equation_parameters(model, eq.name)
+        free = [n for n in equation_parameters_of(model, eq.name)
                 if n not in options.known and (options.offset or not model.variables[n].optional)]
         reg = derive_regression(model, eq.name, free, dict(options.known))
         regressions.append((reg, eq.output))

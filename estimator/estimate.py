@@ -17,12 +17,11 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
-import casadi as ca
 import numpy as np
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
-from feeddrive.estimator.kernels import erode
+from feeddrive.estimator.kernels import equation_parameters_of, erode, measured_signals, residual_symbols
 from feeddrive.estimator.model_terms import (
     constant_sensitivities,
     derived_estimates,
@@ -47,7 +46,7 @@ from feeddrive.estimator.motion import (
     parameter_covariance,
     stationary_score_covariance,
 )
-from feeddrive.estimator.regression import Regression, derive_regression, equation_parameters, equation_residual
+from feeddrive.estimator.regression import Regression, derive_regression
 from feeddrive.estimator.simulation import MODEL, simulate
 from feeddrive.models.drives import differentiated, measured
 
@@ -74,8 +73,9 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     raw = data.raw()
     if "w" in raw:
         raw.pop("position", None)  # a tachometer is preferred to the differentiated encoder
-    unknown = sorted(set(raw) - set(FIELDS) - set(measured(model)))
-    if unknown or (model is not MODEL and ("torque" in raw or set(raw) & {"u", "i"} - set(measured(model)))):
+    known_signals = measured_signals(model)
+    unknown = sorted(set(raw) - set(FIELDS) - set(known_signals))
+    if unknown or (model is not MODEL and ("torque" in raw or set(raw) & {"u", "i"} - set(known_signals))):
         bad = (unknown or sorted({"torque", "u", "i"} & set(raw)))[0]
         raise EstimatorInputError(f"signal {bad!r} is not measured on the {model.name} model: expected "
                                   f"{', '.join(measured(model))} (and position)")
@@ -111,7 +111,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
         sig = {k: v[keep] for k, v in sig.items()}
     sig["sgn_w"] = np.sign(sig["w"])
     free = [v.name for v in options.physical if (options.offset or not v.optional) and v.name not in options.known]
-    owner = owners(model)
+    owner = owners(model)  # cheap: each equation's parameters are kept per model (kernels)
     regressions, overrides = [], {}
     for eq in model.equations.values():
         known, over = dict(options.known), {}
@@ -119,7 +119,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
             known[eq.normaliser] = 1.0  # the torque signal is the normaliser times the output (K i)
             over[eq.output] = sig["torque"]
         mine = [n for n in free if owner.get(n) == eq.name or n == eq.normaliser]
-        borrowed = tuple(n for n in equation_parameters(model, eq.name) if n in free and n not in mine)
+        borrowed = tuple(n for n in equation_parameters_of(model, eq.name) if n in free and n not in mine)
         reg = derive_regression(model, eq.name, mine, known, borrowed)
         if reg.names and all({**sig, **over}.get(x) is not None for x in reg.signals if x not in reg.constants):
             regressions.append(reg)
@@ -378,13 +378,13 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
     step = max(h, 0.125 / options.filter.cutoff_hz)
     n = n or len(s["w"])
     at = np.arange(n) + shift
-    out = {}
+    out, meas = {}, measured_signals(model)
     for reg in source.regressions:
         if reg.equation in skip:  # not simulated: its state is its own (measured) instrument
             continue
         eq = model.equations[reg.equation]
         sig = _signals_for(source, reg)
-        inputs = {x: sig[x] for x in reg.signals if x in measured(model) and x != eq.solves_for}
+        inputs = {x: sig[x] for x in reg.signals if x in meas and x != eq.solves_for}
         # a torque signal replaces normaliser * output: simulate with the normaliser at 1
         values = dict(par, **{eq.normaliser: 1.0}) if source.overrides[reg.equation] else par
         out[eq.solves_for] = simulate((reg.equation,), inputs, values, h, {eq.solves_for: sig[eq.solves_for][0]},
@@ -395,8 +395,8 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
     for eq in model.equations.values():
         if eq.solves_for in out or eq.solves_for not in used or eq.name in skip or eq.solves_for not in s:
             continue
-        syms = {x.name() for x in ca.symvar(equation_residual(model, eq.name))}
-        names = [x for x in measured(model) if x != eq.solves_for and model.variables[x].sym.name() in syms]
+        syms = residual_symbols(model, eq.name)
+        names = [x for x in meas if x != eq.solves_for and model.variables[x].sym.name() in syms]
         if all(x in s for x in names):
             out[eq.solves_for] = simulate((eq.name,), {x: s[x] for x in names}, par, h,
                                           {eq.solves_for: s[eq.solves_for][0]}, step, at=at, model=model)[eq.solves_for]

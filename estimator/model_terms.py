@@ -13,8 +13,9 @@ from scipy import stats
 
 from feeddrive.estimator.derivative import FUTURE, PAST
 from feeddrive.estimator.errors import NotEnoughExcitation
+from feeddrive.estimator.kernels import equation_parameters_of as equation_parameters  # derived once per model
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, ParameterEstimate, Prepared
-from feeddrive.estimator.regression import Regression, derive_regression, equation_parameters
+from feeddrive.estimator.regression import Regression, derive_regression
 from feeddrive.models.drives import derived_quantities
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from scipy import linalg, stats
 
 from feeddrive.estimator.errors import EstimatorInputError
-from feeddrive.estimator.kernels import ar_order_bic
+from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
 MAX_AR = 12
@@ -245,10 +245,10 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
             ar_order = 0
         else:
             ar_order = ar_order_bic(r0, MAX_AR)  # statsmodels' ar_select_order(ic="bic", trend="n")
-    q = T.shape[1]
-    restriction = np.zeros((q, design.shape[1]))
-    restriction[:, -q:] = np.eye(q)
     if ar_order == 0 and segment_covariance is not None:
+        q = T.shape[1]
+        restriction = np.zeros((q, design.shape[1]))
+        restriction[:, -q:] = np.eye(q)
         fvalue, df, pvalue = ols_f_test(y, design, restriction)
         whiten = np.asarray
     else:
@@ -256,8 +256,8 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
 
         fit = GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
         whiten = fit.model.whiten
-        f = fit.f_test(restriction)
-        fvalue, df, pvalue = float(np.squeeze(f.fvalue)), (float(f.df_num), float(f.df_denom)), float(np.squeeze(f.pvalue))
+        fvalue, df_num, df_denom, pvalue = last_columns_f_test(fit, T.shape[1])  # fit.f_test([0 I]), bit for bit
+        df = (df_num, df_denom)
     tests = {"independence": TestResult("independence", fvalue, df, pvalue)}
     # the correlation plot: residue and inputs prewhitened by the fitted AR model, after the nuisance
     white = whiten(y - N @ np.linalg.lstsq(N, y, rcond=None)[0])

@@ -218,13 +218,19 @@ class MeasurementValidation:
         return self.pairs["current"].gain_ratio if "current" in self.pairs else float("nan")
 
 
+#: the MAD of a standard normal variable, scipy.special.ndtri(0.75) (median_abs_deviation's scale="normal")
+NORMAL_MAD = 0.6744897501960817
+
+
 def noise_std(x: np.ndarray) -> float:
     """High-frequency noise std of ``x`` from its first differences (robust, MAD based).
 
     For white noise of std ``s`` on a slowly varying signal, ``diff(x)`` has std ``s sqrt(2)``.
     """
     d = np.diff(np.asarray(x, dtype=float))
-    return float(stats.median_abs_deviation(d, scale="normal") / np.sqrt(2.0))
+    # scipy.stats.median_abs_deviation(d, scale="normal")'s arithmetic without its axis/NaN-policy wrapper
+    # (a third of its time on 35000 samples; the same bits, tests/estimator/test_speed.py)
+    return float(np.median(np.abs(d - np.median(d))) / NORMAL_MAD / np.sqrt(2.0))
 
 
 def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,

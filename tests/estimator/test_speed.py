@@ -135,3 +135,124 @@ def test_filtered_signals_are_reused_only_for_the_same_values() -> None:
     changed = spec.apply({"x": x}, h)["x"]
     np.testing.assert_array_equal(changed, signal.sosfiltfilt(sos, x))
     assert not np.array_equal(changed, first)
+
+
+@pytest.mark.parametrize("kind", ["dc", "pmsm", "pmsm-spm"])
+def test_model_facts_kept_per_model_are_the_derived_ones(kind: str) -> None:
+    """The estimator's per-model facts (kernels: measured signals, each equation's parameters and residual
+    symbols) are those derived from the equations, for every drive kind and a changed design."""
+    import casadi as ca
+
+    from feeddrive.estimator import kernels
+    from feeddrive.estimator.model_terms import owners
+    from feeddrive.estimator.regression import equation_parameters, equation_residual
+    from feeddrive.models.drives import drive_model, measured, with_design
+
+    base = drive_model(kind)
+    models = [base] + ([with_design(base, {"p": 4})] if kind != "dc" else [])
+    for model in models:
+        assert kernels.measured_signals(model) == measured(model)
+        assert owners(model) is not owners(model)  # a new dict each call: callers may change theirs
+        for eq in model.equations:
+            assert kernels.equation_parameters_of(model, eq) == equation_parameters(model, eq)
+            assert kernels.residual_symbols(model, eq) == {x.name() for x in ca.symvar(equation_residual(model, eq))}
+    expected = {"dc": ("i", "w", "u"), "pmsm": ("i_q", "i_d", "w", "u_d", "u_q")}
+    assert kernels.measured_signals(base) == expected.get(kind, expected["pmsm"])
+
+
+def test_column_norms_are_numpy_norms() -> None:
+    from feeddrive.estimator.kernels import column_norms, nonzero_norms
+
+    rng = np.random.default_rng(9)
+    A = rng.standard_normal((5000, 6)) * [1.0, 1e-8, 1e8, 3.0, 0.0, 1.0]
+    ref = np.linalg.norm(A, axis=0)
+    np.testing.assert_allclose(column_norms(A), ref, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(nonzero_norms(A), np.where(ref > 0, ref, 1.0), rtol=1e-14, atol=0)
+
+
+def test_block_iv_is_the_stacked_iv() -> None:
+    """The lack-of-fit test's IV from the blocks' products equals the IV of the stacked matrices (pinv of
+    ``Vs^T Ws``, batch-means covariance over k blocks), a single block bit for bit."""
+    from feeddrive.estimator.kernels import block_iv, block_sums
+
+    rng = np.random.default_rng(10)
+    n, k = 7001, 30
+    X = rng.standard_normal((n, 3))
+    Z = X + 0.3 * rng.standard_normal((n, 3))
+    B = rng.standard_normal((n, 4)) @ rng.standard_normal((4, 4))
+    y = X @ [1.0, -2.0, 0.5] + B @ [0.1, 0.0, -0.3, 0.2] + np.convolve(rng.standard_normal(n), np.ones(9), "same")
+
+    def stacked(W: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        M = np.linalg.pinv(V.T @ W)
+        beta = M @ (V.T @ y)
+        G = block_sums(V * (y - W @ beta)[:, None], k)
+        return beta, M @ (G.T @ G) @ M.T
+
+    for fast, ref in ((block_iv(y, [X], [Z], k), stacked(X, Z)),):
+        np.testing.assert_array_equal(fast[0], ref[0])
+        np.testing.assert_array_equal(fast[1], ref[1])
+    fast = block_iv(y, [X, B], [Z, B], k)
+    ref = stacked(np.column_stack([X, B]), np.column_stack([Z, B]))
+    np.testing.assert_allclose(fast[0], ref[0], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(fast[1], ref[1], rtol=1e-11, atol=1e-12 * np.abs(ref[1]).max())
+    assert block_sums(np.arange(10.0), 3).tolist() == [3.0, 12.0, 30.0]  # 10 rows in blocks of 3, 3, 4
+
+
+def test_noise_std_is_scipy_mad() -> None:
+    from scipy import special, stats
+
+    from feeddrive.estimator.validation import NORMAL_MAD, noise_std
+
+    assert NORMAL_MAD == special.ndtri(0.75)
+    rng = np.random.default_rng(11)
+    for n in (2, 3, 10, 1001, 34879):
+        x = np.cumsum(rng.standard_normal(n)) * 1e-3 + rng.standard_normal(n)
+        assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
+    assert np.isnan(noise_std(np.array([0.0, np.nan, 1.0, 2.0])))
+
+
+def test_last_columns_f_test_is_statsmodels_f_test() -> None:
+    """The residue tests' F test of the last q coefficients: statsmodels' f_test bit for bit, for OLS and
+    GLSAR fits and a rank-deficient covariance block."""
+    from statsmodels.regression.linear_model import GLSAR, OLS
+
+    from feeddrive.estimator.kernels import last_columns_f_test
+
+    rng = np.random.default_rng(12)
+    n = 300
+    X = rng.standard_normal((n, 7))
+    y = X @ [0.5, 1.0, 0.0, 0.0, 0.1, 0.0, 0.02] + np.convolve(rng.standard_normal(n), [1, 0.6], "same")
+    collinear = np.column_stack([X, X[:, -1]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # statsmodels' warnings on the rank-deficient design, wanted here
+        cases = ((OLS(y, X).fit(), 4), (OLS(y, X).fit(), 1), (GLSAR(y, X, rho=2).iterative_fit(maxiter=6), 3),
+                 (OLS(y, collinear).fit(), 3))
+        for fit, q in cases:
+            R = np.zeros((q, fit.params.size))
+            R[:, -q:] = np.eye(q)
+            ref = fit.f_test(R)
+            expected = (float(np.squeeze(ref.fvalue)), float(ref.df_num), float(ref.df_denom),
+                        float(np.squeeze(ref.pvalue)))
+            assert last_columns_f_test(fit, q) == expected
+    assert last_columns_f_test(cases[-1][0], 3)[1] == 2.0  # the rank, as statsmodels
+
+
+@pytest.mark.parametrize("lag", [1, 40, 400])
+def test_adequacy_rows_read_lagged_terms_as_np_roll(lag: int) -> None:
+    """check_adequacy reads its lagged terms on the tested rows only (``x[rows -+ lag]``): the rows that
+    ``_rows`` keeps leave ``lag`` samples at both ends, so these are np.roll's values there, bit for bit."""
+    from feeddrive.estimator.adequacy import _legendre, _rows
+
+    rng = np.random.default_rng(13)
+    n, h = 6000, 1e-4
+    w = np.sin(np.linspace(0, 9, n)) + 0.01 * rng.standard_normal(n)
+    x = rng.standard_normal(n)
+    rows = _rows(w, h, 100.0, 0.03, lag)
+    take = np.flatnonzero(rows)
+    assert take.size > 100 and take[0] >= lag and take[-1] + lag < n
+    rolled = 0.5 * (np.roll(x, lag) + np.roll(x, -lag))
+    np.testing.assert_array_equal(0.5 * (x.take(take - lag) + x.take(take + lag)), rolled[rows])
+    position = np.roll(np.cumsum(w), lag)
+    lo, hi = position[rows].min(), position[rows].max()
+    full = np.polynomial.legendre.legval(2 * (position - lo) / (hi - lo) - 1, [0, 0, 1])  # P2 over the rows' range
+    np.testing.assert_array_equal(_legendre(np.cumsum(w).take(take - lag), range(2, 3))[:, 0], full[rows])
