@@ -1,0 +1,126 @@
+"""The linear fit of one regression on one or more sample sets: LS or basic IV, column-scaled, with its
+sandwich covariance (``_solve``), and the column scale a regressor would have (``_column_reference``).
+
+Kept apart from :mod:`feeddrive.estimator.estimate` (which assembles the methods from it) so that the
+per-parameter estimate (``estimator.partial``) shares the same arithmetic.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from feeddrive.estimator.errors import NotEnoughExcitation
+from feeddrive.estimator.motion import EstimationOptions, parameter_covariance, stationary_score_covariance
+from feeddrive.estimator.regression import Regression
+
+
+@dataclass
+class _Fit:
+    theta: np.ndarray
+    cov: np.ndarray
+    dof: int
+    cond: float
+    fit: float
+    theta_dof: np.ndarray  # (p,) effective dof of each theta's variance
+    #: d theta for a change dy of the outputs (one array per sample set, all samples): theta is linear in y
+    lin: Callable[[list[np.ndarray]], np.ndarray] | None = None
+
+
+def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: float) -> np.ndarray:
+    """The norm each regressor column would have if its signals kept their own RMS level (a derivative
+    ``Dx``: the RMS of ``x`` per motion duration; sign(w): 1). A column far below it (1e-9) is rounding
+    noise, e.g. the derivative of a constant speed. Unit-free: nothing refers to nominal parameters."""
+    n = len(signals["w"])
+    duration = n * h
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(np.square(x)))) or 1.0
+
+    proxy = {}
+    for name in reg.signals:
+        if name == "sgn_w":
+            proxy[name] = 1.0
+        elif name.startswith("D") and signals.get(name[1:]) is not None:
+            proxy[name] = rms(signals[name[1:]]) / duration
+        else:
+            proxy[name] = rms(signals[name])
+    _, Phi = reg.evaluate({k: np.full(n, v) for k, v in proxy.items()})
+    return np.sqrt(np.einsum("ij,ij->j", Phi, Phi))
+
+
+def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
+           reference: np.ndarray | None = None, note: str = "", covariance: bool = True) -> _Fit:
+    """LS or basic IV on the usable rows of one or more sample sets, column-scaled.
+
+    Each part is ``(y (n,), Phi (n, p), Z (n, p) or None, rows (n,) bool)``. With ``Z`` None: LS
+    (``lstsq``, not the normal equations), after the excitation check. Otherwise IV: ``theta = (sum Z^T Phi)^-1 sum Z^T y``. The parts are
+    sample sets of the same time span (sample k of every part near the same time), so their score
+    contributions are added sample by sample before the long-run covariance.
+    """
+    p = parts[0][1].shape[1]
+    used = sum(int(r.sum()) for *_, r in parts)
+    if used < 20 * p:
+        raise NotEnoughExcitation(list(reg.names) + ([reg.normaliser] if reg.normaliser else []),
+                                  f"motion too short: {used} usable samples in the {reg.equation} "
+                                  f"equation, its {p} parameters ({', '.join(reg.names)}) need at least {20 * p}"
+                                  + (f" ({note})" if note else ""))
+    index = {id(r): None if r.all() else np.flatnonzero(r) for *_, r in parts}
+
+    def rows(x, r):  # take() with the indices: the same rows as x[r], twice as fast on (n, p) arrays
+        return x if index[id(r)] is None else x.take(index[id(r)], axis=0)
+
+    Xr = [rows(Phi, r) for _, Phi, _, r in parts]
+    ys = [rows(y, r) for y, _, _, r in parts]
+    scale = np.sqrt(sum(np.einsum("ij,ij->j", X, X) for X in Xr))
+    # a column that is rounding noise (a derivative at constant speed) is empty, however well conditioned
+    # column scaling makes it look; judged against the column's own scale (see _column_reference)
+    empty = scale <= 1e-9 * reference if reference is not None else np.zeros(p, dtype=bool)
+    scale[empty] = 1.0
+    Xs = [X / scale for X in Xr]
+    # singular values of the scaled regressor from its p x p Gram matrix (cheap; fine up to cond ~1e7)
+    eig, V = np.linalg.eigh(sum(X.T @ X for X in Xs)[np.ix_(~empty, ~empty)])
+    sv, Vt = np.sqrt(np.clip(eig[::-1], 0, None)), V[:, ::-1].T
+    cond = sv[0] / sv[-1] if sv[-1] > 0 and not empty.any() else np.inf
+    if parts[0][2] is None:
+        if cond > options.max_condition:
+            weak = np.zeros(p, dtype=bool)
+            weak[~empty] = np.abs(Vt[sv < sv[0] / options.max_condition]).max(axis=0, initial=0) > 0.1
+            bad = [n for n, b in zip(reg.names, weak | empty) if b]
+            raise NotEnoughExcitation(bad, f"{reg.equation} regressor condition number {cond:.3g} > "
+                                      f"{options.max_condition:.3g} (constant speed, no speed reversal?)", cond)
+        Ws = Xs
+        theta_s = np.linalg.lstsq(np.vstack(Xs), np.concatenate(ys), rcond=None)[0]
+    else:
+        Zr = [rows(Z, r) for _, _, Z, r in parts]
+        zscale = np.sqrt(sum(np.einsum("ij,ij->j", Z, Z) for Z in Zr)).clip(1e-300)
+        Ws = [Z / zscale for Z in Zr]
+        theta_s = np.linalg.solve(sum(W.T @ X for W, X in zip(Ws, Xs)), sum(W.T @ y for W, y in zip(Ws, ys)))
+    if not covariance:  # an IV iteration that is not the last: its values only (the covariance was 2/3 of IV)
+        return _Fit(theta_s / scale, np.zeros((p, p)), 1, float(cond), float("nan"), np.ones(p))
+    A = sum(W.T @ X for W, X in zip(Ws, Xs))
+    n = min(len(y) for y, *_ in parts)
+    G = np.zeros((n, p))
+    res2 = out2 = 0.0
+    stationary = []  # (instruments, errors) with the unused rows zero, for the stationary-error floor
+    for (y, _, _, r), W, X, yr in zip(parts, Ws, Xs, ys):
+        e = yr - X @ theta_s
+        g = np.zeros((len(y), p))
+        g[r] = W * e[:, None]
+        G += g[:n]
+        res2 += e @ e
+        out2 += yr @ yr
+        ef = np.zeros(len(y))
+        ef[r] = e
+        Wf = np.zeros((len(y), p))
+        Wf[r] = W
+        stationary.append((Wf, ef))
+    Ai = np.linalg.inv(A)
+    cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
+
+    def lin(dys: list[np.ndarray]) -> np.ndarray:
+        return Ai @ sum(W.T @ rows(dy, r) for W, dy, (*_, r) in zip(Ws, dys, parts)) / scale
+
+    return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
+                float(np.sqrt(res2 / out2)), dof, lin)
