@@ -256,7 +256,7 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
         except ValidationError as exc:
             raise from_validation(exc, raw, source, lines, prefix=("monitor",), model=ComponentSpec) from None
     try:
-        from feeddrive.cosim.monitor import MonitorConfig
+        from feeddrive.cosim.monitor import MonitorConfig, resolve_files
     except ImportError:
         warnings.warn(f"{source}: monitor: cosim.monitor is not available; running without a monitor",
                       stacklevel=3)
@@ -271,8 +271,7 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
                if k in fields and isinstance(v, str)}
     if "sampling" in fields:
         implied["sampling"] = _implied_sampling(data)
-    if isinstance(raw, dict) and isinstance(raw.get("db"), str) and raw["db"] != ":memory:" and "db" in fields:
-        raw = raw | {"db": str(base_dir / Path(raw["db"]).expanduser())}
+    raw = resolve_files(raw, base_dir) if isinstance(raw, dict) else raw  # a relative db or baseline FILE
     try:
         config = MonitorConfig.model_validate(implied | raw if isinstance(raw, dict) else raw)
     except ValidationError as exc:

@@ -34,6 +34,10 @@ from typing import Any
 ROLE_UNITS = {"speed_ref": "rad/s", "load": "N.m", "voltage": "V", "voltage_ref": "V", "current": "A",
               "speed": "rad/s", "position": "m"}
 INPUT_ROLES = ("speed_ref", "load")
+#: the role units' SI exponents (kg, m, s, A, rad): a variable declared in its role's own unit, with no
+#: BaseUnit or this one (factor 1, offset 0), converts by 1 without building pint's registry (0.8 s)
+SI_EXPONENTS = {"rad/s": (0, 0, -1, 0, 1), "N.m": (1, 2, -2, 0, 0), "V": (1, 2, -3, -1, 0), "A": (0, 0, 0, 1, 0),
+                "m": (0, 1, 0, 0, 0), "rad": (0, 0, 0, 0, 1)}
 OUTPUT_ROLES = ("voltage", "voltage_ref", "current", "speed", "position")
 REQUIRED_ROLES = ("speed_ref", "voltage", "current", "speed", "position")
 #: relative agreement asked of an explicit scale with the declared units (printed scales have 5+ digits)
@@ -148,6 +152,18 @@ def _affine(unit: str, base: Any, target: str) -> tuple[float, float]:
     return one - zero, zero
 
 
+def _own_unit(unit: str, base: Any, target: str) -> bool:
+    """``unit`` is the role's unit ``target`` by name and, when the FMU defines it, by its BaseUnit."""
+    if unit.strip() != target or target not in SI_EXPONENTS:
+        return False
+    if base is None:
+        return True
+    exponents = tuple(int(getattr(base, n, 0) or 0) for n in ("kg", "m", "s", "A", "rad"))
+    others = any(int(getattr(base, n, 0) or 0) for n in ("K", "mol", "cd"))
+    return (exponents == SI_EXPONENTS[target] and not others and float(base.factor or 1.0) == 1.0
+            and float(base.offset or 0.0) == 0.0)
+
+
 def declared_unit(variable: Any) -> tuple[str | None, str | None]:
     """``(unit, displayUnit)`` an FMU declares for ``variable``: its own, else its declared type's."""
     t = getattr(variable, "declaredType", None)
@@ -170,8 +186,6 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
         Incompatible units, an unknown unit, or an explicit scale/offset contradicting the units in force;
         ``key`` says which key of the entry, the message names the variable and both units.
     """
-    import pint
-
     target = role_unit(role, kind)
     declared, display = declared_unit(variable)
     unit, source = (entry.unit, "stated") if entry.unit is not None else (declared, "declared" if declared else "none")
@@ -187,8 +201,13 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
     key = "unit" if source == "stated" else "var"
     whose = f"{entry.var!r} is {'stated' if source == 'stated' else 'declared'} in {unit}"
     try:
-        quantity(unit, base)
-        a, b = _affine(unit, base, target)  # role = a * y + b
+        if _own_unit(unit, base, target):
+            a, b = 1.0, 0.0
+        else:
+            import pint
+
+            quantity(unit, base)
+            a, b = _affine(unit, base, target)  # role = a * y + b
     except ValueError as exc:
         raise UnitProblem(key, f"{whose}, a unit pint does not know ({exc}); expected a unit convertible to {target} "
                                f"(state the variable's true unit with unit: '...')") from None

@@ -426,6 +426,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     the next (not white) brings part of that bias back. The halves are sampled every 2 h, so the
     filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h). The equations in
     ``skip`` are not simulated (a derivative coefficient fixed at 0): their own state is its instrument.
+    Raises NumericalFailure when the iterates have not settled (relative change below ``iv_tolerance``)
+    after ``iv_iterations``: the callers fall back to LS with that reason.
     """
     odd, even = split_halves(data)
     halves = (prepare(odd, options, strict=check), prepare(even, options, strict=check))
@@ -456,6 +458,13 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
         cur = new
         if change < options.iv_tolerance:
             break
+    else:
+        # the last iterate of an iteration that does not settle is no estimate: on a record the model does not
+        # fit (REGBOT's lagged current) the instruments simulated from the previous iterate jump from one
+        # iterate to the next, and the 10th depends on the last bits of the data (a 1e-15 relative change of
+        # the samples moved K by +-30 %)
+        raise NumericalFailure(f"IV did not converge in {options.iv_iterations} iterations (relative change of "
+                               f"the parameters {change:.3g} at the last, tolerance {options.iv_tolerance:g})")
     if check:
         check_result(cur, options)
     return cur

@@ -298,6 +298,9 @@ class MotionEstimate:
     bounded: Mapping[str, float] = field(default_factory=dict)
     #: parameter -> the value it was fixed at in the re-fit of the others (L = 0: quasi-static equation)
     fixed: Mapping[str, float] = field(default_factory=dict)
+    #: refused parameter kept in the fit as a lumped term -> its value there (Cd holding Cd + T0 or the
+    #: friction at the motion's speed; L with a second lag): with ``fixed``, the model as fitted
+    lumped: Mapping[str, float] = field(default_factory=dict)
     #: the given parameters with their covariance before a refused one was fixed at its estimate (the
     #: intervals not conditional on it): what several motions or files are pooled and compared with
     joint: MethodResult | None = None

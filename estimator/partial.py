@@ -315,6 +315,7 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
     refused = {n: refused[n] for n in sorted(refused, key=order.index) if n not in options.known}
     return MotionEstimate(options.method, start, end, subsets["ls"], subsets["iv"], subsets["oe"], refused=refused,
                           flags=flags, bounded=bounded, fixed={n: v for n, v in fixed.items() if n in refused},
+                          lumped={n: float(final.values[final.names.index(n)]) for n in lumped if n in final.names},
                           joint=_subset(unconditional, list(shown.names)),
                           derived=derived_estimates(shown, options.model))
 

@@ -86,6 +86,8 @@ def history_line(monitor: dict) -> str | None:
     t = monitor.get("diagnosis_thresholds") or {}
     if t.get("baseline_mode") == "nominal":
         return text + "; healthy baseline: the nominal parameters (monitor.baseline: nominal)"
+    if t.get("baseline_mode") not in (None, "motions"):
+        return text + f"; healthy baseline: stated in {t['baseline_mode']} (monitor.baseline)"
     n, k = t.get("baseline_motions"), t.get("baseline_learnt")
     if n is None or k is None:
         return text
@@ -110,6 +112,8 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
             text = " ".join(f"{p}={v['value']:.4g}" for p, v in params.items() if isinstance(v, dict) and "value" in v)
             lines.append(f"  motion {k}: {verdict_line(m)}")  # the verdict first (cosim/report/verdict.py)
             lines.append(f"    {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
+            for name, why in (m.get("refused") or {}).items():  # no number: the rule that refused it
+                lines.append(f"    {name} refused: {why}")
             for f in m.get("sensor_faults") or []:
                 lines.append(f"    sensor fault: {f['sensor']} {f['kind']} (gain {f['gain']:.4g}, offset {f['offset']:.4g})")
             if isinstance(m.get("mismatch"), dict) and not m["mismatch"].get("passed", True):

@@ -103,7 +103,10 @@ def motion_view(m: Mapping, thresholds: Mapping | None, units: Mapping[str, str]
                      "reference": ref, "band": None if ref is None else (lo, hi),
                      "change": None if not ref else (value - ref) / abs(ref), "status": status})
     verdict = motion_verdict(m, {r["name"]: r["status"] for r in rows})
-    return {"m": m, "rows": rows, "verdict": verdict,
+    # a refused parameter has no number: its row says which rule refused it and why
+    refused = [{"name": n, "unit": units.get(n, ""), "reason": str(why)} for n, why in (m.get("refused") or {}).items()]
+    not_checked = [(q, str(why)) for q, why in (m.get("not_checked") or {}).items() if q.startswith("model")]
+    return {"m": m, "rows": rows, "verdict": verdict, "refused": refused, "not_checked": not_checked,
             "processing": views.processing(m, budget_s), "check": views.model_check(m.get("mismatch")),
             "residues": views.residue_rows(m), "gain_ratio": views.gain_ratio(m), "figures": []}
 

@@ -49,18 +49,21 @@ def slow_run(tmp_path_factory, feeddrive_fmu):
 
 
 def test_slow_healthy_motion_is_validated(slow_run):
-    """Validated with the 95 % CIs of all six parameters covering the plant's values; friction poorly
-    determined (ft +-40 % or more); neither the independence nor the size test rejects."""
+    """Validated with the 95 % CIs of the given parameters covering the plant's values; friction poorly
+    determined: ft (its interval was +-40 % or more when the monitor gave every parameter) is refused with
+    its reason, the model check runs on the model as fitted; neither the independence nor the size test
+    rejects."""
     m, _ = slow_run
     assert m["error"] is None and m["measurements_valid"] and m["sensor_faults"] == []
     assert m["end"] - m["start"] == pytest.approx(10.5, abs=0.01)
     assert m["validated"] and m["diagnosis"] == []
     assert not any("mismatch" in n for n in m["notes"])
     p = m["parameters"]
+    assert set(m["refused"]) == {"ft", "Cd"} and set(p) | set(m["refused"]) == set(TRUTH), m["refused"]
+    assert m["refused"]["ft"].startswith("too narrow a speed range: |w| within [6.2"), m["refused"]
     for name, value in TRUTH.items():
-        assert p[name]["ci95"][0] <= value <= p[name]["ci95"][1], (name, p[name])
-    ft = p["ft"]
-    assert (ft["ci95"][1] - ft["ci95"][0]) / 2 > 0.4 * ft["value"]
+        if name in p:
+            assert p[name]["ci95"][0] <= value <= p[name]["ci95"][1], (name, p[name])
     mm = m["mismatch"]
     assert mm["passed"] and mm["p_value"] >= mm["alpha"] == 0.01
     assert "Bonferroni over 5 tests" in mm["rule"]

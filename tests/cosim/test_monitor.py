@@ -168,13 +168,20 @@ def test_config_errors_name_the_key():
 
 
 def test_unusable_motion_is_recorded_not_fatal():
-    """A motion without speed excitation (standstill) is stored with the estimator's reason."""
+    """A motion without speed excitation (standstill) is stored with the estimator's reason per parameter.
+
+    One parameter at a time (issue 22): every parameter the standstill cannot give is refused with its
+    reason; R is given because this motion has the same noise on every channel (u = i exactly, R = 1).
+    It was an all-or-nothing error before the monitor used ``estimate_parameters``."""
     still = {k: np.zeros(15000) + (0.05 * np.random.default_rng(0).standard_normal(15000) if k != "theta_enc" else 0)
              for k in MEASUREMENTS}
     mon = new()
     run(mon, [still, motion(10)])
     first, second = mon.report()["motions"]
-    assert not first["validated"] and first["error"] and first["parameters"] == {}
+    assert not first["validated"] and first["verdict"] != "healthy"
+    assert set(first["refused"]) == {"L", "K", "Jt", "ft", "Cd"} and all(first["refused"].values())
+    assert set(first["parameters"]) <= {"R"} and abs(first["parameters"]["R"]["value"] - 1.0) < 1e-9
+    assert second["refused"] == {}
     assert second["validated"] and second["reference"] == "nominal"
 
 

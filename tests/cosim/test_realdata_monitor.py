@@ -88,3 +88,23 @@ def test_kuka_gravity_axes_are_a_mismatch_not_a_lack_of_excitation(axis, tmp_pat
     (m,) = json.loads(out)["motions"]
     assert m["verdict"] == "model mismatch" and m["adequacy"]["verdict"] == "model mismatch"
     assert "not enough excitation" not in m["verdict"]
+
+
+def test_quanser_model_check_that_cannot_run_says_why_and_keeps_the_estimates(quanser, tmp_path, capsys):
+    """500 Hz: L/R (about 1 ms) is shorter than the sample period, L is refused and fixed at 0, so the paper's
+    output-error check cannot simulate the current. It said "not estimated" (the check's simulation
+    diverged) and dropped the estimates; now the check says why it did not run, R and K are given (the
+    manual's 8.4 Ohm and 0.042 within the amplifier's and the propeller's distortions) and the residue
+    check decides."""
+    code, out, err = run(capsys, quanser, "--map", "time=t", "voltage=V", "current1=I", "speed=w",
+                         "--db", tmp_path / "h.sqlite", "--json")
+    assert code == 0, err
+    assert err == ""  # no numpy warning of the diverging simulation
+    (m,) = json.loads(out)["motions"]
+    why = m["not_checked"]["model (paper, output error)"]
+    assert why.startswith("not checked: the model check could not be run: its simulation needs L > 0, the fit "
+                          "holds L = 0 (sample period 0.002 s too long for the electrical time constant"), why
+    assert m["refused"]["L"].startswith("sample period 0.002 s too long") and m["fitted"]["L"] == 0.0
+    assert {"R", "K"} <= set(m["parameters"]) and not m["verdict"].startswith("not estimated")
+    assert 0.8 < m["parameters"]["R"]["value"] / 8.4 < 1.3 and 1.0 < m["parameters"]["K"]["value"] / 0.042 < 1.6
+    assert m["verdict"] == "model mismatch" and m["adequacy"]["verdict"] == "model mismatch"

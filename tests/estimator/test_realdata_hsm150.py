@@ -42,8 +42,13 @@ def test_hsm150_repeats_give_ft_and_cd_wherever_jt_is_refused_and_agree(motions,
         assert set(e.parameters) | set(e.refused) == {"Jt", "ft", "Cd"}
         for p in e.parameters.values():
             assert p.value > 0 and p.std <= 0.3 * p.value
-    if method == "iv":  # IV's instruments drift over 20 s: Jt is refused on each, ft and Cd still given
-        assert all("Jt" in e.refused for e in ests)
+    if method == "iv":  # IV's instruments drift over 20 s: Jt refused where IV settles, else LS with the reason
+        for e in ests:
+            if "IV did not converge in 10 iterations" in e.iv.message:  # never the last of unsettled iterates
+                assert e.iv.ran == "ls" and np.array_equal(e.iv.values, e.ls.values)
+            else:
+                assert "Jt" in e.refused and not e.iv.message, e.iv.message
+        assert any("Jt" in e.refused for e in ests)
     verdict = pool([e.joint for e in ests])
     assert verdict.verdict == "consistent" and verdict.p_value > 0.01
     # catalogue B 7.03e-5 (the steady speeds suggest ~1.3e-4), Cd ~0.04 N.m

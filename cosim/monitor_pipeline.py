@@ -1,0 +1,293 @@
+"""The monitor's treatment of one motion (``MonitorPipeline``), without the co-simulation component.
+
+    filtering (eq. 8) -> measurement validation (Fig. 5, 6) -> estimation (eq. 4, 5)
+    -> model validation (IV.B.3) -> diagnosis (Table I) -> history (SQLite)
+
+Used by the component (cosim/monitor.py) and by ``cosim monitor`` on recorded data.
+"""
+from __future__ import annotations
+
+import time as _time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from feeddrive.cosim import monitor_checks as checks
+from feeddrive.cosim.axis import parameter_units
+from feeddrive.cosim.monitor_checks import _drift_reference, _residue_dict, interval_mean_speed
+from feeddrive.cosim.monitor_config import MonitorConfig
+from feeddrive.estimator.adequacy import check_adequacy
+from feeddrive.estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
+from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.estimate import EstimationOptions, MotionData
+from feeddrive.estimator.history import History
+from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
+from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
+
+
+@dataclass
+class MotionTrace:
+    """Signals of one processed motion, for the monitor plots (paper Fig. 9-14)."""
+
+    motion: int
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+    validation: MeasurementValidation | None = None
+    mismatch: MismatchResult | None = None
+    result: dict = field(default_factory=dict)
+
+
+class MonitorPipeline:
+    """The monitor's treatment of one motion at a time, with its memory (theta_{j-1}, baseline).
+
+    Parameters
+    ----------
+    config : MonitorConfig
+    history : History
+        The store; theta_{j-1}, the baseline and the recent validated sets are read from it now.
+    axis : str
+    """
+
+    def __init__(self, config: MonitorConfig, history: History, axis: str) -> None:
+        from feeddrive.models import feed_drive
+
+        self.config, self.history, self.axis = config, history, axis
+        # the axis's own design values when given (a vendor motor), else the built-in model's
+        self.nominal = feed_drive().nominal(("physical",)) | dict(config.nominal) | dict(config.known)
+        self.validation_options = ValidationOptions(config.alpha, config.window_s, config.gain_tol, config.offset_tol)
+        self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
+                                                    speed_threshold=config.speed_threshold,
+                                                    speed_fraction=config.speed_fraction, known=dict(config.known))
+        self.diagnosis_options = DiagnosisOptions(config.alpha, config.min_relative_drift)
+        last = history.last_validated(axis)
+        self.last_validated: dict | None = last["parameters"] if last else None
+        self.baseline_sets = [b["parameters"] for b in history.baseline(axis, config.baseline_motions)]
+        self.recent = [r["parameters"] for r in history.recent_validated(axis, self.diagnosis_options.trend_motions)]
+
+    @property
+    def building(self) -> bool:
+        """True while the healthy baseline has fewer than ``baseline_motions`` motions."""
+        return self.config.baseline == "motions" and len(self.baseline_sets) < self.config.baseline_motions
+
+    def baseline(self) -> dict | None:
+        """The healthy reference (name -> (value, std)) a validated motion is diagnosed against.
+
+        The nominal values, or the mean of the healthy baseline motions; while that baseline is being
+        built, the mean of the healthy motions accepted so far (None before the first one).
+        """
+        if self.config.baseline == "nominal":
+            return {k: (v, 0.0) for k, v in self.nominal.items()}
+        if self.config.stated_baseline is not None:  # a stated baseline FILE
+            return self.config.stated_baseline
+        return make_baseline(self.baseline_sets) if self.baseline_sets else None
+
+    def thresholds(self) -> dict:
+        """The diagnosis' thresholds and the healthy baseline now (report.json ``diagnosis_thresholds``).
+
+        ``{"alpha", "z_crit", "min_relative": {name: fraction}, "baseline_motions", "baseline":
+        {name: {"value", "std"}} or None}``: what the alarm bands of the trend plots are drawn from.
+        """
+        return _drift_reference(self.baseline(), self.diagnosis_options, list(self.nominal)) | {
+            "alpha": self.diagnosis_options.alpha, "baseline_mode": self.config.baseline,
+            "baseline_motions": self.config.baseline_motions,
+            "baseline_learnt": len(self.baseline_sets)}
+
+    def process(self, signals: Mapping[str, np.ndarray | None], h: float, start: float, motion: int,
+                time: float, scenario: str = "") -> MotionTrace:
+        """Validate, estimate, check, diagnose and store one motion.
+
+        Parameters
+        ----------
+        signals : mapping of str to ndarray, shape (n,)
+            ``Im1, Im2`` [A], ``u, u_ref`` [V], ``w_tach, w_enc`` [rad/s], ``torque`` [N.m]: any subset with a
+            speed (cosim/monitor_checks.py); a missing or None sensor leaves its pair not checked.
+        h : float
+            Sample time [s].
+        start : float
+            Time of the first sample in the run or recording [s].
+        motion : int
+            Motion index.
+        time : float
+            Machine clock at the end of the motion [s since the epoch], for the history.
+        scenario : str
+            Stored with the motion.
+
+        Returns
+        -------
+        MotionTrace
+            ``result`` is the per-motion dict stored in the history and in report.json.
+        """
+        tic, cpu = _time.perf_counter(), _time.process_time()
+        signals = {k: v for k, v in signals.items() if v is not None}
+        n = len(next(iter(signals.values())))
+        result: dict[str, Any] = {"motion": int(motion), "start": start, "end": start + (n - 1) * h,
+                                  "method": self.config.method, "validated": False, "measurements_valid": None,
+                                  "reference": None, "parameters": {}, "sensor_faults": [], "gain_ratio": None,
+                                  "residues": {}, "refused": {}, "mismatch": None, "adequacy": None, "diagnosis": [], "notes": [],
+                                  "error": None, "verdict": None,
+                                  "not_checked": checks.not_checked(checks.present(signals), "torque" in signals)}
+        if self.config.known:
+            result["known"] = dict(self.config.known)
+        trace = MotionTrace(int(motion), start + h * np.arange(n), dict(signals), result=result)
+        mismatch = False
+        if (n - 1) * h < self.config.min_motion_s:
+            result["error"] = (f"motion of {(n - 1) * h:.3g} s is shorter than "
+                               f"min_motion_s = {self.config.min_motion_s} s (set it with --min-motion)")
+        else:
+            try:
+                mismatch = self._identify(signals, h, start, trace)
+            except (NotEnoughExcitation, EstimatorInputError) as exc:  # this motion cannot be used; the next may
+                result["error"] = str(exc)
+            except (np.linalg.LinAlgError, FloatingPointError) as exc:  # ill-conditioned data: a refusal, not a crash
+                result["error"] = f"numerical failure on this motion's data ({exc})"
+        result["verdict"] = checks.motion_verdict(result, mismatch)
+        result["processing_s"] = _time.perf_counter() - tic
+        # judged on CPU time: the wall time also counts whatever else the host runs meanwhile
+        result["processing_cpu_s"] = _time.process_time() - cpu
+        result["within_budget"] = result["processing_cpu_s"] <= self.config.budget_s
+        self.history.record(self.axis, result, scenario=scenario, time=time)
+        return trace
+
+    def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> bool:
+        """Validation, estimation, model check and diagnosis of one motion; True when the model check that
+        decided found a mismatch."""
+        result, cfg = trace.result, self.config
+        have = checks.present(signals)
+        known = dict(cfg.known)
+        if "w_tach" not in have and "w_enc" in have:
+            signals, have = {**signals, "w_tach": signals["w_enc"]}, have | {"w_tach"}
+            signals.pop("w_enc")
+            have.discard("w_enc")
+        full = {"Im1", "u", "w_tach"} <= have
+        v, mismatch_result = None, None
+        if full:
+            electrical = checks.electrical_reference(self.last_validated, self.nominal, known)
+            if cfg.sampling.get("speed") == "mean" and signals.get("w_enc") is not None:
+                signals = {**signals, "w_enc": interval_mean_speed(signals["w_enc"])}
+            v = validate_measurements(signals, h, electrical, cfg.filter, self.validation_options,
+                                      nominal=self.nominal)
+            trace.validation = v
+            faults = [f.to_dict() for f in v.sensor_faults]
+            ratio = v.pairs["current"].gain_ratio if v.pairs["current"].residue is not None else None
+            result |= {"measurements_valid": bool(v.valid and not faults), "reference": v.reference,
+                       "gain_ratio": ratio, "relative_gain_error": None if ratio is None else 1.0 - ratio,
+                       "sensor_faults": faults,
+                       "residues": {q: _residue_dict(p) for q, p in v.pairs.items() if p.residue is not None}}
+            result["notes"] += list(v.notes) + [n for p in v.pairs.values() for n in p.notes if p.residue is not None]
+            valid, u, i, w = v.valid, v.u, v.i, v.w
+        else:
+            residues, faults, best, notes = checks.detect_subset(signals, h, self.validation_options, have)
+            result |= {"measurements_valid": not faults, "sensor_faults": faults, "residues": residues}
+            result["notes"] += notes
+            valid, u, i, w = not faults, best.get("u"), best.get("i"), best["w"]
+        torque = signals.get("torque")
+        # a torque's offset T0 needs both directions: in one, sign(w) is a constant and Cd absorbs it
+        peak = float(np.max(np.abs(w))) if np.size(w) else 0.0
+        both = bool(np.max(w) > cfg.speed_fraction * peak and np.min(w) < -cfg.speed_fraction * peak)
+        offset = torque is not None and both
+        if torque is not None and not both:
+            result["notes"].append("one direction only: Cd and a torque offset cannot be told apart (Cd holds both)")
+        adequacy = None
+        try:  # before the estimation: a mismatch explains a refusal (gravity hides Jt on a robot axis)
+            adequacy = check_adequacy(h, u=u, i=i, w=w, torque=torque, alpha=cfg.mismatch_alpha, filter=cfg.filter,
+                                      speed_fraction=cfg.speed_fraction, known=known, offset=offset)
+            result["adequacy"] = adequacy.to_dict()
+        except EstimatorInputError as exc:
+            result["not_checked"]["model (own residue)"] = f"not checked: {exc}"
+        try:
+            est = estimate_parameters(  # one parameter at a time: the refused ones named with their reason
+                MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
+                replace(self.estimation_options, offset=offset), dict(cfg.bounds))
+        except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
+            # this motion cannot be used (the next may); ValueError: a non-finite simulation of the instruments
+            result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
+                f"estimation failed on this motion's data ({exc})"
+            if adequacy is not None and adequacy.mismatch:
+                result["notes"].append("not validated: model mismatch (the residue check), which may be why the "
+                                       "estimation was refused")
+            return adequacy is not None and adequacy.mismatch
+        params = est.parameters
+        units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
+        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
+                                for k, p in params.items()}
+        result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
+        result["refused"] = dict(est.refused)
+        if est.result.message:  # a fallback (IV -> LS) is stated with its reason
+            result["notes"].append(est.result.message)
+        flags = dict(est.flags)
+        if flags:  # outside the physical range or the user's bounds: reported, never validated
+            result["flags"] = flags
+        # the model checks simulate the model as fitted: a refused parameter at the value the fit held it at
+        # (its own estimate, 0, or the lumped term); only the given parameters are validated and stored
+        fitted = {k: float(v) for k, v in {**est.fixed, **est.lumped}.items()}
+        if fitted:
+            result["fitted"] = fitted
+        values = {k: p.value for k, p in params.items()} | fitted | known
+        # the output-error simulation integrates both equations: it needs L > 0 and Jt > 0 (a fixed 0 has no
+        # dynamics, a negative one diverges)
+        derivative = [k for k in ("L", "Jt") if k in values and not values[k] > 0]
+        if full and derivative:
+            result["not_checked"]["model (paper, output error)"] = (
+                "not checked: the model check could not be run: its simulation needs "
+                + "; ".join(f"{k} > 0, the fit holds {k} = {values[k]:.4g} ({est.refused.get(k, 'given')})"
+                            for k in derivative))
+        elif full and all(k in values for k in ("R", "L", "K", "Jt", "ft", "Cd")):
+            try:  # an overflow ends as the NumericalFailure below, never a warning on the console
+                with np.errstate(all="ignore"):
+                    inputs, instruments, noise = check_signals(v, signals)
+                    mismatch_result = check_model(inputs["u"], inputs["i"], inputs["w"], h, values, cfg.filter,
+                                                  cfg.mismatch_alpha, covariance=est.covariance, names=est.names,
+                                                  noise=noise, noise_dof=len(v.i), instruments=instruments,
+                                                  speed_threshold=cfg.speed_threshold,
+                                                  speed_fraction=cfg.speed_fraction)
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # NumericalFailure: it diverged
+                # the check could not be run; the estimates stand, the residue check decides
+                result["not_checked"]["model (paper, output error)"] = (
+                    f"not checked: the model check could not be run: {exc}")
+            else:
+                trace.mismatch = mismatch_result
+                result["mismatch"] = mismatch_result.to_dict()
+        else:
+            result["not_checked"]["model (paper, output error)"] = (
+                "not checked: needs the current, the voltage and the speed" if not full
+                else "not checked: needs every parameter estimated or known")
+        if mismatch_result is not None:  # the paper's check decides; the residue check is reported beside it
+            mismatch = not mismatch_result.passed
+        else:
+            mismatch = adequacy is not None and adequacy.mismatch
+        result["validated"] = bool(valid and not mismatch and (mismatch_result is not None or (
+            adequacy is not None and adequacy.verdict == "adequate")))
+        if flags:
+            result["validated"] = False
+            result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values()))
+        if not valid:
+            result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
+        if mismatch:
+            result["notes"].append("not validated: model mismatch (no diagnosis; parameters reported)")
+        elif valid and not result["validated"]:
+            why = adequacy.verdict if adequacy is not None else "model not checked"
+            result["notes"].append(f"not validated: {why} (the model check has no power; parameters reported)")
+        if not result["validated"]:
+            return mismatch
+        current = result["parameters"]
+        reference = self.baseline()
+        if reference is not None:
+            # the reference and thresholds this motion was judged against: the trend plots' alarm band
+            result["drift_reference"] = _drift_reference(reference, self.diagnosis_options, list(self.nominal))
+            result["diagnosis"] = [d.to_dict() for d in diagnose(current, reference, self.last_validated, self.recent,
+                                                                 self.diagnosis_options)]
+        if self.building:
+            k, n = len(self.baseline_sets), self.config.baseline_motions
+            if result["diagnosis"]:  # a worn axis must not become the healthy reference
+                result["notes"].append(f"healthy baseline incomplete ({k} of {n}): drift diagnosed against the "
+                                       f"{k} healthy motion(s) so far; not added to the baseline")
+            else:
+                self.baseline_sets.append(current)
+                result["notes"].append(f"healthy baseline: motion {k + 1} of {n}")
+        self.last_validated = current
+        self.recent = (self.recent + [current])[-self.diagnosis_options.trend_motions:]
+        return False
+
