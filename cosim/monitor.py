@@ -61,6 +61,10 @@ class Monitor(Component):
             except ValidationError as exc:
                 raise ScenarioError(describe_validation_error(exc, name)) from None
         super().__init__(name, config)
+        if config.drive != "dc":  # a PMSM axis: the servo drive's measurements too (cosim/monitor_servo.py)
+            from feeddrive.cosim.monitor_servo import SERVO_INPUTS
+
+            self.input_names = Monitor.input_names + SERVO_INPUTS
         self.axis = config.axis or "X"
         self.history: History | None = None
         self.pipeline: MonitorPipeline | None = None
@@ -116,6 +120,7 @@ class Monitor(Component):
         if rows.shape[0] < 2:
             return
         signals = dict(zip(MEASUREMENTS, rows[:, :len(MEASUREMENTS)].T))
+        signals |= dict(zip(self.input_names[len(MEASUREMENTS) + 2:], rows[:, len(MEASUREMENTS) + 2:].T))
         signals["w_enc"] = centred_speed(signals["theta_enc"], signals["w_enc"], self.h, self.config.encoder_window_s)
         start = self.t0 + self._start * self.h
         end = start + (rows.shape[0] - 1) * self.h
