@@ -5,8 +5,9 @@ is a PMSM (``MonitorConfig.drive``); the estimation (``estimate_parameters`` wit
 check on the motion's own residue and the diagnosis (``MonitorPipeline.diagnose``, Table I of the drive)
 are the same steps. Measurement validation of a servo drive:
 
-* the q-axis pairs of the ``sensors`` component (two current sensors, terminal voltage against its
-  reference, tachometer against encoder): the paper's residue test (eq. 10), detection only;
+* the q-axis pairs of the ``sensors`` component (two current sensors, tachometer against encoder; the
+  terminal voltage against its reference only without the servo's dq voltages): the paper's residue test
+  (eq. 10), detection only;
 * the servo drive's redundancies (``estimator.redundancy_servo``): the three phase currents sum to zero
   (analytic), two sensors on phase U (material), the reported q current against the Park transform of the
   phase currents, the dq voltage references against the terminal voltages with the dead time modelled;
@@ -167,6 +168,8 @@ def identify_servo(pipe: MonitorPipeline, signals: Mapping[str, Any], h: float, 
     p = int(pipe.estimation_options.model.nominal(("design",))["p"])
     have = checks.present(signals)
     dc = {k: v for k, v in signals.items() if k in checks.SENSOR_NAMES}
+    if {"u_d_ref", "u_q_ref", "u_d", "u_q"} <= have:  # the reference against the terminal voltage is the servo
+        dc.pop("u_ref", None)  # check's, with the inverter's dead time modelled (the plain pair flags it)
     residues, faults, best, notes = checks.detect_subset(dc, h, pipe.validation_options, have & set(dc))
     result["notes"] += notes
     i_q = best.get("i")
@@ -192,7 +195,9 @@ def identify_servo(pipe: MonitorPipeline, signals: Mapping[str, Any], h: float, 
         raise EstimatorInputError(f"a PMSM axis needs the dq currents and voltages and a speed; missing "
                                   f"{', '.join(missing + ['speed'] * ('w' not in best))}")
     options = pipe.estimation_options
-    data = MotionData(h, w=best["w"], signals=dq, t0=start)
+    # interval means (an oversampled plant) aligned to the interval's middle, as the DC monitor's u, i, w
+    delays = {{"u": "u_q", "i": "i_q"}.get(k, k): d for k, d in cfg.delays(h).items()}
+    data = MotionData(h, w=best["w"], signals=dq, t0=start, delays=delays)
     adequacy = check_motion(data, options)  # before the estimation: a mismatch explains a refusal
     result["adequacy"] = adequacy.to_dict()
     result["not_checked"]["model (paper, output error)"] = ("not checked: the output-error check simulates the DC "
