@@ -231,9 +231,12 @@ def identify_servo(pipe: MonitorPipeline, signals: Mapping[str, Any], h: float, 
     if result["validated"]:
         pipe.diagnose(result)
     if valid and lost is not None and lost["detected"]:  # the drive chain, measured by the two encoders
-        result["diagnosis"].append({"fault": LOST_MOTION, "parameters": ["lost_motion"], "evidence": [
-            {"parameter": "lost_motion", "value": lost["value_mm"], "unit": "mm", "ci95": lost["ci95_mm"],
-             "p_value": lost["p_value"], "significant": True}]})
+        # the evidence in a drift's fields (report.html's table): against 0 mm, a change without a relative size
+        lo, hi = lost["ci95_mm"]
+        result["diagnosis"].append({"fault": LOST_MOTION, "parameters": ["lost_motion_mm"], "evidence": [
+            {"parameter": "lost_motion_mm", "value": lost["value_mm"], "baseline": 0.0, "relative_change": None,
+             "z_baseline": None, "z_last": None, "trend_per_motion": None, "significant": True,
+             "std": (hi - lo) / 3.92, "unit": "mm", "ci95": [lo, hi], "p_value": lost["p_value"]}]})
     return mismatch
 
 
