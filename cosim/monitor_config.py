@@ -86,6 +86,9 @@ class MonitorConfig(BaseModel):
     dead_time_loss_v : float
         A PMSM drive's nominal per-leg dead-time loss ``t_dead f_pwm u_dc`` [V], modelled in the voltage
         reference check (0: an ideal inverter).
+    lost_motion_allowed_mm : float
+        A PMSM axis's acceptance value of the lost motion between the motor encoder and the linear scale [mm]:
+        the one-sided test's null (an elastic drive chain has some um without play: 1.2 um on the vendor FMU).
     sampling : mapping of {"voltage", "current", "speed"} to {"instant", "mean"}
         What a sample of each quantity is: ``mean``, the mean over the sampling interval before its
         time stamp, which the estimator aligns to the interval's middle (h/2 earlier); default
@@ -125,6 +128,7 @@ class MonitorConfig(BaseModel):
     drive: Literal["dc", "pmsm", "pmsm-spm"] = "dc"
     pole_pairs: int | None = Field(None, ge=1)
     dead_time_loss_v: float = Field(0.0, ge=0)
+    lost_motion_allowed_mm: float = Field(0.005, ge=0)
     #: the stated baseline FILE's values, name -> (value, std), read once by the validator
     _stated: dict[str, tuple[float, float]] | None = PrivateAttr(None)
 

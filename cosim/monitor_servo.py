@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import asdict
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -33,9 +33,6 @@ from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.estimate import MotionData
 from feeddrive.estimator.partial import estimate_parameters
-
-if TYPE_CHECKING:
-    from feeddrive.cosim.monitor_pipeline import MonitorPipeline, MotionTrace
 
 #: the monitor component's extra inputs on a PMSM axis, after ``state, motion`` (wired from the ``servo``
 #: component: phase currents [A], second sensor on U [A], dq voltage references and terminal voltages [V],
@@ -146,21 +143,25 @@ def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i
     return out, faults, skipped
 
 
-def lost_motion_check(signals: Mapping[str, np.ndarray], h: float, alpha: float) -> tuple[dict | None, str | None]:
-    """Motor encoder against linear scale (``redundancy_servo.lost_motion`` in mm): the result dict, or None
-    and the reason it was not checked."""
+def lost_motion_check(signals: Mapping[str, np.ndarray], h: float, alpha: float,
+                      allowed_mm: float = 0.0) -> tuple[dict | None, str | None]:
+    """Motor encoder against linear scale (``redundancy_servo.lost_motion`` in mm, tested against ``allowed_mm``):
+    the result dict, or None and the reason it was not checked."""
     if not {"x_mot", "x_lin"} <= checks.present(signals):
         return None, "not checked: no " + " and no ".join(k for k in ("x_mot", "x_lin") if k not in signals)
     try:
-        c = rs.lost_motion(1e3 * np.asarray(signals["x_mot"]), 1e3 * np.asarray(signals["x_lin"]), h, alpha)
+        c = rs.lost_motion(1e3 * np.asarray(signals["x_mot"]), 1e3 * np.asarray(signals["x_lin"]), h, alpha,
+                            allowed_mm)
     except EstimatorInputError as exc:
         return None, f"not checked: {exc}"
     return _json(asdict(c)), None
 
 
-def identify_servo(pipe: MonitorPipeline, signals: Mapping[str, Any], h: float, start: float,
-                   trace: MotionTrace) -> bool:
+def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float,  # noqa: ANN401
+                   trace: Any) -> bool:  # noqa: ANN401 - the pipeline imports this module: no import back
     """Validation, estimation, model check and diagnosis of one motion of a PMSM axis; True on a model mismatch.
+
+    ``pipe`` is the ``cosim.monitor_pipeline.MonitorPipeline``, ``trace`` its ``MotionTrace`` of the motion.
 
     ``signals``: the DC monitor's q-axis ``Im1, Im2, u, u_ref, w_tach, w_enc, theta_enc`` and ``SERVO_INPUTS``.
     """
@@ -176,7 +177,7 @@ def identify_servo(pipe: MonitorPipeline, signals: Mapping[str, Any], h: float, 
     servo, servo_faults, skipped = servo_checks(signals, h, p, i_q, cfg.alpha, cfg.gain_tol, cfg.offset_tol,
                                                 cfg.dead_time_loss_v, pipe.validation_options)
     faults += servo_faults
-    lost, why = lost_motion_check(signals, h, cfg.alpha)
+    lost, why = lost_motion_check(signals, h, cfg.alpha, cfg.lost_motion_allowed_mm)
     if lost is not None:
         servo["lost_motion"] = lost
     else:
@@ -244,3 +245,26 @@ def _units(drive: str) -> dict[str, str]:
     from feeddrive.cosim.cli.estimate import model_units
 
     return model_units(drive)
+
+
+def servo_line(servo: Mapping[str, Any]) -> str:
+    """One console line of a motion's servo checks (report.json ``servo_checks``): each check ``ok`` or ``FAULT``
+    with its number (the q current's gain against the Park transform, the dead time's per-leg loss [V], the
+    lost motion [mm])."""
+    def state(name: str) -> str:
+        return "ok" if servo[name].get("valid", True) else "FAULT"
+
+    parts = []
+    if "phase_current_sum" in servo:
+        parts.append(f"phase sum {state('phase_current_sum')}")
+    if "phase_sensor_pair" in servo:
+        parts.append(f"I_U/I_2 {state('phase_sensor_pair')} (ratio {servo['phase_sensor_pair']['gain_ratio']:.4f})")
+    if "dq_current_consistency" in servo:
+        parts.append(f"i_q/Park {state('dq_current_consistency')} (gain {servo['dq_current_consistency']['gain']:.4f})")
+    if "voltage_reference_check" in servo:
+        parts.append(f"u_ref/u {state('voltage_reference_check')} (dead time "
+                     f"{servo['voltage_reference_check']['u_loss']:.2f} V per leg)")
+    if "lost_motion" in servo:
+        lost = servo["lost_motion"]
+        parts.append(f"lost motion {lost['value_mm']:.4f} mm{' DETECTED' if lost['detected'] else ''}")
+    return "servo checks: " + ", ".join(parts)
