@@ -187,7 +187,9 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     result["not_checked"] |= skipped
     # the dq signals the estimator needs: d current from the phase currents at the encoder's electrical angle
     dq: dict[str, np.ndarray] = {}
-    if {"I_U", "I_V", "I_W", "theta_enc"} <= have:
+    if "i_d" in have:  # a recording's d current (``cosim monitor --drive pmsm --map i_d=...``)
+        dq["i_d"] = np.asarray(signals["i_d"], float)
+    elif {"I_U", "I_V", "I_W", "theta_enc"} <= have:
         dq["i_d"], _ = rs.park(np.vstack([signals["I_U"], signals["I_V"], signals["I_W"]]),
                                p * np.asarray(signals["theta_enc"], float))
     dq |= {k: v for k, v in (("i_q", i_q), ("u_q", best.get("u")), ("u_d", signals.get("u_d"))) if v is not None}

@@ -3,6 +3,7 @@ Table I of the PMSM, through ``cosim run`` on the built-in PMSM and on the vendo
 from __future__ import annotations
 
 import copy
+import json
 import math
 import sys
 from pathlib import Path
@@ -10,6 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from feeddrive.cosim.cli import main
 from feeddrive.cosim.run import run_scenario
 from feeddrive.cosim.scenario import scenario_from_dict
 from feeddrive.estimator.diagnosis import TABLE_I, TABLE_I_PMSM, DiagnosisOptions, diagnose
@@ -62,7 +64,7 @@ def _run(tmp_path: Path, data: dict, name: str):
                         plots=False)
 
 
-def test_a_healthy_pmsm_axis_is_validated_and_a_phase_gain_fault_is_a_sensor_fault(tmp_path):
+def test_a_healthy_pmsm_axis_is_validated_and_a_phase_gain_fault_is_a_sensor_fault(tmp_path, capsys):
     """Motion 1 healthy: every servo check passes, the dq estimate is validated (R within 1 %, L_q 0.5 %, psi_f
     0.1 % of the plant's) and becomes the baseline. Between the motions phase V's sensor gain steps to 1.03:
     motion 2 is a sensor fault isolated to I_V by the phase-current sum (gain 1.03 +- 0.005), never validated
@@ -83,6 +85,31 @@ def test_a_healthy_pmsm_axis_is_validated_and_a_phase_gain_fault_is_a_sensor_fau
     fault = m2["sensor_faults"][0]
     assert fault["sensor"] == "I_V" and fault["check"] == "phase_current_sum"
     assert fault["gain"] == pytest.approx(1.03, abs=0.005)
+    # the same recording by `cosim monitor --drive pmsm` on a drive's dq signals (no phase currents: the phase
+    # fault is not seen, each servo check says why): the same estimate of motion 1
+    assert main(["monitor", str(res.out_dir / "signals.csv"), "--map", *PMSM_MAP, "--drive", "pmsm",
+                 "--pole-pairs", "4", "--db", str(tmp_path / "m.db"), "--alpha", "0.01", "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out.splitlines()[-1])["motions"]
+    assert [m["validated"] for m in cli] == [True, True]
+    assert cli[0]["not_checked"]["phase_current_sum"] == "not checked: no I_U and no I_V and no I_W"
+    for name in ("R", "L_q", "psi_f"):
+        assert cli[0]["parameters"][name]["value"] == pytest.approx(p[name], rel=0.005), name
+
+
+#: a PMSM recording's dq roles (``cosim monitor --drive pmsm``): the drive's q current and voltage, its d ones
+PMSM_MAP = ["time=time", "i_q=sensors.Im1", "i_d=plant.i_d", "u_q=sensors.u", "u_d=servo.u_d",
+            "speed=sensors.w_tach", "position=sensors.theta_enc", "state=nc.state"]
+
+
+def test_cosim_monitor_refuses_a_pmsm_recording_without_its_roles(tmp_path, capsys):
+    """A PMSM without i_d, or pole pairs on a DC motor: one line naming what is missing, exit 2."""
+    csv = tmp_path / "r.csv"
+    csv.write_text("time,a,b\n0,1,2\n0.001,1,2\n", encoding="utf-8")
+    assert main(["monitor", str(csv), "--map", "time=time", "i_q=a", "speed=b", "--drive", "pmsm"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "missing required role(s): i_d, u_q, u_d" in err, err
+    assert main(["monitor", str(csv), "--map", "time=time", "current1=a", "speed=b", "--pole-pairs", "4"]) == 2
+    assert "--pole-pairs 4" in capsys.readouterr().err
 
 
 def vendor_scenario(fmu: Path, oversample: int, lost_motion_mm: float = 0.0) -> dict:
