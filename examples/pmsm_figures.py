@@ -1,12 +1,13 @@
 """Figures of the PMSM monitor campaign (examples/campaign_pmsm.yaml): detection rate per fault, false alarms.
 
-    python examples/pmsm_figures.py runs/campaign-pmsm [--json]
+    python examples/pmsm_figures.py runs/campaign-pmsm [MORE_OUT_DIRS ...] [--json]
 
 Each run's last motion is scored (the one after the parameter step; the earlier ones build the healthy
 baseline). A case is the run's injected plant change: none (healthy), ``psi_f`` (demagnetisation) or ``R``
 (winding heating). On a faulty case a motion is *detected* when its diagnosis names the expected fault; on
 the healthy case a *false alarm* is any alarm: a diagnosis, a sensor fault or a model mismatch. Motions
 not validated (no alarm, no diagnosis) are counted apart. Rates come with their 95 % Clopper-Pearson interval.
+Several out dirs (campaigns of other seeds, or one per case) are counted together.
 """
 from __future__ import annotations
 
@@ -41,20 +42,35 @@ def figures(out: Path) -> dict:
         case["motions"] += 1
         case["hits"] += int(hit)
         case["not_validated"] += int(not motion.get("validated"))
+    if not cases:
+        raise SystemExit(f"{out}: no finished run")
+    return _rates(cases)
+
+
+def _rates(cases: dict[str, dict]) -> dict[str, dict]:
     for case in cases.values():
         lo, hi = proportion_confint(case["hits"], case["motions"], alpha=0.05, method="beta")
         case |= {"rate": case["hits"] / case["motions"], "ci95": [float(lo), float(hi)]}
-    if not cases:
-        raise SystemExit(f"{out}: no finished run")
     return cases
+
+
+def merged(outs: list[Path]) -> dict[str, dict]:
+    """``figures`` of several out dirs, the counts of each case added."""
+    total: dict[str, dict] = {}
+    for out in outs:
+        for name, c in figures(out).items():
+            t = total.setdefault(name, {"fault": c["fault"], "motions": 0, "hits": 0, "not_validated": 0})
+            for key in ("motions", "hits", "not_validated"):
+                t[key] += c[key]
+    return _rates(total)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("out", type=Path)
+    parser.add_argument("out", type=Path, nargs="+")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
-    cases = figures(args.out)
+    cases = merged(args.out)
     if args.json:
         print(json.dumps(cases, indent=2))
         return 0
