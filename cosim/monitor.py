@@ -46,7 +46,9 @@ MEASUREMENTS = ("Im1", "Im2", "u", "u_ref", "w_tach", "w_enc", "theta_enc")
 class Monitor(Component):
     """Co-simulation component of the monitor; see the module docstring.
 
-    Inputs: ``Im1, Im2, u, u_ref, w_tach, w_enc, theta_enc`` (sensors), ``state, motion`` (NC).
+    Inputs: ``Im1, Im2, u, u_ref, w_tach, w_enc, theta_enc`` (sensors), ``state, motion`` (NC); on a PMSM axis
+    (``config.drive``) also ``monitor_servo.SERVO_INPUTS`` (the ``servo`` component's phase currents, dq
+    voltages, motor encoder and linear scale positions).
     Output: ``request`` (1.0 while the identification is too old).
     """
 
