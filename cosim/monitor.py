@@ -46,7 +46,9 @@ MEASUREMENTS = ("Im1", "Im2", "u", "u_ref", "w_tach", "w_enc", "theta_enc")
 class Monitor(Component):
     """Co-simulation component of the monitor; see the module docstring.
 
-    Inputs: ``Im1, Im2, u, u_ref, w_tach, w_enc, theta_enc`` (sensors), ``state, motion`` (NC).
+    Inputs: ``Im1, Im2, u, u_ref, w_tach, w_enc, theta_enc`` (sensors), ``state, motion`` (NC); on a PMSM axis
+    (``config.drive``) also ``monitor_servo.SERVO_INPUTS`` (the ``servo`` component's phase currents, dq
+    voltages, motor encoder and linear scale positions).
     Output: ``request`` (1.0 while the identification is too old).
     """
 
@@ -61,6 +63,10 @@ class Monitor(Component):
             except ValidationError as exc:
                 raise ScenarioError(describe_validation_error(exc, name)) from None
         super().__init__(name, config)
+        if config.drive != "dc":  # a PMSM axis: the servo drive's measurements too (cosim/monitor_servo.py)
+            from feeddrive.cosim.monitor_servo import SERVO_INPUTS
+
+            self.input_names = Monitor.input_names + SERVO_INPUTS
         self.axis = config.axis or "X"
         self.history: History | None = None
         self.pipeline: MonitorPipeline | None = None
@@ -116,6 +122,7 @@ class Monitor(Component):
         if rows.shape[0] < 2:
             return
         signals = dict(zip(MEASUREMENTS, rows[:, :len(MEASUREMENTS)].T))
+        signals |= dict(zip(self.input_names[len(MEASUREMENTS) + 2:], rows[:, len(MEASUREMENTS) + 2:].T))
         signals["w_enc"] = centred_speed(signals["theta_enc"], signals["w_enc"], self.h, self.config.encoder_window_s)
         start = self.t0 + self._start * self.h
         end = start + (rows.shape[0] - 1) * self.h

@@ -77,6 +77,18 @@ class MonitorConfig(BaseModel):
         The sensors' ``w_enc`` is a backward difference, i.e. the speed half a window earlier: averaged
         with the tachometer it delayed the speed by a quarter window (0.25 ms), which biased R by
         +0.45 % and ft by -1 % on the built-in plant.
+    drive : {"dc", "pmsm", "pmsm-spm"}
+        The axis's drive model (``models.drives``); in a scenario, ``axis.drive.kind``. A PMSM's motions
+        are validated with the servo drive's redundancies and estimated with the dq model
+        (cosim/monitor_servo.py); the estimation, model check and diagnosis steps are the same.
+    pole_pairs : int or None
+        A PMSM's pole pairs (known, not estimated); None: the model's 4. In a scenario, ``axis.drive.pole_pairs``.
+    dead_time_loss_v : float
+        A PMSM drive's nominal per-leg dead-time loss ``t_dead f_pwm u_dc`` [V], modelled in the voltage
+        reference check (0: an ideal inverter).
+    lost_motion_allowed_mm : float
+        A PMSM axis's acceptance value of the lost motion between the motor encoder and the linear scale [mm]:
+        the one-sided test's null (an elastic drive chain has some um without play: 1.2 um on the vendor FMU).
     sampling : mapping of {"voltage", "current", "speed"} to {"instant", "mean"}
         What a sample of each quantity is: ``mean``, the mean over the sampling interval before its
         time stamp, which the estimator aligns to the interval's middle (h/2 earlier); default
@@ -113,6 +125,10 @@ class MonitorConfig(BaseModel):
     keep_traces: int = Field(5, ge=0)
     encoder_window_s: float = Field(1.0e-3, gt=0)
     sampling: dict[Literal["voltage", "current", "speed"], Literal["instant", "mean"]] = {}
+    drive: Literal["dc", "pmsm", "pmsm-spm"] = "dc"
+    pole_pairs: int | None = Field(None, ge=1)
+    dead_time_loss_v: float = Field(0.0, ge=0)
+    lost_motion_allowed_mm: float = Field(0.005, ge=0)
     #: the stated baseline FILE's values, name -> (value, std), read once by the validator
     _stated: dict[str, tuple[float, float]] | None = PrivateAttr(None)
 

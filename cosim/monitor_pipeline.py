@@ -19,7 +19,7 @@ from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.monitor_checks import _drift_reference, _residue_dict, interval_mean_speed
 from feeddrive.cosim.monitor_config import MonitorConfig
 from feeddrive.estimator.adequacy import check_adequacy
-from feeddrive.estimator.diagnosis import DiagnosisOptions, diagnose, make_baseline
+from feeddrive.estimator.diagnosis import TABLES, DiagnosisOptions, diagnose, make_baseline
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.estimate import EstimationOptions, MotionData
 from feeddrive.estimator.history import History
@@ -52,21 +52,24 @@ class MonitorPipeline:
     """
 
     def __init__(self, config: MonitorConfig, history: History, axis: str) -> None:
-        # the model check's AR prewhitening of the current residue needs statsmodels (0.3-0.9 s of imports,
+        # the model check's AR prewhitening of a coloured residue needs statsmodels' GLSAR (0.3-0.9 s of imports,
         # lazy in the estimator): loaded now, before the motions, so that no motion's processing time holds it
         import statsmodels.regression.linear_model  # noqa: F401
-        import statsmodels.tsa.ar_model  # noqa: F401
 
-        from feeddrive.models import feed_drive
+        from feeddrive.models.drives import drive_model
 
         self.config, self.history, self.axis = config, history, axis
         # the axis's own design values when given (a vendor motor), else the built-in model's
-        self.nominal = feed_drive().nominal(("physical",)) | dict(config.nominal) | dict(config.known)
+        self.nominal = drive_model(config.drive).nominal(("physical",)) | dict(config.nominal) | dict(config.known)
         self.validation_options = ValidationOptions(config.alpha, config.window_s, config.gain_tol, config.offset_tol)
+        # a PMSM's pole pairs are known, not estimated (as ``cosim estimate --pole-pairs``)
+        design = {"p": float(config.pole_pairs)} if config.pole_pairs and config.drive != "dc" else {}
         self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
                                                     speed_threshold=config.speed_threshold,
-                                                    speed_fraction=config.speed_fraction, known=dict(config.known))
+                                                    speed_fraction=config.speed_fraction,
+                                                    known=dict(config.known) | design, model=config.drive)
         self.diagnosis_options = DiagnosisOptions(config.alpha, config.min_relative_drift)
+        self.table = TABLES[config.drive]  # Table I of the axis's drive kind
         last = history.last_validated(axis)
         self.last_validated: dict | None = last["parameters"] if last else None
         self.baseline_sets = [b["parameters"] for b in history.baseline(axis, config.baseline_motions)]
@@ -160,6 +163,10 @@ class MonitorPipeline:
         """Validation, estimation, model check and diagnosis of one motion; True when the model check that
         decided found a mismatch."""
         result, cfg = trace.result, self.config
+        if cfg.drive != "dc":  # a servo drive's redundancies and dq model; estimation to diagnosis as below
+            from feeddrive.cosim.monitor_servo import identify_servo
+
+            return identify_servo(self, signals, h, start, trace)
         have = checks.present(signals)
         known = dict(cfg.known)
         if "w_tach" not in have and "w_enc" in have:
@@ -277,13 +284,19 @@ class MonitorPipeline:
             result["notes"].append(f"not validated: {why} (the model check has no power; parameters reported)")
         if not result["validated"]:
             return mismatch
+        self.diagnose(result)
+        return False
+
+    def diagnose(self, result: dict) -> None:
+        """Diagnosis (Table I of the axis's drive) of a validated motion's ``result["parameters"]`` against
+        the baseline, which it may join; theta_{j-1} and the trend's sets move on."""
         current = result["parameters"]
         reference = self.baseline()
         if reference is not None:
             # the reference and thresholds this motion was judged against: the trend plots' alarm band
             result["drift_reference"] = _drift_reference(reference, self.diagnosis_options, list(self.nominal))
             result["diagnosis"] = [d.to_dict() for d in diagnose(current, reference, self.last_validated, self.recent,
-                                                                 self.diagnosis_options)]
+                                                                 self.diagnosis_options, self.table)]
         if self.building:
             k, n = len(self.baseline_sets), self.config.baseline_motions
             if result["diagnosis"]:  # a worn axis must not become the healthy reference
@@ -294,5 +307,4 @@ class MonitorPipeline:
                 result["notes"].append(f"healthy baseline: motion {k + 1} of {n}")
         self.last_validated = current
         self.recent = (self.recent + [current])[-self.diagnosis_options.trend_motions:]
-        return False
 

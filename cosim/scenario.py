@@ -271,6 +271,10 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
                if k in fields and isinstance(v, str)}
     if "sampling" in fields:
         implied["sampling"] = _implied_sampling(data)
+    drive = data.get("axis", {}).get("drive") if isinstance(data.get("axis"), dict) else None
+    if isinstance(drive, dict) and "drive" in fields:  # the axis's motor, stated once (validated by apply_drive)
+        implied |= {"drive": drive.get("kind", "dc")} | ({"pole_pairs": drive["pole_pairs"]}
+                                                          if drive.get("pole_pairs") else {})
     raw = resolve_files(raw, base_dir) if isinstance(raw, dict) else raw  # a relative db or baseline FILE
     try:
         config = MonitorConfig.model_validate(implied | raw if isinstance(raw, dict) else raw)

@@ -25,8 +25,9 @@ class Strict(BaseModel):
 Role = Literal["speed_ref", "load", "voltage", "voltage_ref", "current", "speed", "position"]
 BUILTIN_MAP = {"speed_ref": "w_ref", "load": "Tl", "voltage": "u", "voltage_ref": "u_ref", "current": "i",
                "speed": "w", "position": "x"}
-#: The PMSM plant's roles: the DC pipeline's voltage and current are the q axis for now. The monitor's DC model is
-#: biased on it (its one K cannot be both k_T = 1.5 p psi_f and k_E = p psi_f; issue 25 items 3-4 remove the bias).
+#: The PMSM plant's roles: the DC pipeline's voltage and current are the q axis. A DC monitor's model would be biased
+#: on it (its one K cannot be both k_T = 1.5 p psi_f and k_E = p psi_f): ``axis.drive.kind: pmsm`` gives the monitor
+#: the dq model (cosim/monitor_servo.py).
 PMSM_MAP = BUILTIN_MAP | {"voltage": "u_q", "voltage_ref": "u_q_ref", "current": "i_q"}
 
 class MapEntry(Strict):

@@ -42,6 +42,18 @@ TABLE_I: dict[str, dict[str, int]] = {
     "motor heating": {"R": +1, "L": 0, "K": -1},
     "demagnetisation": {"L": 0, "K": -1},
 }
+#: Table I extended to a PMSM servo axis (issue 25 item 4): the magnet flux psi_f takes K's place (a
+#: demagnetised magnet lowers it; a hot magnet too, by about -0.1 %/K for NdFeB, while the copper's R rises by
+#: +0.39 %/K); the mechanical faults are the DC drive's
+TABLE_I_PMSM: dict[str, dict[str, int]] = {
+    "bearing or slide-way wear": {"Cd": +1, "ft": +1},
+    "lack or ageing of lubricating oil": {"Cd": +1, "ft": +1},
+    "missing work-piece or work-piece holder": {"Jt": -1},
+    "winding heating": {"R": +1, "psi_f": -1},
+    "demagnetisation": {"psi_f": -1},
+}
+#: the table of each drive kind (``models.drives.DRIVES``)
+TABLES: dict[str, dict[str, dict[str, int]]] = {"dc": TABLE_I, "pmsm": TABLE_I_PMSM, "pmsm-spm": TABLE_I_PMSM}
 UNEXPLAINED = "unexplained drift"
 
 
@@ -200,11 +212,12 @@ def _contradicts(d: Drift | None, direction: int, options: DiagnosisOptions) -> 
 
 
 def diagnose(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mapping[str, Any] | None = None,
-             recent: Sequence[Mapping[str, Any]] = (), options: DiagnosisOptions = DiagnosisOptions()
-             ) -> list[Diagnosis]:
+             recent: Sequence[Mapping[str, Any]] = (), options: DiagnosisOptions = DiagnosisOptions(),
+             table: Mapping[str, Mapping[str, int]] | None = None) -> list[Diagnosis]:
     """Map the significant drifts of a validated parameter set to the faults of Table I.
 
-    Parameters are those of ``drifts``. Returns one ``Diagnosis`` per candidate fault (several when
+    Parameters are those of ``drifts``, and ``table`` (fault -> {parameter: direction}; None: the DC drive's
+    ``TABLE_I``; a PMSM's is ``TABLE_I_PMSM``, see ``TABLES``). Returns one ``Diagnosis`` per candidate fault (several when
     Table I cannot tell them apart, e.g. wear and lubrication), plus ``unexplained drift`` for the
     drifted parameters no fault explains; an empty list when nothing drifted.
     """
@@ -212,8 +225,9 @@ def diagnose(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mapp
     evidence = {p: d for p, d in all_drifts.items() if d.significant}
     if not evidence:
         return []
+    table = TABLE_I if table is None else table
     explains = {}
-    for fault, sens in TABLE_I.items():
+    for fault, sens in table.items():
         hit = frozenset(p for p, d in evidence.items()
                         if p in sens and (sens[p] == 0 or np.sign(d.relative_change) == sens[p]))
         if hit:
@@ -223,7 +237,7 @@ def diagnose(current: Mapping[str, Any], baseline: Mapping[str, Any], last: Mapp
     # against a fault: of the faults explaining the same drifts keep those with the fewest such
     # contradictions (R up with K and L steady is brush wear, not motor heating).
     against = {f: sum(_contradicts(all_drifts.get(p), want, options)
-                      for p, want in TABLE_I[f].items() if p not in explains[f]) for f in kept}
+                      for p, want in table[f].items() if p not in explains[f]) for f in kept}
     kept = [f for f in kept if not any(explains[g] >= explains[f] and against[g] < against[f] for g in kept)]
     out = [Diagnosis(f, tuple(sorted(explains[f])), tuple(evidence[p] for p in sorted(explains[f]))) for f in kept]
     rest = sorted(set(evidence) - set().union(*explains.values()))

@@ -321,7 +321,8 @@ def plot_drift(result: Mapping[str, Any], path: Path) -> Path:
     truths = _truths(result)
     onset, drifting = _onset(truths)
     outcome = _run_outcome(result)
-    names = [p for p in PHYSICAL if p in drifting]
+    # the DC drive's order, then another model's own names (a PMSM's psi_f, L_q)
+    names = [p for p in PHYSICAL if p in drifting] + sorted(p for p in drifting if p not in PHYSICAL)
     fig, axes = plt.subplots(len(names), 1, figsize=(7, 2.4 * len(names)), sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], names):
         k = np.arange(len(motions))

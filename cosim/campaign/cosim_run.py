@@ -18,7 +18,7 @@ from feeddrive.models import feed_drive
 RECORDED = ("u", "u_ref", "Im1", "Im2", "w_tach", "w_enc", "theta_enc")
 #: monitor keys copied into a campaign record (residues and notes stay in the run's report.json)
 MONITOR_KEYS = ("validated", "measurements_valid", "method", "parameters", "sensor_faults", "gain_ratio", "mismatch",
-                "diagnosis", "processing_s", "error")
+                "diagnosis", "processing_s", "error", "verdict")
 
 
 def _injected(scenario: Any, truth: Mapping[str, float], nominal: Mapping[str, float]) -> dict[str, Any]:
@@ -103,8 +103,15 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="campaign-run-") as tmp:
         keep = spec.out_dir is not None  # else the files go with the temporary directory: no figures, no page
         res = run_scenario(scenario, spec.out_dir or tmp, overwrite=True, plots=keep, page=keep)
-    nominal = feed_drive().nominal(("physical",))
-    nominal = {p: nominal[p] for p in PHYSICAL}
+    config = scenario.monitor.config if isinstance(getattr(scenario.monitor, "config", None), MonitorConfig) \
+        else MonitorConfig()
+    if config.drive == "dc":
+        nominal = feed_drive().nominal(("physical",))
+        nominal = {p: nominal[p] for p in PHYSICAL}
+    else:  # a PMSM axis: its model's parameters (R, L_d, L_q, psi_f, Jt, ft, Cd)
+        from feeddrive.models.drives import drive_model
+
+        nominal = {k: v for k, v in drive_model(config.drive).nominal(("physical",)).items() if k != "T0"}
     truth0 = nominal | {k: float(v) for k, v in scenario.plant.parameters.items() if k in nominal}
     t0 = float(res.time[0])
     # (step at which the event applies, parameter, value), the master's rule
@@ -113,8 +120,6 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
                     if e.target.startswith("plant.") and e.target.partition(".")[2] in nominal)
     final = truth0 | {p: v for _, p, v in events}
     injected = _injected(scenario, final, nominal)
-    config = scenario.monitor.config if isinstance(getattr(scenario.monitor, "config", None), MonitorConfig) \
-        else MonitorConfig()
     missing = [k for k in ("nc.state", "nc.motion") + tuple(f"sensors.{c}" for c in RECORDED) if k not in res.signals]
     if missing:
         raise CampaignError(f"run {spec.id}: the scenario does not record {missing} (use record: all)")
@@ -129,8 +134,9 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
         entry: dict[str, Any] = {"motion": int(k), "start": start, "end": float(res.time[rows.stop - 1]),
                                  "truth": truth, "validated": None, "parameters": {}, "sensor_faults": [],
                                  "diagnosis": []}
-        try:
-            entry["methods"] = _estimates(res.signals, rows, scenario.step, set(injected["sensors"]), methods, config)
+        try:  # a PMSM: the DC estimates on its q axis would be biased, the monitor's dq estimate only
+            entry["methods"] = {} if config.drive != "dc" else _estimates(
+                res.signals, rows, scenario.step, set(injected["sensors"]), methods, config)
         except ValueError as exc:  # not enough excitation in this motion: no numbers, the reason kept
             entry["methods"], entry["estimation_error"] = {}, " ".join(str(exc).split())
         entry |= {key: monitor[k][key] for key in MONITOR_KEYS if key in monitor.get(k, {})}

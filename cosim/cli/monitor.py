@@ -52,7 +52,10 @@ from feeddrive.cosim.run import _versions
 UNITS = parameter_units("motor")
 #: role -> monitor signal
 ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
-         "speed": "w_tach", "position": None, "torque": "torque", "state": None}
+         "speed": "w_tach", "position": None, "torque": "torque", "state": None,
+         "i_q": "Im1", "i_d": "i_d", "u_q": "u", "u_d": "u_d"}
+#: roles of a PMSM's recording (``--drive pmsm``: the dq currents and voltages, peak values, as ``cosim estimate``)
+PMSM_ROLES = ("i_q", "i_d", "u_q", "u_d")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -62,22 +65,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plots", metavar="DIR", help="write the monitor plots of every motion into DIR")
     parser.add_argument("--out", metavar="DIR", help="write report.json, report.html and plots/ into DIR")
     parser.add_argument("--overwrite", action="store_true", help="replace existing plot files")
+    parser.add_argument("--drive", choices=("dc", "pmsm", "pmsm-spm"), default="dc",
+                        help="the motor: dc (default) or a PMSM with the roles " + ", ".join(PMSM_ROLES)
+                        + " (dq frame, peak values; the dq model and Table I of the PMSM, cosim/monitor_servo.py)")
+    parser.add_argument("--pole-pairs", type=int, default=None, metavar="N", help="a PMSM's pole pairs (default 4)")
     add_config_arguments(parser, MonitorConfig)
 
 
 def main(args: argparse.Namespace) -> int:
     from feeddrive.estimator.history import History
 
-    role_map = mapped_roles(args, ROLES)
-    missing = [] if {"current1", "current2", "torque"} & set(role_map) else ["current1 (or torque)"]
+    drive = getattr(args, "drive", "dc")
+    pmsm = drive != "dc"
+    if getattr(args, "pole_pairs", None) is not None and (not pmsm or args.pole_pairs < 1):
+        raise InputError(f"--pole-pairs {args.pole_pairs}: expected a positive integer with --drive pmsm or pmsm-spm")
+    common = ("time", "speed", "position", "state")
+    role_map = mapped_roles(args, [r for r in ROLES if r in common or (r in PMSM_ROLES) == pmsm])
+    if pmsm:
+        missing = [r for r in PMSM_ROLES if r not in role_map]
+    else:
+        missing = [] if {"current1", "current2", "torque"} & set(role_map) else ["current1 (or torque)"]
     if not {"speed", "position"} & set(role_map):
         missing.append("speed or position")
     if missing:
         raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
-    columns = {"voltage": role_map.get("voltage"), "current": role_map.get("current1") or role_map.get("current2"),
+    columns = {"voltage": role_map.get("u_q" if pmsm else "voltage"),
+               "current": role_map.get("i_q") if pmsm else role_map.get("current1") or role_map.get("current2"),
                "speed": role_map.get("speed")}
+    drive_keys = {"drive": drive} | ({"pole_pairs": args.pole_pairs} if pmsm and args.pole_pairs else {})
     config = config_with_options(args, MonitorConfig, axis=args.axis, db=args.db, method=args.method,
-                                 speed_threshold=args.speed_threshold,
+                                 speed_threshold=args.speed_threshold, **drive_keys,
                                  sampling=sampling_modes(args, {q: c for q, c in columns.items() if c}))
     rec = read_recording(args, role_map)
     if rec.side == "table":  # the monitor's model is the motor's: u = R i + L di/dt + K w, w in rad/s

@@ -114,6 +114,10 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
             lines.append(f"    {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
             for name, why in (m.get("refused") or {}).items():  # no number: the rule that refused it
                 lines.append(f"    {name} refused: {why}")
+            if m.get("servo_checks"):  # a PMSM axis (cosim/monitor_servo.py)
+                from feeddrive.cosim.monitor_servo import servo_line
+
+                lines.append(f"    {servo_line(m['servo_checks'])}")
             for f in m.get("sensor_faults") or []:
                 lines.append(f"    sensor fault: {f['sensor']} {f['kind']} (gain {f['gain']:.4g}, offset {f['offset']:.4g})")
             if isinstance(m.get("mismatch"), dict) and not m["mismatch"].get("passed", True):
