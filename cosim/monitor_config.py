@@ -113,9 +113,10 @@ class MonitorConfig(BaseModel):
     baseline_axis: str | None = Field(None, min_length=1)
     baseline_motions: int = Field(3, ge=1)
     baseline: str = Field("motions", min_length=1)  # after axis, baseline_axis and baseline_motions: it reads them
-    nominal: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
-    known: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], float] = {}
-    bounds: dict[Literal["R", "L", "K", "Jt", "ft", "Cd"], tuple[float | None, float | None]] = {}
+    # parameter names of the axis's drive model (checked against ``drive`` below: R, L, K, ... or R, L_d, psi_f, ...)
+    nominal: dict[str, float] = {}
+    known: dict[str, float] = {}
+    bounds: dict[str, tuple[float | None, float | None]] = {}
     min_relative_drift: float = Field(0.05, gt=0)
     min_motion_s: float = Field(1.0, gt=0)
     max_motion_s: float = Field(30.0, gt=0)
@@ -139,6 +140,18 @@ class MonitorConfig(BaseModel):
             _read(value, info.data.get("baseline_axis") or info.data.get("axis") or "X",
                   info.data.get("baseline_motions", 3))
         return value
+
+    @model_validator(mode="after")
+    def _parameter_names(self) -> MonitorConfig:
+        from feeddrive.models.drives import drive_model
+
+        names = [v.name for v in drive_model(self.drive).of_kind("physical")]
+        for key in ("nominal", "known", "bounds"):
+            unknown = sorted(set(getattr(self, key)) - set(names) - ({"p"} if key == "known" else set()))
+            if unknown:
+                raise ValueError(f"{key}: unknown parameter {', '.join(map(repr, unknown))} of the {self.drive} drive "
+                                 f"(expected {', '.join(names)})")
+        return self
 
     @model_validator(mode="after")
     def _read_baseline(self) -> MonitorConfig:

@@ -159,3 +159,22 @@ def test_a_lost_motion_of_the_vendor_drive_chain_is_seen_by_the_two_encoders(ven
     lost = m["servo_checks"]["lost_motion"]
     assert lost["detected"] and lost["value_mm"] == pytest.approx(0.02, abs=0.002), lost
     assert m["measurements_valid"] and "lost motion (backlash)" in [d["fault"] for d in m["diagnosis"]]
+
+
+def test_known_nominal_and_bounds_take_the_drive_models_names(tmp_path):
+    """A PMSM axis states psi_f or L_q as known (its K is no parameter of it); a DC name on a PMSM axis and a
+    PMSM name on a DC axis are one-line errors naming the key and the expected names."""
+    from feeddrive.cosim.cli import main as cosim_main
+    from feeddrive.cosim.monitor_config import MonitorConfig
+
+    cfg = MonitorConfig(drive="pmsm", known={"psi_f": 0.23, "p": 4}, bounds={"L_q": (0.0, 0.1)}, nominal={"L_d": 8e-3})
+    assert cfg.known == {"psi_f": 0.23, "p": 4} and cfg.bounds == {"L_q": (0.0, 0.1)}
+    assert MonitorConfig(known={"K": 1.05}).known == {"K": 1.05}
+    for drive, key, name in (("dc", "known", "psi_f"), ("pmsm", "bounds", "K"), ("pmsm", "nominal", "L")):
+        value = (0.0, 1.0) if key == "bounds" else 1.0
+        with pytest.raises(ValueError, match=rf"{key}: unknown parameter '{name}' of the {drive} drive"):
+            MonitorConfig(drive=drive, **{key: {name: value}})
+    bad = tmp_path / "s.yaml"
+    bad.write_text("name: s\naxis: {name: PK, pitch: 0.01, drive: {kind: pmsm, pole_pairs: 4}}\nstep: 1.0e-4\n"
+                   "nc: {program: [{dwell: {time: 0.1}}]}\nmonitor: {known: {K: 1.0}}\n")
+    assert cosim_main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
