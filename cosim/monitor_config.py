@@ -113,7 +113,7 @@ class MonitorConfig(BaseModel):
     baseline_axis: str | None = Field(None, min_length=1)
     baseline_motions: int = Field(3, ge=1)
     baseline: str = Field("motions", min_length=1)  # after axis, baseline_axis and baseline_motions: it reads them
-    # parameter names of the axis's drive model (checked against ``drive`` below: R, L, K, ... or R, L_d, psi_f, ...)
+    drive: Literal["dc", "pmsm", "pmsm-spm"] = "dc"  # before the parameter maps: they take its model's names
     nominal: dict[str, float] = {}
     known: dict[str, float] = {}
     bounds: dict[str, tuple[float | None, float | None]] = {}
@@ -126,7 +126,6 @@ class MonitorConfig(BaseModel):
     keep_traces: int = Field(5, ge=0)
     encoder_window_s: float = Field(1.0e-3, gt=0)
     sampling: dict[Literal["voltage", "current", "speed"], Literal["instant", "mean"]] = {}
-    drive: Literal["dc", "pmsm", "pmsm-spm"] = "dc"
     pole_pairs: int | None = Field(None, ge=1)
     dead_time_loss_v: float = Field(0.0, ge=0)
     lost_motion_allowed_mm: float = Field(0.005, ge=0)
@@ -141,17 +140,19 @@ class MonitorConfig(BaseModel):
                   info.data.get("baseline_motions", 3))
         return value
 
-    @model_validator(mode="after")
-    def _parameter_names(self) -> MonitorConfig:
+    @field_validator("nominal", "known", "bounds")
+    @classmethod
+    def _parameter_names(cls, value: dict, info: ValidationInfo) -> dict:
+        """The names of the axis's drive model (R, L, K, ... or R, L_d, L_q, psi_f, ...; ``p`` known too)."""
         from feeddrive.models.drives import drive_model
 
-        names = [v.name for v in drive_model(self.drive).of_kind("physical")]
-        for key in ("nominal", "known", "bounds"):
-            unknown = sorted(set(getattr(self, key)) - set(names) - ({"p"} if key == "known" else set()))
-            if unknown:
-                raise ValueError(f"{key}: unknown parameter {', '.join(map(repr, unknown))} of the {self.drive} drive "
-                                 f"(expected {', '.join(names)})")
-        return self
+        drive = info.data.get("drive", "dc")
+        names = [v.name for v in drive_model(drive).of_kind("physical")]
+        unknown = sorted(set(value) - set(names) - ({"p"} if info.field_name == "known" else set()))
+        if unknown:
+            raise ValueError(f"unknown parameter {', '.join(map(repr, unknown))} of the {drive} drive "
+                             f"(expected {', '.join(names)})")
+        return value
 
     @model_validator(mode="after")
     def _read_baseline(self) -> MonitorConfig:

@@ -172,7 +172,7 @@ def test_known_nominal_and_bounds_take_the_drive_models_names(tmp_path):
     assert MonitorConfig(known={"K": 1.05}).known == {"K": 1.05}
     for drive, key, name in (("dc", "known", "psi_f"), ("pmsm", "bounds", "K"), ("pmsm", "nominal", "L")):
         value = (0.0, 1.0) if key == "bounds" else 1.0
-        with pytest.raises(ValueError, match=rf"{key}: unknown parameter '{name}' of the {drive} drive"):
+        with pytest.raises(ValueError, match=rf"unknown parameter '{name}' of the {drive} drive"):
             MonitorConfig(drive=drive, **{key: {name: value}})
     bad = tmp_path / "s.yaml"
     bad.write_text("name: s\naxis: {name: PK, pitch: 0.01, drive: {kind: pmsm, pole_pairs: 4}}\nstep: 1.0e-4\n"
