@@ -118,6 +118,8 @@ CONFIG_UNITS = {
     # monitor: levels, fractions and relative tolerances are dimensionless
     "speed_fraction": "1", "alpha": "1", "gain_tol": "1", "offset_tol": "1", "mismatch_alpha": "1",
     "min_relative_drift": "1",
+    # monitor on a PMSM axis: the inverter's per-leg dead-time loss, the lost motion accepted on the table
+    "dead_time_loss_v": "V", "lost_motion_allowed_mm": "mm",
 }
 
 
