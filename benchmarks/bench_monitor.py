@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-import feeddrive.cosim.monitor as monitor
+import feeddrive.cosim.monitor_pipeline as monitor
 from feeddrive.cosim.monitor import MEASUREMENTS, MonitorConfig, MonitorPipeline, centred_speed
 from feeddrive.cosim.run import run_scenario
 from feeddrive.cosim.scenario import load_scenario
@@ -37,8 +37,8 @@ from feeddrive.estimator.history import History
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_MS = 50.0
-#: the stages of MonitorPipeline._identify, as the names monitor.py calls them by
-STAGES = ("validate_measurements", "check_adequacy", "estimate_motion", "check_signals", "check_model")
+#: the stages of MonitorPipeline, as the names monitor_pipeline.py calls them by
+STAGES = ("validate_measurements", "check_adequacy", "estimate_parameters", "check_signals", "check_model")
 
 
 def tool_change() -> dict[str, np.ndarray]:
