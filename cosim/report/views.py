@@ -111,6 +111,38 @@ def _ci(x: Any, ci: Any, unit: str) -> str:
     return f"{text} {unit}".rstrip()
 
 
+def servo_rows(m: Mapping) -> list[dict]:
+    """The servo drive's redundancy checks of a PMSM motion (report.json ``servo_checks``), one row each:
+    what was checked, its figure with its 95 % interval, and the decision."""
+    checks = m.get("servo_checks") or {}
+    rows = []
+
+    def row(name: str, what: str, figure: str, bad: bool, decision: str) -> None:
+        rows.append({"check": name, "what": what, "figure": figure, "bad": bad, "decision": decision})
+
+    if (c := checks.get("phase_current_sum")) is not None:
+        bad = bool(c.get("faulty"))
+        row("phase currents", "I_U + I_V + I_W = 0 (analytic)", "offset " + _ci(c.get("offset"), c.get("offset_ci95"), "A"),
+            bad, f"fault on phase {c.get('phase')}" if bad and c.get("phase") else ("fault" if bad else "valid"))
+    if (c := checks.get("phase_sensor_pair")) is not None:
+        bad = c.get("valid") is False
+        row("second sensor on one phase", "material redundancy (paper eq. 12)",
+            "gain ratio " + _ci(c.get("gain_ratio"), None, ""), bad, "not valid" if bad else "valid")
+    if (c := checks.get("dq_current_consistency")) is not None:
+        bad = bool(c.get("faulty"))
+        row("i_q against Park(I_U, I_V, I_W)", "analytic", "gain " + _ci(c.get("gain"), c.get("gain_ci95"), ""),
+            bad, "mis-scaled current" if bad else "valid")
+    if (c := checks.get("voltage_reference_check")) is not None:
+        bad = c.get("valid") is False
+        row("voltage references against terminal voltages", "dead time modelled",
+            "dead-time loss " + _ci(c.get("u_loss"), c.get("u_loss_ci95"), "V per leg"), bad, "not valid" if bad else "valid")
+    if (c := checks.get("lost_motion")) is not None:
+        bad = bool(c.get("detected"))
+        row("motor encoder against linear scale", "lost motion of the drive chain",
+            _ci(c.get("value_mm"), c.get("ci95_mm"), "mm"), bad, "lost motion detected" if bad else "within the allowed")
+    return rows
+
+
 def gain_ratio(m: Mapping) -> tuple[str, str]:
     """(a1/a2, relative gain error) of the current sensors, or why they were not computed."""
     if not finite(m.get("gain_ratio")):

@@ -1,0 +1,36 @@
+"""The servo drive's redundancy checks of a PMSM motion on report.html: one row per check, a fault in red."""
+from __future__ import annotations
+
+from feeddrive.cosim.report import views
+
+HEALTHY = {
+    "phase_current_sum": {"faulty": False, "phase": None, "offset": 0.0011, "offset_ci95": [-0.0002, 0.0024]},
+    "phase_sensor_pair": {"gain_ratio": 1.00017, "valid": True},
+    "dq_current_consistency": {"gain": 0.99976, "gain_ci95": [0.99936, 1.00017], "faulty": False},
+    "voltage_reference_check": {"u_loss": 4.777, "u_loss_ci95": [4.70, 4.85], "valid": True},
+    "lost_motion": {"value_mm": 0.01995, "ci95_mm": [0.0199, 0.0200], "detected": True},
+}
+
+
+def test_each_check_is_a_row_with_its_interval_and_decision():
+    rows = views.servo_rows({"servo_checks": HEALTHY})
+    assert [r["check"] for r in rows] == ["phase currents", "second sensor on one phase",
+                                         "i_q against Park(I_U, I_V, I_W)",
+                                         "voltage references against terminal voltages",
+                                         "motor encoder against linear scale"]
+    by = {r["check"]: r for r in rows}
+    assert by["i_q against Park(I_U, I_V, I_W)"]["figure"] == "gain 0.9998 [0.9994, 1]"
+    assert by["voltage references against terminal voltages"]["figure"] == "dead-time loss 4.777 [4.7, 4.85] V per leg"
+    assert by["motor encoder against linear scale"]["bad"] and by["motor encoder against linear scale"]["decision"] == \
+        "lost motion detected"
+    assert not any(r["bad"] for r in rows[:4])
+
+
+def test_a_faulty_phase_is_named_and_nothing_is_nan():
+    checks = HEALTHY | {"phase_current_sum": {"faulty": True, "phase": "V", "offset": float("nan")},
+                        "dq_current_consistency": {"gain": 0.7071, "gain_ci95": [0.7068, 0.7074], "faulty": True}}
+    rows = {r["check"]: r for r in views.servo_rows({"servo_checks": checks})}
+    assert rows["phase currents"]["bad"] and rows["phase currents"]["decision"] == "fault on phase V"
+    assert rows["phase currents"]["figure"] == "offset not computed"
+    assert rows["i_q against Park(I_U, I_V, I_W)"]["decision"] == "mis-scaled current"
+    assert views.servo_rows({}) == [] and views.servo_rows({"servo_checks": None}) == []
