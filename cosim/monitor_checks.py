@@ -262,3 +262,16 @@ def config_with_options(args, config_class, **fixed):  # noqa: ANN001, ANN201 - 
         flag = CLI_OPTIONS.get(field, (field,))[0]
         detail = ".".join(str(x) for x in err["loc"][1:])
         raise InputError(f"{flag}{' ' + detail if detail else ''}: {err['msg']} (got {err.get('input')!r})") from None
+
+
+def note_not_validated(result: dict, flags: dict, valid: bool, mismatch: bool, why: str) -> None:
+    """Append to ``result["notes"]`` each reason why the motion's parameters were not validated (``why``: the
+    model check's verdict when it had no power). Shared by the DC and the servo drive's paths."""
+    if flags:
+        result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values()))
+    if not valid:
+        result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
+    if mismatch:
+        result["notes"].append("not validated: model mismatch (no diagnosis; parameters reported)")
+    elif valid and not result["validated"]:
+        result["notes"].append(f"not validated: {why} (the model check has no power; parameters reported)")

@@ -274,14 +274,7 @@ class MonitorPipeline:
             adequacy is not None and adequacy.verdict == "adequate")))
         if flags:
             result["validated"] = False
-            result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values()))
-        if not valid:
-            result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
-        if mismatch:
-            result["notes"].append("not validated: model mismatch (no diagnosis; parameters reported)")
-        elif valid and not result["validated"]:
-            why = adequacy.verdict if adequacy is not None else "model not checked"
-            result["notes"].append(f"not validated: {why} (the model check has no power; parameters reported)")
+        checks.note_not_validated(result, flags, valid, mismatch, adequacy.verdict if adequacy is not None else "model not checked")
         if not result["validated"]:
             return mismatch
         self.diagnose(result)
@@ -307,4 +300,3 @@ class MonitorPipeline:
                 result["notes"].append(f"healthy baseline: motion {k + 1} of {n}")
         self.last_validated = current
         self.recent = (self.recent + [current])[-self.diagnosis_options.trend_motions:]
-

@@ -222,15 +222,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
         result["flags"] = flags
     mismatch = adequacy.mismatch
     result["validated"] = bool(valid and not flags and adequacy.verdict == "adequate")
-    if flags:
-        result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values()))
-    if not valid:
-        result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
-    if mismatch:
-        result["notes"].append("not validated: model mismatch (no diagnosis; parameters reported)")
-    elif valid and not result["validated"]:
-        result["notes"].append(f"not validated: {adequacy.verdict} (the model check has no power; parameters "
-                               "reported)")
+    checks.note_not_validated(result, flags, valid, mismatch, adequacy.verdict)
     if result["validated"]:
         pipe.diagnose(result)
     if valid and lost is not None and lost["detected"]:  # the drive chain, measured by the two encoders
