@@ -108,7 +108,8 @@ def motion_view(m: Mapping, thresholds: Mapping | None, units: Mapping[str, str]
     not_checked = [(q, str(why)) for q, why in (m.get("not_checked") or {}).items() if q.startswith("model")]
     return {"m": m, "rows": rows, "verdict": verdict, "refused": refused, "not_checked": not_checked,
             "processing": views.processing(m, budget_s), "check": views.model_check(m.get("mismatch")),
-            "residues": views.residue_rows(m), "gain_ratio": views.gain_ratio(m), "servo": views.servo_rows(m), "figures": []}
+            "residues": views.residue_rows(m), "gain_ratio": views.gain_ratio(m), "servo": views.servo_rows(m),
+            "adequacy": views.residue_check(m), "figures": []}
 
 
 def parameter_status(validated: bool, diagnosed: bool, value: float, ref: float | None, lo: float | None,

@@ -111,6 +111,34 @@ def _ci(x: Any, ci: Any, unit: str) -> str:
     return f"{text} {unit}".rstrip()
 
 
+def residue_check(m: Mapping) -> dict | None:
+    """The model check on the motion's own residue (report.json ``adequacy``: estimator/adequacy.py), one row per
+    equation: the nuisance terms tested, F statistic, degrees of freedom, p-value and the decision at the
+    Bonferroni-adjusted level. None when it did not run."""
+    a = m.get("adequacy")
+    if not isinstance(a, Mapping) or not a.get("verdict"):
+        return None
+    eqs = a.get("equations") or {}
+    alpha = a.get("alpha")
+    level = alpha / max(len(eqs), 1) if finite(alpha) else None
+    rows = []
+    for name, e in eqs.items():
+        p = e.get("p_value")
+        if e.get("reason"):
+            decision = e["reason"]
+        elif not finite(p):
+            decision = "not computed"
+        else:
+            decision = "reject: mismatch" if level is not None and p < level else "pass"
+        rows.append({"equation": f"{name} ({e.get('output')})", "terms": ", ".join(e.get("terms") or []) or "-",
+                     "statistic": _n(e.get("statistic")), "p": _n(p),
+                     "df": ", ".join(_dof(x) for x in e["df"]) if isinstance(e.get("df"), Sequence) else _dof(e.get("df")),
+                     "strongest": e.get("strongest") or "-", "decision": decision, "bad": decision.startswith("reject")})
+    return {"verdict": a["verdict"], "p": _n(a.get("p_value")), "reason": a.get("reason") or "",
+            "level": f"alpha {alpha:g} / {max(len(eqs), 1)} equations = {level:.3g} (Bonferroni)" if level else "",
+            "bad": a["verdict"] != "adequate", "rows": rows}
+
+
 def servo_rows(m: Mapping) -> list[dict]:
     """The servo drive's redundancy checks of a PMSM motion (report.json ``servo_checks``), one row each:
     what was checked, its figure with its 95 % interval, and the decision."""
@@ -139,7 +167,7 @@ def servo_rows(m: Mapping) -> list[dict]:
     if (c := checks.get("lost_motion")) is not None:
         bad = bool(c.get("detected"))
         row("motor encoder against linear scale", "lost motion of the drive chain",
-            _ci(c.get("value_mm"), c.get("ci95_mm"), "mm"), bad, "lost motion detected" if bad else "within the allowed")
+            _ci(c.get("value_mm"), c.get("ci95_mm"), "mm"), bad, "lost motion detected" if bad else "within the allowed lost motion")
     return rows
 
 

@@ -34,3 +34,19 @@ def test_a_faulty_phase_is_named_and_nothing_is_nan():
     assert rows["phase currents"]["figure"] == "offset not computed"
     assert rows["i_q against Park(I_U, I_V, I_W)"]["decision"] == "mis-scaled current"
     assert views.servo_rows({}) == [] and views.servo_rows({"servo_checks": None}) == []
+
+
+def test_the_residue_check_is_a_table_of_its_equations_at_the_adjusted_level():
+    adequacy = {"verdict": "model mismatch", "p_value": 3e-9, "alpha": 0.01, "reason": "mechanical: offset",
+                "equations": {"electrical": {"output": "u", "p_value": 0.41, "statistic": 0.95, "df": [3, 40],
+                                             "terms": ["offset (constant)"], "strongest": "offset (constant)"},
+                              "mechanical": {"output": "i", "p_value": 1e-9, "statistic": 31.0, "df": [6, 37],
+                                             "terms": ["offset (constant)"], "strongest": "offset (constant)"},
+                              "other": {"output": "x", "p_value": float("nan"), "reason": "not determined: Jt"}}}
+    view = views.residue_check({"adequacy": adequacy})
+    assert view["bad"] and view["level"] == "alpha 0.01 / 3 equations = 0.00333 (Bonferroni)"
+    rows = {r["equation"]: r for r in view["rows"]}
+    assert rows["electrical (u)"]["decision"] == "pass" and rows["electrical (u)"]["df"] == "3, 40"
+    assert rows["mechanical (i)"]["decision"] == "reject: mismatch" and rows["mechanical (i)"]["bad"]
+    assert rows["other (x)"]["decision"] == "not determined: Jt" and rows["other (x)"]["p"] == "not computed"
+    assert views.residue_check({}) is None
