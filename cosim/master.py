@@ -27,7 +27,8 @@ Default wiring of the standard components (by port name; a scenario's ``connecti
     plant.speed_ref, plant.load           <- nc
     nc.position <- plant, nc.request <- monitor (0.0 without a monitor)
     sensors.<role>                        <- plant.<role> (voltage_ref <- plant.voltage if unmapped)
-    monitor.<port>                        <- sensors, else servo (a PMSM's), else nc (state, motion)
+    monitor.<port>                        <- sensors, else nc (state, motion); a PMSM's servo inputs
+                                             <- servo (wired by the scenario, Scenario.servo_drive)
 """
 from __future__ import annotations
 
@@ -47,7 +48,7 @@ from feeddrive.cosim.port_units import mismatch
 from feeddrive.cosim.recorder import Recorder
 
 #: preferred source components of each standard component's inputs
-DEFAULT_SOURCES = {"plant": ("nc",), "nc": ("plant", "monitor"), "sensors": ("plant",), "monitor": ("sensors", "servo", "nc")}
+DEFAULT_SOURCES = {"plant": ("nc",), "nc": ("plant", "monitor"), "sensors": ("plant",), "monitor": ("sensors", "nc")}
 #: fallbacks when no source component has the port
 DEFAULT_FALLBACKS = {"sensors.voltage_ref": "plant.voltage", "sensors.voltage_ref_mean": "plant.voltage_mean",
                      "nc.request": 0.0}
@@ -172,8 +173,10 @@ class Master:
         specs = [(("monitor", "class"), scenario.monitor)] if scenario.monitor is not None else []
         specs += [(("components", k, "class"), spec) for k, spec in enumerate(scenario.components)]
         # a PMSM's servo sensors step before the monitor, which reads them at the same step as the q-axis sensors
-        # (a sample later, the d axis lagged the q axis: L_d -40 %, R -10 % on the built-in PMSM)
-        specs.sort(key=lambda item: item[1].name != "servo")
+        # (a sample later, the d axis lagged the q axis: L_d -40 %, R -10 % on the built-in PMSM); only on a PMSM
+        # axis: elsewhere a component named servo is a user component like any other
+        if getattr(scenario, "servo_drive", False):
+            specs.sort(key=lambda item: item[1].name != "servo")
         for where, spec in specs:
             if spec.fmu is not None:  # an FMU component: its own ports, step multiple and watchdog
                 comps.append((spec.name, fmu_component(spec.name, spec.config, own_inputs=True)))

@@ -30,7 +30,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError
 
 from feeddrive.cosim import scenario_plant
 from feeddrive.cosim.axis import Axis, resolve_drive_chain
-from feeddrive.cosim.drive import apply_drive, check_pole_pairs
+from feeddrive.cosim.drive import SERVO, apply_drive, check_pole_pairs
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.fmu_inspect import REAL_TYPES
 from feeddrive.cosim.fmu_inspect import fmi_version as fmi_version  # re-exported: cosim info, the tests
@@ -99,6 +99,15 @@ class Scenario(_Strict):
     def unit_notes(self) -> list[str]:
         """The plant map's stated unit assumptions (``unit not declared: taken as rad/s``), one per entry."""
         return [c.note for c in self._conversions.values() if c.note]
+
+    @property
+    def servo_drive(self) -> bool:
+        """A PMSM axis (``axis.drive.kind: pmsm``, or the default monitor's ``drive`` not ``dc``): only then does
+        a component named ``servo`` (the servo drive's sensors) step before the monitor and feed its servo inputs."""
+        drive = self.axis.drive
+        spec = self.monitor
+        monitor_drive = getattr(spec.config, "drive", "dc") if spec is not None else "dc"
+        return (drive is not None and drive.kind == "pmsm") or monitor_drive != "dc"
 
     @property
     def source(self) -> str:
@@ -225,7 +234,19 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     check_pole_pairs(scenario.axis.drive, {v.name: v for v in md.modelVariables}, scenario.plant.parameters,
                      scenario.error)
     _check_events(scenario, md)
-    return scenario.model_copy(update={"plant": plant, "components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
+    return scenario.model_copy(update={"plant": plant, "connections": _servo_connections(scenario),
+                                       "components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
+
+
+def _servo_connections(s: Scenario) -> dict[str, str | float]:
+    """The connections with a PMSM monitor's servo inputs wired to the ``servo`` component's outputs of the same
+    names (those the scenario leaves unconnected); on a DC axis, or without a ``servo`` component, unchanged."""
+    servo_monitor = s.monitor is not None and getattr(s.monitor.config, "drive", "dc") != "dc"
+    if not servo_monitor or not any(c.name == SERVO for c in s.components):
+        return dict(s.connections)
+    from feeddrive.cosim.monitor_servo import SERVO_INPUTS
+
+    return {f"monitor.{port}": f"{SERVO}.{port}" for port in SERVO_INPUTS} | dict(s.connections)
 
 
 def _drive_chain(data: dict, source: str, lines: dict) -> dict:
