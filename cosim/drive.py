@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field
 DEFAULT_PLANT = {"dc": "builtin", "pmsm": "builtin-pmsm"}
 BUILTIN_KIND = {"builtin": "dc", "builtin-backlash": "dc", "builtin-pmsm": "pmsm"}
 SERVO = "servo"
+PHASES = ("U", "V", "W")
 #: the servo sensors' inputs from the built-in PMSM's outputs (SI, peak dq currents: no scales); the q axis and
 #: the position are the plant's roles (``scenario.PMSM_MAP``), the other outputs keep their FMU names
 SERVO_WIRING = {"i_d": "plant.i_d", "i_q": "plant.current", "theta": "plant.theta", "u_d_ref": "plant.u_d_ref",
@@ -48,12 +49,16 @@ class Drive(BaseModel):
         DC motor with its converter (the paper's) or permanent-magnet synchronous servo motor with its FOC drive.
     pole_pairs : int or None
         ``p`` of a PMSM; None: the plant FMU's ``p``. Checked against the FMU.
+    second_sensor_on : {"U", "V", "W"} or None
+        The phase a PMSM's second current sensor measures (the material redundancy); None: the servo
+        sensors' ``second_sensor_on`` (default U). Handed to the servo sensors and to the monitor.
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     kind: Literal["dc", "pmsm"] = "dc"
     pole_pairs: int | None = Field(None, ge=1)
+    second_sensor_on: Literal["U", "V", "W"] | None = None
 
 
 def apply_drive(data: dict, error: Callable[[tuple, str], Exception]) -> dict:
@@ -93,6 +98,12 @@ def apply_drive(data: dict, error: Callable[[tuple, str], Exception]) -> dict:
         raise error(("axis", "drive", "pole_pairs"), f"expected an integer >= 1, got {pp!r}")
     if pp is not None and kind != "pmsm":
         raise error(("axis", "drive", "pole_pairs"), "a DC motor has no pole pairs; expected kind: pmsm")
+    second = raw.get("second_sensor_on")
+    if second is not None and second not in PHASES:
+        raise error(("axis", "drive", "second_sensor_on"), f"expected the phase U, V or W, got {second!r}")
+    if second is not None and kind != "pmsm":
+        raise error(("axis", "drive", "second_sensor_on"), "a DC motor's second current sensor is "
+                                                          "sensors.current[1]; expected kind: pmsm")
     data = dict(data)
     plant = data.get("plant")
     plant = dict(plant) if isinstance(plant, dict) else {}
@@ -108,13 +119,42 @@ def apply_drive(data: dict, error: Callable[[tuple, str], Exception]) -> dict:
         seed = sensors.get("seed", 0) if isinstance(sensors, dict) else 0
         params = plant.get("parameters") if isinstance(plant.get("parameters"), dict) else {}
         p = pp or params.get("p") or 4
-        config = {"seed": seed, "pole_pairs": int(p)}
+        config = {"seed": seed, "pole_pairs": int(p)} | ({"second_sensor_on": second} if second else {})
         if isinstance(axis.get("pitch"), (int, float)) or isinstance(axis.get("ratio"), (int, float)):
             config["encoder"] = {k: axis[a] for k, a in (("pitch", "pitch"), ("belt_ratio", "ratio"))
                                  if isinstance(axis.get(a), (int, float))}
         data["components"] = [*components, {"name": SERVO, "class": "feeddrive.cosim.sensors_servo:ServoSensors",
                                             "config": config, "inputs": dict(SERVO_WIRING)}]
+    elif second is not None:  # the scenario's own servo sensors: the phase stated once, or twice alike
+        data["components"] = _second_phase(components, second, error)
     return data
+
+
+def _second_phase(components: list, second: str, error: Callable[[tuple, str], Exception]) -> list:
+    """``components`` with the ``servo`` component's ``second_sensor_on`` set to the drive's ``second``;
+    a contradicting value is an error naming both keys."""
+    out = list(components) if isinstance(components, list) else components
+    for k, c in enumerate(out):
+        if not (isinstance(c, dict) and c.get("name") == SERVO):
+            continue
+        config = c.get("config") if isinstance(c.get("config"), dict) else {}
+        given = config.get("second_sensor_on", second)
+        if given != second:
+            raise error(("components", k, "config", "second_sensor_on"),
+                        f"{given!r} contradicts axis.drive.second_sensor_on = {second!r}; expected {second!r} "
+                        "(or the key left out: the drive states it)")
+        out[k] = c | {"config": config | {"second_sensor_on": second}}
+    return out
+
+
+def second_sensor_phase(components: Any) -> str | None:
+    """The phase of the second current sensor of the scenario's ``servo`` component (raw YAML data): its
+    ``config.second_sensor_on`` (default U; None: no second sensor); U when there is no servo component."""
+    for c in components if isinstance(components, list) else ():
+        if isinstance(c, dict) and c.get("name") == SERVO:
+            config = c.get("config") if isinstance(c.get("config"), dict) else {}
+            return config.get("second_sensor_on", "U")
+    return "U"
 
 
 def check_pole_pairs(drive: Drive | None, variables: dict[str, Any], parameters: dict[str, float],

@@ -83,6 +83,9 @@ class MonitorConfig(BaseModel):
         (cosim/monitor_servo.py); the estimation, model check and diagnosis steps are the same.
     pole_pairs : int or None
         A PMSM's pole pairs (known, not estimated); None: the model's 4. In a scenario, ``axis.drive.pole_pairs``.
+    second_sensor_on : {"U", "V", "W"} or None
+        The phase of a PMSM's second current sensor ``I_2`` (checked against that phase's sensor); None: no
+        second sensor. In a scenario, the ``servo`` component's (``axis.drive.second_sensor_on``).
     dead_time_loss_v : float
         A PMSM drive's nominal per-leg dead-time loss ``t_dead f_pwm u_dc`` [V], modelled in the voltage
         reference check (0: an ideal inverter).
@@ -127,6 +130,7 @@ class MonitorConfig(BaseModel):
     encoder_window_s: float = Field(1.0e-3, gt=0)
     sampling: dict[Literal["voltage", "current", "speed"], Literal["instant", "mean"]] = {}
     pole_pairs: int | None = Field(None, ge=1)
+    second_sensor_on: Literal["U", "V", "W"] | None = "U"
     dead_time_loss_v: float = Field(0.0, ge=0)
     lost_motion_allowed_mm: float = Field(0.005, ge=0)
     #: the stated baseline FILE's values, name -> (value, std), read once by the validator

@@ -9,7 +9,7 @@ are the same steps. Measurement validation of a servo drive:
   terminal voltage against its reference only without the servo's dq voltages): the paper's residue test
   (eq. 10), detection only;
 * the servo drive's redundancies (``estimator.redundancy_servo``): the three phase currents sum to zero
-  (analytic), two sensors on phase U (material), the reported q current against the Park transform of the
+  (analytic), two sensors on one phase (material; ``MonitorConfig.second_sensor_on``, U by default), the reported q current against the Park transform of the
   phase currents, the dq voltage references against the terminal voltages with the dead time modelled;
 
 a failed check is a sensor fault, and the motion's parameters are then never validated. The motor encoder
@@ -35,7 +35,7 @@ from feeddrive.estimator.estimate import MotionData
 from feeddrive.estimator.partial import estimate_parameters
 
 #: the monitor component's extra inputs on a PMSM axis, after ``state, motion`` (wired from the ``servo``
-#: component: phase currents [A], second sensor on U [A], dq voltage references and terminal voltages [V],
+#: component: phase currents [A], second sensor on phase ``second_sensor_on`` [A], dq voltage references and terminal voltages [V],
 #: table position from the motor encoder and from the linear scale [m])
 SERVO_INPUTS = ("I_U", "I_V", "I_W", "I_2", "u_d_ref", "u_q_ref", "u_d", "u_q", "x_mot", "x_lin")
 #: the lost-motion finding's name in ``result["diagnosis"]``
@@ -55,7 +55,7 @@ def _json(x: Any) -> Any:
 
 def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i_q: np.ndarray | None,
                  alpha: float, gain_tol: float, offset_tol: float, u_loss: float,
-                 options: Any) -> tuple[dict[str, dict], list[dict], dict[str, str]]:  # noqa: ANN401
+                 options: Any, second_on: str | None = "U") -> tuple[dict[str, dict], list[dict], dict[str, str]]:  # noqa: ANN401
     """Run the servo drive's redundancy checks on one motion.
 
     Parameters
@@ -72,6 +72,8 @@ def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i
     u_loss : float
         Nominal per-leg dead-time loss [V].
     options : ValidationOptions
+    second_on : {"U", "V", "W"} or None
+        The phase the second current sensor ``I_2`` measures; None: no second sensor.
 
     Returns
     -------
@@ -103,14 +105,16 @@ def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i
                            "kind": "gain" if c.phase else "offset", "gain": c.gain, "offset": c.offset,
                            "check": "phase_current_sum"})
 
+    first = f"I_{second_on}"
+
     def pair() -> None:
-        c = rs.phase_sensor_pair(signals["I_U"], signals["I_2"], h, options=options)
+        c = rs.phase_sensor_pair(signals[first], signals["I_2"], h, options=options)
         r = c.residue
-        out["phase_sensor_pair"] = {"kind": r.kind, "gain_diff": r.gain_diff, "gain_diff_ci95": list(r.gain_diff_ci95),
-                                    "offset": r.offset, "p_gain": r.p_gain, "p_offset": r.p_offset,
-                                    "gain_ratio": c.gain_ratio, "valid": not c.faulty}
+        out["phase_sensor_pair"] = {"phase": second_on, "kind": r.kind, "gain_diff": r.gain_diff,
+                                    "gain_diff_ci95": list(r.gain_diff_ci95), "offset": r.offset, "p_gain": r.p_gain,
+                                    "p_offset": r.p_offset, "gain_ratio": c.gain_ratio, "valid": not c.faulty}
         if c.faulty:
-            faults.append({"sensor": "I_U or I_2", "kind": r.kind, "gain": 1.0 + r.gain_diff, "offset": r.offset,
+            faults.append({"sensor": f"{first} or I_2", "kind": r.kind, "gain": 1.0 + r.gain_diff, "offset": r.offset,
                            "check": "phase_sensor_pair"})
 
     def dq() -> None:
@@ -134,7 +138,10 @@ def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i
                                "offset": r.offset, "check": "voltage_reference_check"})
 
     run("phase_current_sum", {"I_U", "I_V", "I_W"}, phase_sum)
-    run("phase_sensor_pair", {"I_U", "I_2"}, pair)
+    if second_on is None:
+        skipped["phase_sensor_pair"] = "not checked: one current sensor per phase (second_sensor_on: none)"
+    else:
+        run("phase_sensor_pair", {first, "I_2"}, pair)
     if i_q is None:
         skipped["dq_current_consistency"] = "not checked: no q current"
     else:
@@ -175,7 +182,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     result["notes"] += notes
     i_q = best.get("i")
     servo, servo_faults, skipped = servo_checks(signals, h, p, i_q, cfg.alpha, cfg.gain_tol, cfg.offset_tol,
-                                                cfg.dead_time_loss_v, pipe.validation_options)
+                                                cfg.dead_time_loss_v, pipe.validation_options, cfg.second_sensor_on)
     faults += servo_faults
     lost, why = lost_motion_check(signals, h, cfg.alpha, cfg.lost_motion_allowed_mm)
     if lost is not None:
@@ -252,7 +259,8 @@ def servo_line(servo: Mapping[str, Any]) -> str:
     if "phase_current_sum" in servo:
         parts.append(f"phase sum {state('phase_current_sum')}")
     if "phase_sensor_pair" in servo:
-        parts.append(f"I_U/I_2 {state('phase_sensor_pair')} (ratio {servo['phase_sensor_pair']['gain_ratio']:.4f})")
+        pair = servo["phase_sensor_pair"]
+        parts.append(f"I_{pair.get('phase', 'U')}/I_2 {state('phase_sensor_pair')} (ratio {pair['gain_ratio']:.4f})")
     if "dq_current_consistency" in servo:
         parts.append(f"i_q/Park {state('dq_current_consistency')} (gain {servo['dq_current_consistency']['gain']:.4f})")
     if "voltage_reference_check" in servo:

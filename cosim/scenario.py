@@ -30,7 +30,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError
 
 from feeddrive.cosim import scenario_plant
 from feeddrive.cosim.axis import Axis, resolve_drive_chain
-from feeddrive.cosim.drive import SERVO, apply_drive, check_pole_pairs
+from feeddrive.cosim.drive import SERVO, apply_drive, check_pole_pairs, second_sensor_phase
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.fmu_inspect import REAL_TYPES
 from feeddrive.cosim.fmu_inspect import fmi_version as fmi_version  # re-exported: cosim info, the tests
@@ -296,6 +296,16 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
     if isinstance(drive, dict) and "drive" in fields:  # the axis's motor, stated once (validated by apply_drive)
         implied |= {"drive": drive.get("kind", "dc")} | ({"pole_pairs": drive["pole_pairs"]}
                                                           if drive.get("pole_pairs") else {})
+    components = data.get("components") if isinstance(data.get("components"), list) else []
+    stated = raw.get("drive") if isinstance(raw, dict) else None
+    if (stated or implied.get("drive", "dc")) != "dc" and "second_sensor_on" in fields and any(isinstance(c, dict) and c.get("name") == SERVO for c in components):
+        second = second_sensor_phase(data.get("components"))  # the servo sensors' (set from axis.drive)
+        given = raw.get("second_sensor_on", second) if isinstance(raw, dict) else second
+        if given != second:
+            raise located_error(source, lines, (*prefix, "second_sensor_on"),
+                                f"{given!r} contradicts the servo sensors' second_sensor_on = {second!r}; "
+                                f"expected {second!r} (or the key left out: the servo component states it)")
+        implied["second_sensor_on"] = second
     raw = resolve_files(raw, base_dir) if isinstance(raw, dict) else raw  # a relative db or baseline FILE
     try:
         config = MonitorConfig.model_validate(implied | raw if isinstance(raw, dict) else raw)

@@ -153,8 +153,8 @@ def servo_rows(m: Mapping) -> list[dict]:
         row("phase currents", "I_U + I_V + I_W = 0 (analytic)", "offset " + _ci(c.get("offset"), c.get("offset_ci95"), "A"),
             bad, f"fault on phase {c.get('phase')}" if bad and c.get("phase") else ("fault" if bad else "valid"))
     if (c := checks.get("phase_sensor_pair")) is not None:
-        bad = c.get("valid") is False
-        row("second sensor on one phase", "material redundancy (paper eq. 12)",
+        bad, phase = c.get("valid") is False, c.get("phase", "U")
+        row(f"second sensor on phase {phase}", f"I_{phase} against I_2: material redundancy (paper eq. 12)",
             "gain ratio " + _ci(c.get("gain_ratio"), None, ""), bad, "not valid" if bad else "valid")
     if (c := checks.get("dq_current_consistency")) is not None:
         bad = bool(c.get("faulty"))

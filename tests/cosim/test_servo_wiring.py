@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import yaml
 
 from feeddrive.cosim.component import Component
@@ -75,3 +76,53 @@ def test_a_pmsm_axis_monitor_gets_its_servo_inputs_from_the_servo_component_step
         assert m.connections["monitor.state"] == "nc.state"
     finally:
         m.terminate()
+
+
+def _pmsm(**axis_drive) -> dict:
+    data = yaml.safe_load((EXAMPLES / "pmsm_monitor.yaml").read_text())
+    data["axis"]["drive"] |= axis_drive
+    return data
+
+
+def test_the_second_current_sensor_on_phase_v_is_checked_against_phase_v(tmp_path):
+    """``axis.drive.second_sensor_on: V``: the servo sensors' I_2 measures phase V and the monitor pairs it with
+    I_V (paired with I_U, a healthy motion would be a gross fault: the phases are 120 degrees apart). Motion 1
+    healthy: the pair passes with a gain ratio within 0.5 % of 1; between the motions I_2's gain steps to 1.03:
+    motion 2's pair is not valid (gain difference 3 % +- 0.5 %), the phase sum still passes (I_2 is not a phase
+    of the sum)."""
+    from feeddrive.cosim.run import run_scenario
+
+    data = _pmsm(second_sensor_on="V")
+    data["events"] = [{"time": 1.6, "target": "servo.I_2.gain", "value": 1.03}]
+    s = scenario_from_dict(data, base_dir=EXAMPLES)
+    (servo,) = [c for c in s.components if c.name == "servo"]
+    assert servo.config["second_sensor_on"] == "V" and s.monitor.config.second_sensor_on == "V"
+    m1, m2 = run_scenario(s, tmp_path / "v", plots=False).report["motions"]
+    pair1, pair2 = m1["servo_checks"]["phase_sensor_pair"], m2["servo_checks"]["phase_sensor_pair"]
+    assert pair1["phase"] == "V" and pair1["valid"] and abs(pair1["gain_ratio"] - 1) < 0.005, pair1
+    assert m1["measurements_valid"], m1["sensor_faults"]
+    assert not pair2["valid"] and abs(-pair2["gain_diff"] - 0.03) < 0.005, pair2
+    assert m2["servo_checks"]["phase_current_sum"]["valid"]
+    assert [f["sensor"] for f in m2["sensor_faults"]] == ["I_V or I_2"]
+
+
+@pytest.mark.parametrize(("drive", "servo_config", "key", "words"), [
+    ({"second_sensor_on": "X"}, None, "axis.drive.second_sensor_on", "expected the phase U, V or W, got 'X'"),
+    ({"kind": "dc", "second_sensor_on": "V"}, None, "axis.drive.second_sensor_on", "a DC motor's second current"),
+    ({"second_sensor_on": "V"}, {"second_sensor_on": "W"}, "components[0].config.second_sensor_on",
+     "'W' contradicts axis.drive.second_sensor_on = 'V'"),
+])
+def test_a_bad_or_contradicting_second_sensor_phase_is_one_line_naming_the_key(drive, servo_config, key, words):
+    from feeddrive.cosim.errors import ScenarioError
+
+    data = _pmsm(**drive)
+    if drive.get("kind") == "dc":
+        data["axis"]["drive"].pop("pole_pairs")
+        data.pop("plant")
+    if servo_config is not None:
+        data["plant"] = {"fmu": "builtin-pmsm", "parameters": data["plant"]["parameters"]}
+        data["components"] = [{"name": "servo", "class": "feeddrive.cosim.sensors_servo:ServoSensors",
+                               "config": servo_config, "inputs": {}}]
+    with pytest.raises(ScenarioError) as err:
+        scenario_from_dict(data, base_dir=EXAMPLES)
+    assert key in str(err.value) and words in str(err.value) and "\n" not in str(err.value), str(err.value)

@@ -14,7 +14,7 @@ HEALTHY = {
 
 def test_each_check_is_a_row_with_its_interval_and_decision():
     rows = views.servo_rows({"servo_checks": HEALTHY})
-    assert [r["check"] for r in rows] == ["phase currents", "second sensor on one phase",
+    assert [r["check"] for r in rows] == ["phase currents", "second sensor on phase U",
                                          "i_q against Park(I_U, I_V, I_W)",
                                          "voltage references against terminal voltages",
                                          "motor encoder against linear scale"]
@@ -24,6 +24,9 @@ def test_each_check_is_a_row_with_its_interval_and_decision():
     assert by["motor encoder against linear scale"]["bad"] and by["motor encoder against linear scale"]["decision"] == \
         "lost motion detected"
     assert not any(r["bad"] for r in rows[:4])
+    # the second sensor's phase as the check states it (report.json phase_sensor_pair.phase)
+    on_v = HEALTHY | {"phase_sensor_pair": {"phase": "V", "gain_ratio": 1.0, "valid": True}}
+    assert views.servo_rows({"servo_checks": on_v})[1]["what"].startswith("I_V against I_2")
 
 
 def test_a_faulty_phase_is_named_and_nothing_is_nan():
