@@ -215,6 +215,10 @@ CLI_OPTIONS = {
     "max_age_s": ("--max-age", "SECONDS", "identification too old after this long"),
     "budget_s": ("--budget", "SECONDS", "processing time allowed per motion"),
     "keep_traces": ("--keep-traces", "N", "motions whose signals are kept for the plots (the last ones)"),
+    "dead_time_loss_v": ("--dead-time-loss", "VOLTS", "a PMSM inverter's per-leg dead-time loss t_dead f_pwm u_dc "
+                         "(modelled in the voltage check and taken off the voltage references)"),
+    "lost_motion_allowed_mm": ("--lost-motion-allowed", "MM", "a PMSM axis's acceptance value of the lost motion "
+                               "between the motor encoder and the linear scale"),
 }
 
 

@@ -55,13 +55,15 @@ def _json(x: Any) -> Any:
 
 def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i_q: np.ndarray | None,
                  alpha: float, gain_tol: float, offset_tol: float, u_loss: float,
-                 options: Any, second_on: str | None = "U") -> tuple[dict[str, dict], list[dict], dict[str, str]]:  # noqa: ANN401
+                 options: Any, second_on: str | None = "U",  # noqa: ANN401
+                 skip: Mapping[str, str] | None = None) -> tuple[dict[str, dict], list[dict], dict[str, str]]:
     """Run the servo drive's redundancy checks on one motion.
 
     Parameters
     ----------
     signals : mapping of str to ndarray, shape (n,)
-        ``SERVO_INPUTS`` and ``theta_enc`` [rad] (any subset; a check lacking a signal is not checked).
+        ``SERVO_INPUTS`` and the electrical angle ``phi_el`` [rad] or the encoder's motor angle ``theta_enc``
+        [rad] (any subset; a check lacking a signal is not checked).
     h : float
         Sample time [s].
     pole_pairs : int
@@ -74,6 +76,8 @@ def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i
     options : ValidationOptions
     second_on : {"U", "V", "W"} or None
         The phase the second current sensor ``I_2`` measures; None: no second sensor.
+    skip : mapping of str to str, optional
+        Check name -> why it is not checked (``complete_signals``: a check its completed signals make void).
 
     Returns
     -------
@@ -84,10 +88,17 @@ def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i
     have = checks.present(signals)
     out: dict[str, dict] = {}
     faults: list[dict] = []
-    skipped: dict[str, str] = {}
-    phi = pole_pairs * np.asarray(signals["theta_enc"], float) if "theta_enc" in have else None
+    skipped: dict[str, str] = dict(skip or {})
+    phi = None
+    if "phi_el" in have:  # a drive's own electrical angle
+        phi = np.asarray(signals["phi_el"], float)
+    elif "theta_enc" in have:  # the encoder's: p theta (the encoder zeroed on the d axis)
+        phi = pole_pairs * np.asarray(signals["theta_enc"], float)
+    have = have | ({"phi_el"} if phi is not None else set())
 
     def run(name: str, needs: set[str], fn) -> None:  # noqa: ANN001 - a closure computing one check
+        if name in skipped:
+            return
         missing = sorted(needs - have)
         if missing:
             skipped[name] = "not checked: no " + " and no ".join(missing)
@@ -142,12 +153,75 @@ def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i
         skipped["phase_sensor_pair"] = "not checked: one current sensor per phase (second_sensor_on: none)"
     else:
         run("phase_sensor_pair", {first, "I_2"}, pair)
-    if i_q is None:
+    if i_q is None and "dq_current_consistency" not in skipped:
         skipped["dq_current_consistency"] = "not checked: no q current"
     else:
-        run("dq_current_consistency", {"I_U", "I_V", "I_W", "theta_enc"}, dq)
-    run("voltage_reference_check", {"u_d_ref", "u_q_ref", "u_d", "u_q", "theta_enc", "I_U", "I_V", "I_W"}, voltage)
+        run("dq_current_consistency", {"I_U", "I_V", "I_W", "phi_el"}, dq)
+    run("voltage_reference_check", {"u_d_ref", "u_q_ref", "u_d", "u_q", "phi_el", "I_U", "I_V", "I_W"}, voltage)
     return out, faults, skipped
+
+
+def complete_signals(signals: Mapping[str, np.ndarray], pole_pairs: int,
+                     u_loss: float) -> tuple[dict[str, np.ndarray], dict[str, str], list[str]]:
+    """What a servo drive's trace lacks, from what it holds: the monitor's q-axis signals of the phase currents.
+
+    * two phase currents: the third is minus their sum (a star-connected winding), and the phase-sum check
+      has nothing to test;
+    * the electrical angle ``phi_el``: ``p theta_enc`` unless given;
+    * the q current ``Im1`` (unless given) and the d current ``i_d`` (unless given): the Park transform of the
+      phase currents at ``phi_el``; the q current's check against that transform is then void;
+    * the terminal voltages ``u`` (q) and ``u_d`` (unless given): the references ``u_q_ref``, ``u_d_ref`` less
+      the dead time's loss (``redundancy_servo.dead_time_loss`` with ``u_loss``, which needs the phase
+      currents); the voltage check is then void.
+
+    Parameters
+    ----------
+    signals : mapping of str to ndarray, shape (n,)
+    pole_pairs : int
+    u_loss : float
+        Per-leg dead-time loss [V].
+
+    Returns
+    -------
+    signals : dict
+        The completed signals.
+    skip : dict of str to str
+        Check name -> ``"not checked: <why>"``.
+    notes : list of str
+        What was derived, for the motion's notes.
+    """
+    sig = {k: np.asarray(v, float) for k, v in signals.items() if v is not None}
+    skip: dict[str, str] = {}
+    notes: list[str] = []
+    phases = [k for k in ("I_U", "I_V", "I_W") if k in sig]
+    if len(phases) == 2:
+        (third,) = {"I_U", "I_V", "I_W"} - set(phases)
+        sig[third] = -(sig[phases[0]] + sig[phases[1]])
+        skip["phase_current_sum"] = f"not checked: two phase currents ({third} is minus their sum: no redundancy)"
+        notes.append(f"{third} = -({phases[0]} + {phases[1]}) (two phase currents measured)")
+    if "u" in sig:  # a recording's q terminal voltage is the monitor's u (the servo component gives both)
+        sig.setdefault("u_q", sig["u"])
+    if "phi_el" not in sig and "theta_enc" in sig:
+        sig["phi_el"] = pole_pairs * sig["theta_enc"]
+    abc = {"I_U", "I_V", "I_W"} <= set(sig)
+    if abc and "phi_el" in sig:
+        d, q = rs.park(np.vstack([sig["I_U"], sig["I_V"], sig["I_W"]]), sig["phi_el"])
+        if "Im1" not in sig and "Im2" not in sig:
+            sig["Im1"] = q
+            skip["dq_current_consistency"] = ("not checked: the q current is the Park transform of the phase "
+                                              "currents (no q current measured)")
+            notes.append("i_q = Park(I_U, I_V, I_W) at the electrical angle")
+        sig.setdefault("i_d", d)
+    if "u" not in sig and {"u_q_ref", "u_d_ref"} <= set(sig) and (abc and "phi_el" in sig or u_loss == 0):
+        loss_d, loss_q = (rs.dead_time_loss(sig["I_U"], sig["I_V"], sig["I_W"], sig["phi_el"], u_loss)
+                          if u_loss else (0.0, 0.0))
+        sig["u"] = sig["u_q_ref"] - loss_q
+        sig.setdefault("u_d", sig["u_d_ref"] - loss_d)
+        skip["voltage_reference_check"] = ("not checked: the terminal voltages are the references less the dead "
+                                           "time's loss (no voltage measured)")
+        notes.append(f"u_q, u_d = the references u_q*, u_d* less a dead-time loss of {u_loss:g} V per leg "
+                     "(dead_time_loss_v)")
+    return sig, skip, notes
 
 
 def lost_motion_check(signals: Mapping[str, np.ndarray], h: float, alpha: float,
@@ -174,6 +248,9 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     """
     result, cfg = trace.result, pipe.config
     p = int(pipe.estimation_options.model.nominal(("design",))["p"])
+    signals, skip, derived = complete_signals(signals, p, cfg.dead_time_loss_v)
+    if derived:  # what the monitor derived from a drive's trace (report.json ``derived``; not a verdict's note)
+        result["derived"] = derived
     have = checks.present(signals)
     dc = {k: v for k, v in signals.items() if k in checks.SENSOR_NAMES}
     if {"u_d_ref", "u_q_ref", "u_d", "u_q"} <= have:  # the reference against the terminal voltage is the servo
@@ -182,7 +259,8 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     result["notes"] += notes
     i_q = best.get("i")
     servo, servo_faults, skipped = servo_checks(signals, h, p, i_q, cfg.alpha, cfg.gain_tol, cfg.offset_tol,
-                                                cfg.dead_time_loss_v, pipe.validation_options, cfg.second_sensor_on)
+                                                cfg.dead_time_loss_v, pipe.validation_options, cfg.second_sensor_on,
+                                                skip)
     faults += servo_faults
     lost, why = lost_motion_check(signals, h, cfg.alpha, cfg.lost_motion_allowed_mm)
     if lost is not None:
@@ -192,13 +270,10 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     valid = not faults
     result |= {"measurements_valid": valid, "sensor_faults": faults, "residues": residues, "servo_checks": servo}
     result["not_checked"] |= skipped
-    # the dq signals the estimator needs: d current from the phase currents at the encoder's electrical angle
+    # the dq signals the estimator needs: the d current a drive reports or the phase currents' (complete_signals)
     dq: dict[str, np.ndarray] = {}
-    if "i_d" in have:  # a recording's d current (``cosim monitor --drive pmsm --map i_d=...``)
+    if "i_d" in have:
         dq["i_d"] = np.asarray(signals["i_d"], float)
-    elif {"I_U", "I_V", "I_W", "theta_enc"} <= have:
-        dq["i_d"], _ = rs.park(np.vstack([signals["I_U"], signals["I_V"], signals["I_W"]]),
-                               p * np.asarray(signals["theta_enc"], float))
     dq |= {k: v for k, v in (("i_q", i_q), ("u_q", best.get("u")), ("u_d", signals.get("u_d"))) if v is not None}
     missing = [k for k in ("i_q", "i_d", "u_q", "u_d") if k not in dq]
     if missing or "w" not in best:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import math
 import re
 import sys
 from collections.abc import Mapping
@@ -90,7 +91,7 @@ class Recording:
     def side(self) -> str | None:
         """``table`` when a position, speed or torque column is a length, speed in m/s or force; ``motor``
         when one is an angle, rad/s or N.m; None when the columns say nothing (or both)."""
-        sides = {SI_SIDE[u] for r, u in self.units.items() if u in SI_SIDE}
+        sides = {SI_SIDE[u] for r, u in self.units.items() if u in SI_SIDE and r in MECHANICAL}
         return sides.pop() if len(sides) == 1 else None
 
     def bounds(self) -> list[tuple[int, int]]:
@@ -117,7 +118,16 @@ class Recording:
 #: position / speed / torque puts the data on the table side of a linear axis.
 SI_UNITS = {"time": ("s",), "voltage": ("V",), "voltage_ref": ("V",), "current": ("A",), "current1": ("A",),
             "current2": ("A",), "speed": ("rad/s", "m/s"), "position": ("rad", "m"), "torque": ("N*m", "N"),
-            "state": (), "i_d": ("A",), "i_q": ("A",), "u_d": ("V",), "u_q": ("V",)}  # PMSM dq (cosim estimate --drive)
+            "state": (), "i_d": ("A",), "i_q": ("A",), "u_d": ("V",), "u_q": ("V",),  # PMSM dq (cosim estimate --drive)
+            # a PMSM drive's trace (cosim monitor --drive pmsm, cosim/recorded_servo.py): phase currents, a second
+            # sensor on one phase, voltage references, electrical angle, linear-scale position
+            "I_U": ("A",), "I_V": ("A",), "I_W": ("A",), "I_U2": ("A",), "I_V2": ("A",), "I_W2": ("A",),
+            "u_d_ref": ("V",), "u_q_ref": ("V",), "phi_el": ("rad",), "x_lin": ("m",)}
+#: roles whose unit says which side of the drive chain the data are on (``Recording.side``, ``to_motor_side``)
+MECHANICAL = ("position", "speed", "torque")
+#: roles whose values may be rms values (``[A rms]``): a PMSM's dq currents, whose amplitude-invariant value is
+#: the phase peak, sqrt(2) x the rms value of the sinusoidal phase current (a phase current's sample is never rms)
+RMS_ROLES = ("i_d", "i_q")
 SI_SIDE = {"rad/s": "motor", "rad": "motor", "N*m": "motor", "m/s": "table", "m": "table", "N": "table"}
 #: Largest magnitude accepted: the estimator squares and sums the samples, 1e300 would overflow
 MAX_ABS = 1e100
@@ -141,6 +151,13 @@ def si_factor(unit: str, role: str, where: str) -> tuple[float, str]:
     targets = SI_UNITS.get(role, ())
     if not targets or unit in ("", "1", "-"):
         return 1.0, ""
+    base, rms = re.subn(r"(?i)[\s_]*rms$", "", unit.strip())
+    if rms:  # an rms value is no unit pint converts: stated in the header, converted here, and said so
+        if role not in RMS_ROLES or not base:
+            raise DataError(f"{where}: unit {unit!r}: an rms value is not a sample of role {role}; expected "
+                            f"{' or '.join(targets)} (rms only for the dq currents {', '.join(RMS_ROLES)})")
+        factor, si = si_factor(base, role, where)
+        return factor * math.sqrt(2.0), f"{si} (rms x sqrt 2)"
     text = re.sub(r"(?<=[A-Za-z])\.(?=[A-Za-z])", "*", unit)  # N.m -> N*m
     text = re.sub(r"(?<=[A-Za-z])(\d+)", r"**\1", text).replace("Ohm", "ohm")  # m2 -> m**2
     ureg = _registry()
@@ -302,7 +319,7 @@ def to_motor_side(rec: Recording, args: argparse.Namespace) -> Recording:
     without a unit takes the side the declared columns agree on (the table side when none declares
     one, as ``--pitch`` says). Without ``--pitch``, columns on both sides are refused, naming them.
     """
-    sided = {r: SI_SIDE[u] for r, u in rec.units.items() if u in SI_SIDE}
+    sided = {r: SI_SIDE[u] for r, u in rec.units.items() if u in SI_SIDE and r in MECHANICAL}
     declared = set(sided.values())
     pitch = getattr(args, "pitch", None)
     if pitch is None:
@@ -314,7 +331,7 @@ def to_motor_side(rec: Recording, args: argparse.Namespace) -> Recording:
         return rec
     if not (pitch > 0 and args.ratio > 0):
         raise InputError(f"--pitch {pitch} --ratio {args.ratio}: expected positive numbers")
-    if declared == {"motor"}:
+    if declared == {"motor"} and "x_lin" not in rec.signals:  # a linear scale: the pitch puts the encoder by it
         raise InputError(f"{rec.path}: --pitch converts table-side columns (m, m/s, N), but the columns are on the "
                          f"motor side ({rec.units})")
     mechanical = ("position", "speed", "torque")

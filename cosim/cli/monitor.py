@@ -46,16 +46,16 @@ from feeddrive.cosim.recorded import (
 from feeddrive.cosim.recorded import (
     motions as record_motions,
 )
+from feeddrive.cosim.recorded_servo import PMSM_ROLES, missing_roles, second_phase, servo_signals, unit_notes
 from feeddrive.cosim.run import _versions
 
 #: units of the monitor's parameters (motor side)
 UNITS = parameter_units("motor")
-#: role -> monitor signal
+#: role -> monitor signal (the DC drive's; a PMSM's: ``recorded_servo.PMSM_ROLES``)
 ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
-         "speed": "w_tach", "position": None, "torque": "torque", "state": None,
-         "i_q": "Im1", "i_d": "i_d", "u_q": "u", "u_d": "u_d"}
-#: roles of a PMSM's recording (``--drive pmsm``: the dq currents and voltages, peak values, as ``cosim estimate``)
-PMSM_ROLES = ("i_q", "i_d", "u_q", "u_d")
+         "speed": "w_tach", "position": None, "torque": "torque", "state": None} | PMSM_ROLES
+#: roles of both drives
+COMMON = ("time", "speed", "position", "state")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -67,8 +67,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true", help="replace existing plot files")
     parser.add_argument("--drive", choices=("dc", "pmsm", "pmsm-spm"), default="dc",
                         help="the motor: dc (default) or a PMSM with the roles " + ", ".join(PMSM_ROLES)
-                        + " (dq frame, peak values; the dq model and Table I of the PMSM, cosim/monitor_servo.py)")
+                        + " (a servo drive's trace, cosim/recorded_servo.py; the dq model and Table I of the PMSM)")
     parser.add_argument("--pole-pairs", type=int, default=None, metavar="N", help="a PMSM's pole pairs (default 4)")
+    parser.add_argument("--angle-offset", type=float, default=None, metavar="RAD",
+                        help="a PMSM's electrical angle at the encoder's zero: phi_el = p * position + RAD (default 0)")
     add_config_arguments(parser, MonitorConfig)
 
 
@@ -79,20 +81,23 @@ def main(args: argparse.Namespace) -> int:
     pmsm = drive != "dc"
     if getattr(args, "pole_pairs", None) is not None and (not pmsm or args.pole_pairs < 1):
         raise InputError(f"--pole-pairs {args.pole_pairs}: expected a positive integer with --drive pmsm or pmsm-spm")
-    common = ("time", "speed", "position", "state")
-    role_map = mapped_roles(args, [r for r in ROLES if r in common or (r in PMSM_ROLES) == pmsm])
+    if getattr(args, "angle_offset", None) is not None and not pmsm:
+        raise InputError("--angle-offset: a PMSM's electrical angle; expected --drive pmsm or pmsm-spm")
+    role_map = mapped_roles(args, [r for r in ROLES if r in COMMON or (r in PMSM_ROLES) == pmsm])
     if pmsm:
-        missing = [r for r in PMSM_ROLES if r not in role_map]
+        missing = missing_roles(role_map)
     else:
         missing = [] if {"current1", "current2", "torque"} & set(role_map) else ["current1 (or torque)"]
     if not {"speed", "position"} & set(role_map):
         missing.append("speed or position")
     if missing:
         raise InputError(f"--map: missing required role(s): {', '.join(missing)}")
-    columns = {"voltage": role_map.get("u_q" if pmsm else "voltage"),
-               "current": role_map.get("i_q") if pmsm else role_map.get("current1") or role_map.get("current2"),
+    columns = {"voltage": role_map.get("u_q") or role_map.get("u_q_ref") if pmsm else role_map.get("voltage"),
+               "current": role_map.get("i_q") or role_map.get("I_U") if pmsm
+               else role_map.get("current1") or role_map.get("current2"),
                "speed": role_map.get("speed")}
     drive_keys = {"drive": drive} | ({"pole_pairs": args.pole_pairs} if pmsm and args.pole_pairs else {})
+    drive_keys |= {"second_sensor_on": second_phase(role_map)} if pmsm else {}
     config = config_with_options(args, MonitorConfig, axis=args.axis, db=args.db, method=args.method,
                                  speed_threshold=args.speed_threshold, **drive_keys,
                                  sampling=sampling_modes(args, {q: c for q, c in columns.items() if c}))
@@ -100,7 +105,9 @@ def main(args: argparse.Namespace) -> int:
     if rec.side == "table":  # the monitor's model is the motor's: u = R i + L di/dt + K w, w in rad/s
         raise InputError(f"{args.data}: the position/speed columns are on the table side ({rec.units}); the "
                          "monitor needs the motor side: give --pitch (and --ratio) to convert them")
-    sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r]}
+    sig = {ROLES[r]: v for r, v in rec.signals.items() if ROLES[r] and r not in PMSM_ROLES}
+    if pmsm:  # a servo drive's trace: the monitor completes what it lacks (monitor_servo.complete_signals)
+        sig |= servo_signals(rec.signals, args, args.pole_pairs or 4)
     if "Im1" not in sig and "Im2" in sig:  # a single current sensor, whatever it is called
         sig["Im1"] = sig.pop("Im2")
     if "position" in rec.signals:
@@ -126,6 +133,7 @@ def main(args: argparse.Namespace) -> int:
         motions = history.motions(args.axis)
         thresholds = pipeline.thresholds()
     results = [t.result for t in traces]
+    units = unit_notes(rec.columns, rec.units)  # the conversions a reader must know (an rms current)
     if plots is not None:
         from feeddrive.cosim.monitor_plots import plot_monitor
 
@@ -135,16 +143,18 @@ def main(args: argparse.Namespace) -> int:
         report = {"kind": "monitor", "source": str(rec.path), "axis": args.axis, "db": args.db, "started": started,
                   "status": "ok", "versions": _versions(), "method": args.method, **recording_json(rec, clock_source),
                   "components": {"monitor": {"budget_s": config.budget_s}}, "diagnosis_thresholds": thresholds,
-                  "motions": results}
+                  "unit_notes": units, "motions": results}
         kept = traces[-config.keep_traces:] if config.keep_traces else []  # as the co-simulation monitor keeps
         print(f"wrote {write_monitor_report(out, report, kept, motions, thresholds)}")
     if args.json:
-        print(json.dumps({"axis": args.axis, "db": args.db, **recording_json(rec, clock_source), "motions": results},
-                         default=_jsonable))
+        print(json.dumps({"axis": args.axis, "db": args.db, **recording_json(rec, clock_source), "unit_notes": units,
+                          "motions": results}, default=_jsonable))
     else:
         from feeddrive.cosim.cli.run import history_line
 
         print(f"time: {clock_source}")
+        for note in units:
+            print(f"units: {note}")
         print(table(results))
         print(history_line({"axis": args.axis, "db": str(Path(args.db).resolve()),
                             "diagnosis_thresholds": thresholds}).strip())
@@ -242,7 +252,12 @@ def table(results: list[dict]) -> str:
                          f"test: statistic {m['statistic']:.3g}, p = {m['p_value']:.3g} at alpha = {m['alpha']:g})")
         if r.get("adequacy"):
             lines.append(f"  {adequacy_line(r['adequacy'])}")
+        if r.get("servo_checks"):  # a PMSM's redundancies, as the co-simulation's console shows them
+            from feeddrive.cosim.monitor_servo import servo_line
+
+            lines.append(f"  {servo_line(r['servo_checks'])}")
         for d in r["diagnosis"]:
             lines.append(f"  diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
+        lines += [f"  derived: {n}" for n in r.get("derived", ())]
         lines += [f"  note: {n}" for n in r["notes"]]
     return "\n".join(lines)

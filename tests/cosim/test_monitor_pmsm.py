@@ -107,7 +107,8 @@ def test_cosim_monitor_refuses_a_pmsm_recording_without_its_roles(tmp_path, caps
     csv.write_text("time,a,b\n0,1,2\n0.001,1,2\n", encoding="utf-8")
     assert main(["monitor", str(csv), "--map", "time=time", "i_q=a", "speed=b", "--drive", "pmsm"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "missing required role(s): i_d, u_q, u_d" in err, err
+    assert "\n" not in err and ("missing required role(s): i_d (or two of I_U, I_V, I_W with phi_el or position), "
+                               "u_q (or u_q_ref), u_d (or u_d_ref)") in err, err
     assert main(["monitor", str(csv), "--map", "time=time", "current1=a", "speed=b", "--pole-pairs", "4"]) == 2
     assert "--pole-pairs 4" in capsys.readouterr().err
 
