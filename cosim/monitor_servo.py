@@ -33,6 +33,7 @@ from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.estimate import MotionData
 from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.validation import gain_ratio
 
 #: the monitor component's extra inputs on a PMSM axis, after ``state, motion`` (wired from the ``servo``
 #: component: phase currents [A], second sensor on phase ``second_sensor_on`` [A], dq voltage references and terminal voltages [V],
@@ -257,6 +258,17 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
         dc.pop("u_ref", None)  # check's, with the inverter's dead time modelled (the plain pair flags it)
     residues, faults, best, notes = checks.detect_subset(dc, h, pipe.validation_options, have & set(dc))
     result["notes"] += notes
+    if {"Im1", "Im2"} <= have:  # the q-axis current sensors' gain ratio (eq. 12), on the identically filtered pair
+        f = cfg.filter.apply({"1": dc["Im1"], "2": dc["Im2"]}, h)
+        try:
+            ratio = gain_ratio(f["1"], f["2"])
+        except EstimatorInputError as exc:
+            result["gain_ratio_reason"] = f"not computed: {exc}"
+        else:
+            result |= {"gain_ratio": ratio, "relative_gain_error": 1.0 - ratio}
+    else:
+        result["gain_ratio_reason"] = ("not checked: one q current sensor" if {"Im1", "Im2"} & have else
+                                       "not checked: no q current sensor (the q current is the phase currents')")
     i_q = best.get("i")
     servo, servo_faults, skipped = servo_checks(signals, h, p, i_q, cfg.alpha, cfg.gain_tol, cfg.offset_tol,
                                                 cfg.dead_time_loss_v, pipe.validation_options, cfg.second_sensor_on,

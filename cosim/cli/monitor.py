@@ -155,7 +155,9 @@ def main(args: argparse.Namespace) -> int:
         print(f"time: {clock_source}")
         for note in units:
             print(f"units: {note}")
-        print(table(results))
+        from feeddrive.cosim.cli.estimate import model_units
+
+        print(table(results, UNITS | model_units(drive)))
         print(history_line({"axis": args.axis, "db": str(Path(args.db).resolve()),
                             "diagnosis_thresholds": thresholds}).strip())
     return 0
@@ -215,7 +217,7 @@ def adequacy_line(a: dict) -> str:
     return f"model check (own residue): {verdict}{p}: {a['reason']}"
 
 
-def table(results: list[dict]) -> str:
+def table(results: list[dict], units: dict[str, str] | None = None) -> str:
     """One block per motion: verdicts, sensor faults, parameters with 95 % CIs, model check, diagnosis."""
     from feeddrive.cosim.report.verdict import finite, verdict_line
 
@@ -237,6 +239,8 @@ def table(results: list[dict]) -> str:
                          f"[{f['offset_ci95'][0]:.4g}, {f['offset_ci95'][1]:.4g}]")
         if finite(r["gain_ratio"]):
             lines.append(f"  current gain ratio a1/a2 = {r['gain_ratio']:.4f}")
+        elif r.get("gain_ratio_reason"):  # why, never a bare "not computed"
+            lines.append(f"  current gain ratio a1/a2: {r['gain_ratio_reason']}")
         elif r["gain_ratio"] is not None:
             lines.append("  current gain ratio a1/a2: not checked (one current sensor)")
         for name, p in r["parameters"].items():
@@ -245,7 +249,7 @@ def table(results: list[dict]) -> str:
         for name, why in (r.get("refused") or {}).items():
             lines.append(f"  {name:3} refused: {why}")
         for name, value in r.get("known", {}).items():
-            lines.append(f"  {name:3} {value:12.6g} {UNITS.get(name, ''):10} known (--known)")
+            lines.append(f"  {name:3} {value:12.6g} {(units or UNITS).get(name, ''):10} known (--known)")
         if r["mismatch"]:
             m = r["mismatch"]
             lines.append(f"  model check: {'passed' if m['passed'] else 'MISMATCH'} (decided by the {m['test']} "

@@ -97,6 +97,13 @@ def history_line(monitor: dict) -> str | None:
     return text + f"; healthy baseline: {n} motions"
 
 
+def _unit(name: str) -> str:
+    """A known parameter's unit, from the drive models' names (DC and PMSM share R, Jt, ft, Cd)."""
+    from feeddrive.cosim.cli.estimate import model_units
+
+    return (model_units("dc") | model_units("pmsm")).get(name, "")
+
+
 def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
     """A few lines: simulated time and speed, final position against the NC's target, motions, files."""
     from feeddrive.cosim.report.verdict import verdict_line
@@ -114,6 +121,9 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
             lines.append(f"    {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
             for name, why in (m.get("refused") or {}).items():  # no number: the rule that refused it
                 lines.append(f"    {name} refused: {why}")
+            if m.get("known"):  # fixed, not estimated (monitor.known), as cosim monitor's --known
+                lines.append("    known " + " ".join(f"{p}={v:.4g} {_unit(p)}".rstrip() for p, v in m["known"].items())
+                             + " (monitor.known)")
             if m.get("servo_checks"):  # a PMSM axis (cosim/monitor_servo.py)
                 from feeddrive.cosim.monitor_servo import servo_line
 

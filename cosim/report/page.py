@@ -106,7 +106,8 @@ def motion_view(m: Mapping, thresholds: Mapping | None, units: Mapping[str, str]
     # a refused parameter has no number: its row says which rule refused it and why
     refused = [{"name": n, "unit": units.get(n, ""), "reason": str(why)} for n, why in (m.get("refused") or {}).items()]
     not_checked = [(q, str(why)) for q, why in (m.get("not_checked") or {}).items() if q.startswith("model")]
-    return {"m": m, "rows": rows, "verdict": verdict, "refused": refused, "not_checked": not_checked,
+    known = [{"name": n, "unit": units.get(n, ""), "value": v} for n, v in (m.get("known") or {}).items()]
+    return {"m": m, "rows": rows, "verdict": verdict, "refused": refused, "known": known, "not_checked": not_checked,
             "processing": views.processing(m, budget_s), "check": views.model_check(m.get("mismatch")),
             "residues": views.residue_rows(m), "gain_ratio": views.gain_ratio(m), "servo": views.servo_rows(m),
             "adequacy": views.residue_check(m), "figures": []}
@@ -126,7 +127,10 @@ def parameter_status(validated: bool, diagnosed: bool, value: float, ref: float 
 
 def _units(report: Mapping) -> dict[str, str]:
     """Parameter units: the defaults, overridden by any ``unit`` a motion's parameters carry."""
-    out = dict(UNITS)
+    from feeddrive.models.drives import drive_model
+
+    # a PMSM's names too (a known psi_f has no estimate to carry its unit)
+    out = {v.name: v.unit for v in drive_model("pmsm").of_kind("physical")} | dict(UNITS)
     for m in report.get("motions") or ():
         out |= {k: p["unit"] for k, p in (m.get("parameters") or {}).items() if p.get("unit")}
     return out

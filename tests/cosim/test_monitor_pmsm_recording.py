@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -14,7 +15,7 @@ import pytest
 
 from feeddrive.cosim.cli import main
 from feeddrive.cosim.run import run_scenario
-from feeddrive.cosim.scenario import load_scenario
+from feeddrive.cosim.scenario import load_scenario, scenario_from_dict
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "plants"))
 from vendor_pmsm import INVERTER, TRUTH  # noqa: E402
@@ -199,3 +200,44 @@ def test_the_vendor_pmsm_trace_in_its_own_units(vendor_pmsm_fmu, tmp_path, capsy
     dq = m["servo_checks"]["dq_current_consistency"]
     assert not dq["valid"] and dq["gain"] == pytest.approx(1 / math.sqrt(2), abs=0.005)
     assert not m["validated"] and any(f["check"] == "dq_current_consistency" for f in m["sensor_faults"])
+
+
+def page_text(path: Path) -> str:
+    """The visible text of a report.html (figures' data URIs and tags dropped)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "report"))
+    from page_checks import parse
+
+    return " ".join(" ".join(parse(path).find("body").itertext()).split())
+
+
+def test_known_parameters_and_reasons_on_the_console_and_the_page_and_no_nan(builtin_trace, tmp_path, capsys):
+    """A PMSM run with monitor.known psi_f: the console shows it with its unit, as the DC console shows --known;
+    the page lists it as known. The q-axis current sensors' gain ratio is computed (within 0.5 % of 1, never a
+    bare "not computed"), and no "nan" anywhere on the console, in report.json or on the page. On a recording
+    with one q current sensor the console and the page say why the ratio is not checked."""
+    from feeddrive.cosim.cli.run import summary
+
+    data = load_scenario(EXAMPLE).to_dict()
+    data["monitor"] = {"db": ":memory:", "alpha": 0.01, "known": {"psi_f": 0.23}}
+    res = run_scenario(scenario_from_dict(data), tmp_path / "run", plots=False)
+    text = summary(res)
+    assert "known psi_f=0.23 Wb (monitor.known)" in text and "nan" not in text.lower(), text
+    (m,) = res.report["motions"]
+    assert m["validated"] and "psi_f" not in m["parameters"] and m["known"] == {"psi_f": 0.23}
+    assert m["gain_ratio"] == pytest.approx(1.0, abs=0.005) and "gain_ratio_reason" not in m
+    page = page_text(tmp_path / "run" / "report.html")
+    assert "known (monitor.known, --known)" in page and "current gain ratio a1/a2 (eq. 12)" in page
+    for where in (page, (tmp_path / "run" / "report.json").read_text()):
+        assert not re.search(r"(?i)\bnan\b", where)
+        assert "not computed" not in where or "not computed:" in where
+    # cosim monitor on a recording with one q current sensor, psi_f known: the reason and the known value
+    csv = write_csv(tmp_path / "t.csv", builtin_trace)
+    assert main(["monitor", str(csv), "--map", *FULL, "--drive", "pmsm", "--pitch", "0.01", "--known", "psi_f=0.23",
+                 "--db", str(tmp_path / "m.db"), "--out", str(tmp_path / "out")]) == 0
+    console = capsys.readouterr().out
+    assert "current gain ratio a1/a2: not checked: one q current sensor" in console
+    assert any(line.split()[:3] == ["psi_f", "0.23", "Wb"] and "known" in line for line in console.splitlines())
+    assert "nan" not in console.lower()
+    page = page_text(tmp_path / "out" / "report.html")
+    assert "not checked: one q current sensor" in page and "known (monitor.known, --known)" in page
+    assert not re.search(r"(?i)\bnan\b", page)
