@@ -146,7 +146,7 @@ def servo_rows(m: Mapping) -> list[dict]:
     rows = []
 
     def row(name: str, what: str, figure: str, bad: bool, decision: str) -> None:
-        rows.append({"check": name, "what": what, "figure": figure, "bad": bad, "decision": decision})
+        rows.append({"check": name, "what": what, "figure": figure, "bad": bad, "decision": decision, "skipped": False})
 
     if (c := checks.get("phase_current_sum")) is not None:
         bad = bool(c.get("faulty"))
@@ -168,7 +168,18 @@ def servo_rows(m: Mapping) -> list[dict]:
         bad = bool(c.get("detected"))
         row("motor encoder against linear scale", "lost motion of the drive chain",
             _ci(c.get("value_mm"), c.get("ci95_mm"), "mm"), bad, "lost motion detected" if bad else "within the allowed lost motion")
+    if checks:  # a PMSM motion: the checks that did not run, each with its reason (report.json ``not_checked``)
+        skipped = m.get("not_checked") or {}
+        rows += [{"check": label, "what": "-", "figure": "-", "bad": False, "decision": str(skipped[name]),
+                  "skipped": True} for name, label in SERVO_CHECKS.items() if name not in checks and name in skipped]
     return rows
+
+
+#: the servo checks' report.json names and the page's labels
+SERVO_CHECKS = {"phase_current_sum": "phase currents", "phase_sensor_pair": "second sensor on one phase",
+                "dq_current_consistency": "i_q against Park(I_U, I_V, I_W)",
+                "voltage_reference_check": "voltage references against terminal voltages",
+                "lost_motion": "motor encoder against linear scale"}
 
 
 def gain_ratio(m: Mapping) -> tuple[str, str]:

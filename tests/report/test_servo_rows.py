@@ -39,6 +39,17 @@ def test_a_faulty_phase_is_named_and_nothing_is_nan():
     assert views.servo_rows({}) == [] and views.servo_rows({"servo_checks": None}) == []
 
 
+def test_a_check_that_did_not_run_is_a_row_with_its_reason():
+    """A recording without a q current or a voltage sensor: those checks are rows saying why, not judged."""
+    checks = {k: HEALTHY[k] for k in ("phase_current_sum", "lost_motion")}
+    why = {"dq_current_consistency": "not checked: the q current is the Park transform of the phase currents",
+           "phase_sensor_pair": "not checked: no I_2", "current": "not checked: no Im2"}
+    rows = views.servo_rows({"servo_checks": checks, "not_checked": why})
+    assert [r["check"] for r in rows] == ["phase currents", "motor encoder against linear scale",
+                                         "second sensor on one phase", "i_q against Park(I_U, I_V, I_W)"]
+    assert rows[3]["skipped"] and not rows[3]["bad"] and rows[3]["decision"] == why["dq_current_consistency"]
+
+
 def test_the_residue_check_is_a_table_of_its_equations_at_the_adjusted_level():
     adequacy = {"verdict": "model mismatch", "p_value": 3e-9, "alpha": 0.01, "reason": "mechanical: offset",
                 "equations": {"electrical": {"output": "u", "p_value": 0.41, "statistic": 0.95, "df": [3, 40],
