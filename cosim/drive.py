@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field
 DEFAULT_PLANT = {"dc": "builtin", "pmsm": "builtin-pmsm"}
 BUILTIN_KIND = {"builtin": "dc", "builtin-backlash": "dc", "builtin-pmsm": "pmsm"}
 SERVO = "servo"
+SERVO_CLASS = "feeddrive.cosim.sensors_servo:ServoSensors"
 PHASES = ("U", "V", "W")
 #: the servo sensors' inputs from the built-in PMSM's outputs (SI, peak dq currents: no scales); the q axis and
 #: the position are the plant's roles (``scenario.PMSM_MAP``), the other outputs keep their FMU names
@@ -123,7 +124,7 @@ def apply_drive(data: dict, error: Callable[[tuple, str], Exception]) -> dict:
         if isinstance(axis.get("pitch"), (int, float)) or isinstance(axis.get("ratio"), (int, float)):
             config["encoder"] = {k: axis[a] for k, a in (("pitch", "pitch"), ("belt_ratio", "ratio"))
                                  if isinstance(axis.get(a), (int, float))}
-        data["components"] = [*components, {"name": SERVO, "class": "feeddrive.cosim.sensors_servo:ServoSensors",
+        data["components"] = [*components, {"name": SERVO, "class": SERVO_CLASS,
                                             "config": config, "inputs": dict(SERVO_WIRING)}]
     elif second is not None:  # the scenario's own servo sensors: the phase stated once, or twice alike
         data["components"] = _second_phase(components, second, error)
@@ -155,6 +156,25 @@ def second_sensor_phase(components: Any) -> str | None:
             config = c.get("config") if isinstance(c.get("config"), dict) else {}
             return config.get("second_sensor_on", "U")
     return "U"
+
+
+def servo_oversample(data: dict, error: Callable[[tuple, str], Exception]) -> dict:
+    """The scenario with its ``servo`` sensors' ``config.oversample`` set to ``plant.oversample`` (their sampling's
+    sub-samples, as the DC sensors'); a different value stated in the servo's config is an error."""
+    components, plant = data.get("components"), data.get("plant")
+    m = plant.get("oversample", 1) if isinstance(plant, dict) else 1
+    if not isinstance(components, list) or not isinstance(m, int) or isinstance(m, bool):
+        return data
+    out = list(components)
+    for k, c in enumerate(out):
+        if not (isinstance(c, dict) and c.get("name") == SERVO and c.get("class") == SERVO_CLASS):
+            continue
+        config = c.get("config") if isinstance(c.get("config"), dict) else {}
+        if config.get("oversample", m) != m:
+            raise error(("components", k, "config", "oversample"), f"{config['oversample']!r} contradicts "
+                        f"plant.oversample = {m}; expected {m} (or the key left out: the plant states it)")
+        out[k] = c | {"config": config | {"oversample": m}}
+    return data | {"components": out}
 
 
 def check_pole_pairs(drive: Drive | None, variables: dict[str, Any], parameters: dict[str, float],

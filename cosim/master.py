@@ -191,6 +191,8 @@ class Master:
                 comps.append((spec.name, cls_(spec.name, spec.config)))
             except (ValueError, TypeError) as exc:  # the component refuses its config
                 raise scenario.error(where[:-1] + ("config",), f"{spec.class_}: {exc}") from None
+            if getattr(comps[-1][1], "fine_rate", False):  # it samples the plant's sub-steps (servo sensors' means)
+                rates[spec.name] = 1
         parts = [s.name for s in scenario.components if s.fmu is not None and s.config.map]
         if parts and scenario.nc is not None:  # a plant split into FMUs: its parts step with it, before the sensors
             k = [n for n, _ in comps].index("plant") + 1

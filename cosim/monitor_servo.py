@@ -162,8 +162,8 @@ def servo_checks(signals: Mapping[str, np.ndarray], h: float, pole_pairs: int, i
     return out, faults, skipped
 
 
-def complete_signals(signals: Mapping[str, np.ndarray], pole_pairs: int,
-                     u_loss: float) -> tuple[dict[str, np.ndarray], dict[str, str], list[str]]:
+def complete_signals(signals: Mapping[str, np.ndarray], pole_pairs: int, u_loss: float,
+                     mean_currents: bool = False) -> tuple[dict[str, np.ndarray], dict[str, str], list[str]]:
     """What a servo drive's trace lacks, from what it holds: the monitor's q-axis signals of the phase currents.
 
     * two phase currents: the third is minus their sum (a star-connected winding), and the phase-sum check
@@ -181,6 +181,10 @@ def complete_signals(signals: Mapping[str, np.ndarray], pole_pairs: int,
     pole_pairs : int
     u_loss : float
         Per-leg dead-time loss [V].
+    mean_currents : bool
+        The phase currents are interval means (``sampling: {current: mean}``): ``phi_el`` becomes the interval's
+        middle angle, the mean of the angles at its ends, for every transform of the currents (at the end
+        angle the d current would take ``i_q sin(w_el h / 2)``: 3.8 % of i_q at 1800 rpm, p = 4, h = 0.1 ms).
 
     Returns
     -------
@@ -204,6 +208,9 @@ def complete_signals(signals: Mapping[str, np.ndarray], pole_pairs: int,
         sig.setdefault("u_q", sig["u"])
     if "phi_el" not in sig and "theta_enc" in sig:
         sig["phi_el"] = pole_pairs * sig["theta_enc"]
+    if mean_currents and sig.get("phi_el") is not None and sig["phi_el"].size > 1:  # the currents' angle
+        phi = sig["phi_el"]
+        sig["phi_el"] = 0.5 * (phi + np.concatenate([[2 * phi[0] - phi[1]], phi[:-1]]))
     abc = {"I_U", "I_V", "I_W"} <= set(sig)
     if abc and "phi_el" in sig:
         d, q = rs.park(np.vstack([sig["I_U"], sig["I_V"], sig["I_W"]]), sig["phi_el"])
@@ -249,7 +256,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     """
     result, cfg = trace.result, pipe.config
     p = int(pipe.estimation_options.model.nominal(("design",))["p"])
-    signals, skip, derived = complete_signals(signals, p, cfg.dead_time_loss_v)
+    signals, skip, derived = complete_signals(signals, p, cfg.dead_time_loss_v, cfg.sampling.get("current") == "mean")
     if derived:  # what the monitor derived from a drive's trace (report.json ``derived``; not a verdict's note)
         result["derived"] = derived
     have = checks.present(signals)
@@ -293,7 +300,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
                                   f"{', '.join(missing + ['speed'] * ('w' not in best))}")
     options = pipe.estimation_options
     # interval means (an oversampled plant) aligned to the interval's middle, as the DC monitor's u, i, w
-    delays = {{"u": "u_q", "i": "i_q"}.get(k, k): d for k, d in cfg.delays(h).items()}
+    delays = {s: d for k, d in cfg.delays(h).items() for s in {"u": ("u_q", "u_d"), "i": ("i_q", "i_d")}.get(k, (k,))}
     data = MotionData(h, w=best["w"], signals=dq, t0=start, delays=delays)
     adequacy = check_motion(data, options)  # before the estimation: a mismatch explains a refusal
     result["adequacy"] = adequacy.to_dict()

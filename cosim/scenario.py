@@ -30,7 +30,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError
 
 from feeddrive.cosim import scenario_plant
 from feeddrive.cosim.axis import Axis, resolve_drive_chain
-from feeddrive.cosim.drive import SERVO, apply_drive, check_pole_pairs, second_sensor_phase
+from feeddrive.cosim.drive import SERVO, apply_drive, check_pole_pairs, second_sensor_phase, servo_oversample
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.fmu_inspect import REAL_TYPES
 from feeddrive.cosim.fmu_inspect import fmi_version as fmi_version  # re-exported: cosim info, the tests
@@ -198,6 +198,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     if not isinstance(data, dict):
         raise located_error(source, lines, (), f"expected a mapping of scenario keys, got {type(data).__name__}")
     data = apply_drive(dict(data), lambda key, message: located_error(source, lines, key, message))
+    data = servo_oversample(data, lambda key, message: located_error(source, lines, key, message))
     given, data = dict(data), _drive_chain(data, source, lines)
     base_dir = Path(base_dir or ".").resolve()
     data["monitor"] = _monitor_spec(data.get("monitor"), data, base_dir, source, lines)
@@ -329,7 +330,8 @@ def _check_lowpass(s: Scenario) -> None:
 
 def _implied_sampling(data: dict) -> dict[str, str]:
     """The monitor's default ``sampling``: a quantity is an interval mean when the plant is oversampled and
-    every sensor of it samples the mean (the default); bad values are left to the sections' own checks."""
+    every sensor of it samples the mean (the default; a PMSM's servo sensors included); bad values are left to
+    the sections' own checks."""
     plant, sensors = data.get("plant"), data.get("sensors")
     m = plant.get("oversample", 1) if isinstance(plant, dict) else 1
     if not isinstance(m, int) or m <= 1:
@@ -339,6 +341,13 @@ def _implied_sampling(data: dict) -> dict[str, str]:
     channels = {"voltage": [sensors.get("voltage"), sensors.get("voltage_ref")],
                 "current": list(current) if isinstance(current, list) else [None, None],
                 "speed": [sensors.get("tachometer")]}
+    servo = next((c.get("config") for c in data.get("components") or () if isinstance(c, dict)
+                  and c.get("name") == SERVO and isinstance(c.get("config"), dict)), None) \
+        if isinstance(data.get("components"), list) else None
+    if servo is not None:  # a PMSM's servo sensors sample the same quantities (cosim/sensors_servo.py)
+        phases = servo.get("phases")
+        channels["current"] += (list(phases) if isinstance(phases, list) else [None] * 3) + [servo.get("second")]
+        channels["voltage"] += [servo.get("voltage"), servo.get("voltage_ref")]
     return {q: "mean" for q, chans in channels.items()
             if all((c or {}).get("sampling", "mean") == "mean" if isinstance(c, dict) or c is None else False
                    for c in chans)}

@@ -2,7 +2,7 @@
 
 The servo counterpart of ``cosim.sensors`` (the DC drive's redundant sensors), with the same sensor model
 (paper eq. 9, ``measured = gain * true + offset + noise * z``) and channel settings (``ChannelConfig``: gain,
-offset, noise; instantaneous samples)::
+offset, noise, and the sampling of each analogue channel)::
 
     channel        true signal                                   default noise (std)
     I_U I_V I_W    phase currents of i_d, i_q at phi_el = p theta  0.05 A (``CurrentSensor``)
@@ -18,7 +18,16 @@ second sensor on one phase is the paper's material redundancy. The lost motion b
 table lives in the plant (the vendor PMSM's ``lost_motion_mm``), not here: the encoder sees the motor
 side, the linear scale the table.
 
-``measure_servo`` measures whole arrays (offline studies, benchmarks); ``ServoSensors`` is the same as a
+Sampling, as the DC sensors' (``cosim.sensors``): with ``oversample`` m > 1 plant steps per recorded sample (the
+scenario's ``plant.oversample``, set by the scenario), each analogue channel's ``sampling`` is ``instant`` (the
+true signal at the recording instant), ``mean`` (the interval mean of the m sub-samples by
+``sensors.interval_mean_weights``: an integrating ADC; the default, as the DC sensors') or ``lowpass`` (a
+Butterworth anti-aliasing filter at the plant's step, sampled at the recording instant). The phase currents
+are averaged as phase currents (what a phase's ADC integrates), not as dq values. The encoder and the linear
+scale are counters latched at the recording instant. The component then steps at the plant's rate
+(``fine_rate``); with m = 1, or every channel ``instant``, at the recording rate.
+
+``measure_servo`` measures whole arrays of instantaneous samples (offline studies, benchmarks); ``ServoSensors`` is the same as a
 co-simulation component (``class: feeddrive.cosim.sensors_servo:ServoSensors``) whose inputs are connected
 to the plant's outputs; ``config.scales`` converts a plant's units on the way in (an rms current x sqrt(2),
 mm -> m, an electrical angle / p).
@@ -36,7 +45,15 @@ from pydantic import Field
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.nc import StrictConfig, drive_chain_nominal
-from feeddrive.cosim.sensors import BLOCK, CurrentSensor, EncoderConfig, VoltageSensor, parse_event
+from feeddrive.cosim.sensors import (
+    BLOCK,
+    CurrentSensor,
+    EncoderConfig,
+    VoltageSensor,
+    antialias_sos,
+    interval_mean_weights,
+    parse_event,
+)
 from feeddrive.estimator.redundancy_servo import PHASES, inverse_park
 
 #: the component's inputs (SI, peak dq currents, mechanical motor angle, table position)
@@ -80,6 +97,9 @@ class ServoSensorsConfig(StrictConfig):
     scales : dict
         Input name -> factor applied to the connected value (a plant's units: 1.4142 for an rms current,
         0.001 for mm, 1/p for an electrical angle); unknown names are refused.
+    oversample : int
+        Plant steps per recorded sample (the scenario sets it to ``plant.oversample``): the sub-samples of the
+        ``mean`` and ``lowpass`` sampling.
     """
 
     seed: int = Field(0, ge=0)
@@ -93,6 +113,7 @@ class ServoSensorsConfig(StrictConfig):
         pitch=drive_chain_nominal("builtin-pmsm")[0], belt_ratio=drive_chain_nominal("builtin-pmsm")[1]))
     scale: LinearScale = LinearScale()
     scales: dict[Literal[INPUTS], float] = {}  # type: ignore[valid-type]
+    oversample: int = Field(1, ge=1)
 
     def channels(self) -> dict[str, object]:
         """Event name -> channel configuration."""
@@ -163,7 +184,8 @@ def _params(cfg: ServoSensorsConfig) -> dict[str, dict[str, float]]:
 
 
 class ServoSensors(Component):
-    """``measure_servo`` sample by sample in a co-simulation (instantaneous samples, at the component's step).
+    """``measure_servo`` sample by sample in a co-simulation, each analogue channel sampled as its ``sampling`` says
+    (module docstring; at the plant's rate when ``fine_rate``, else instantaneous at the recording step).
 
     Inputs ``INPUTS`` (each multiplied by ``config.scales.get(name, 1)``), outputs ``OUTPUTS``. Events
     ``<channel>.<gain|offset|noise>`` with the channels of ``ServoSensorsConfig.channels`` change a
@@ -176,6 +198,12 @@ class ServoSensors(Component):
 
     def __init__(self, name: str, config: ServoSensorsConfig | dict | None = None) -> None:
         super().__init__(name, ServoSensorsConfig.parse(config, name))
+        cfg = self.config
+        channels = cfg.channels()
+        #: per analogue channel (``OUTPUTS[:8]``): 0 instant, 1 interval mean, 2 low-pass filtered
+        self._kinds = tuple({"instant": 0, "mean": 1, "lowpass": 2}[channels[c].sampling] for c in OUTPUTS[:8])
+        #: the master steps the component at the plant's rate (every sub-sample), not at the recording rate
+        self.fine_rate = cfg.oversample > 1 and any(self._kinds)
 
     def setup(self, t0: float, h: float, n_steps: int) -> None:
         self._params = _params(self.config)
@@ -187,6 +215,21 @@ class ServoSensors(Component):
         self._q = 2 * math.pi / (4 * cfg.encoder.lines)
         self._conv = cfg.encoder.pitch / (2 * math.pi * cfg.encoder.belt_ratio)
         self._k = BLOCK
+        self._m = cfg.oversample if self.fine_rate else 1
+        self._acc = [0.0] * 8
+        self._weights = interval_mean_weights(self._m)
+        self._lp = [0.0] * 8
+        self._filters = []
+        for j, c in enumerate(OUTPUTS[:8]):
+            chan = cfg.channels()[c]
+            if self.fine_rate and chan.sampling == "lowpass":
+                fc = chan.cutoff_hz or 0.25 / (h * self._m)
+                if not fc < 0.45 / h:
+                    raise ScenarioError(f"{self.name}: {c}: lowpass cutoff_hz {fc:g} Hz must be below 0.9 x the "
+                                        f"Nyquist frequency of the plant's step ({0.45 / h:g} Hz)")
+                sos = antialias_sos(chan.order, fc, h)
+                self._filters.append((j, [(b0, b1, b2, a1, a2) for b0, b1, b2, _, a1, a2 in sos.tolist()],
+                                      [[0.0, 0.0] for _ in sos]))
         self._sample()
 
     def set_parameter(self, name: str, value: object) -> None:
@@ -203,10 +246,12 @@ class ServoSensors(Component):
             self._k = 0
         z = self._z[self._k]
         self._k += 1
-        i_d, i_q, theta, u_d_ref, u_q_ref, u_d, u_q, x_table = (v * s for v, s in zip(self._inputs, self._scales))
-        phi = self._p * theta
-        raw = [i_d * math.cos(phi - a) - i_q * math.sin(phi - a) for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
-        true = (*raw, raw[self._second], u_d_ref, u_q_ref, u_d, u_q)
+        true, theta, x_table = self._true()
+        if self.fine_rate:  # each channel's sample: instantaneous, its interval mean or its filter's output
+            acc, lp, inv_m = self._acc, self._lp, 1.0 / self._m
+            true = [x if k == 0 else acc[j] * inv_m if k == 1 else lp[j]
+                    for j, (k, x) in enumerate(zip(self._kinds, true))]
+            self._acc = [0.0] * 8
         p = self._params
         y = [p[c]["gain"] * x + p[c]["offset"] + p[c]["noise"] * zc for c, x, zc in zip(OUTPUTS[:8], true, z)]
         if self.config.second_sensor_on is None:
@@ -216,7 +261,30 @@ class ServoSensors(Component):
         x_lin = res * math.floor((ps["gain"] * x_table + ps["offset"] + ps["noise"] * z[9]) / res + 0.5)
         self._y = [*y, theta_enc, theta_enc * self._conv, x_lin]
 
+    def _true(self) -> tuple[list[float], float, float]:
+        """The analogue channels' true values at this instant (``OUTPUTS[:8]``), the motor angle and the table."""
+        i_d, i_q, theta, u_d_ref, u_q_ref, u_d, u_q, x_table = (v * s for v, s in zip(self._inputs, self._scales))
+        phi = self._p * theta
+        raw = [i_d * math.cos(phi - a) - i_q * math.sin(phi - a) for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
+        return [*raw, raw[self._second], u_d_ref, u_q_ref, u_d, u_q], theta, x_table
+
     def step(self, n: int) -> None:
+        if self.fine_rate:  # every plant step: the sub-sample into the sums and the filters
+            x, _, _ = self._true()
+            w = self._weights[n % self._m]
+            acc = self._acc
+            for j in range(8):
+                acc[j] += w * x[j]
+            for j, coefs, states in self._filters:  # direct form II transposed, per second-order section
+                v = x[j]
+                for (b0, b1, b2, a1, a2), st in zip(coefs, states):
+                    y = b0 * v + st[0]
+                    st[0] = b1 * v - a1 * y + st[1]
+                    st[1] = b2 * v - a2 * y
+                    v = y
+                self._lp[j] = v
+            if (n + 1) % self._m:
+                return
         self._sample()
 
     def get_outputs(self) -> list[float]:
@@ -224,4 +292,5 @@ class ServoSensors(Component):
 
     def report(self) -> dict:
         return {"channels": self._params, "pole_pairs": self.config.pole_pairs,
-                "second_sensor_on": self.config.second_sensor_on}
+                "second_sensor_on": self.config.second_sensor_on, "oversample": self._m,
+                "sampling": {c: ("instant", "mean", "lowpass")[k] for c, k in zip(OUTPUTS[:8], self._kinds)}}
