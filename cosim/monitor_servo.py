@@ -256,6 +256,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     """
     result, cfg = trace.result, pipe.config
     p = int(pipe.estimation_options.model.nominal(("design",))["p"])
+    given = checks.present(signals)
     signals, skip, derived = complete_signals(signals, p, cfg.dead_time_loss_v, cfg.sampling.get("current") == "mean")
     if derived:  # what the monitor derived from a drive's trace (report.json ``derived``; not a verdict's note)
         result["derived"] = derived
@@ -274,7 +275,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
         else:
             result |= {"gain_ratio": ratio, "relative_gain_error": 1.0 - ratio}
     else:
-        result["gain_ratio_reason"] = ("not checked: one q current sensor" if {"Im1", "Im2"} & have else
+        result["gain_ratio_reason"] = ("not checked: one q current sensor" if {"Im1", "Im2"} & given else
                                        "not checked: no q current sensor (the q current is the phase currents')")
     i_q = best.get("i")
     servo, servo_faults, skipped = servo_checks(signals, h, p, i_q, cfg.alpha, cfg.gain_tol, cfg.offset_tol,
@@ -289,6 +290,14 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     valid = not faults
     result |= {"measurements_valid": valid, "sensor_faults": faults, "residues": residues, "servo_checks": servo}
     result["not_checked"] |= skipped
+    # the q-axis pairs (paper eq. 10) a servo drive measures otherwise: said so, not as a missing DC sensor
+    phases = [c for c in ("phase_current_sum", "phase_sensor_pair") if c in servo]
+    if "current" in result["not_checked"] and phases:
+        result["not_checked"]["current"] = ("not checked as a q-axis pair (no two q current sensors); the phase "
+                                            f"currents are checked instead ({', '.join(phases)})")
+    if "voltage" in result["not_checked"] and "voltage_reference_check" in servo:
+        result["not_checked"]["voltage"] = ("not checked as a q-axis pair; the dq voltages are checked against "
+                                            "their references instead (voltage_reference_check)")
     # the dq signals the estimator needs: the d current a drive reports or the phase currents' (complete_signals)
     dq: dict[str, np.ndarray] = {}
     if "i_d" in have:

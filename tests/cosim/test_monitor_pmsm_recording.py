@@ -77,6 +77,7 @@ def test_a_drive_trace_with_phase_currents_rpm_rms_and_a_linear_scale(builtin_tr
     assert set(checks) == {"phase_current_sum", "phase_sensor_pair", "dq_current_consistency",
                            "voltage_reference_check", "lost_motion"}
     assert all(c.get("valid", True) for c in checks.values()), checks
+    assert m["not_checked"]["current"].endswith("checked instead (phase_current_sum, phase_sensor_pair)")
     assert checks["dq_current_consistency"]["gain"] == pytest.approx(1.0, abs=0.005)
     assert abs(checks["lost_motion"]["value_mm"]) < 0.002 and not checks["lost_motion"]["detected"]
     for name, tol in (("R", 0.01), ("L_q", 0.005), ("psi_f", 0.002), ("Jt", 0.002)):
@@ -104,6 +105,7 @@ def test_two_phase_currents_and_the_voltage_references_only(builtin_trace, tmp_p
     assert why["phase_current_sum"] == "not checked: two phase currents (I_V is minus their sum: no redundancy)"
     assert why["dq_current_consistency"].startswith("not checked: the q current is the Park transform")
     assert why["voltage_reference_check"].startswith("not checked: the terminal voltages are the references")
+    assert m["gain_ratio_reason"].startswith("not checked: no q current sensor")
     assert m["validated"], m["notes"]
     for name, tol in (("R", 0.01), ("L_q", 0.005), ("psi_f", 0.002)):
         assert m["parameters"][name]["value"] == pytest.approx(BUILTIN[name], rel=tol), name
