@@ -193,7 +193,7 @@ def complete_signals(signals: Mapping[str, np.ndarray], pole_pairs: int, u_loss:
     skip : dict of str to str
         Check name -> ``"not checked: <why>"``.
     notes : list of str
-        What was derived, for the motion's notes.
+        What was derived (report.json ``derived``; the console's ``derived:`` lines).
     """
     sig = {k: np.asarray(v, float) for k, v in signals.items() if v is not None}
     skip: dict[str, str] = {}
