@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -126,3 +127,27 @@ def test_a_bad_or_contradicting_second_sensor_phase_is_one_line_naming_the_key(d
     with pytest.raises(ScenarioError) as err:
         scenario_from_dict(data, base_dir=EXAMPLES)
     assert key in str(err.value) and words in str(err.value) and "\n" not in str(err.value), str(err.value)
+
+
+def test_no_second_sensor_is_said_not_paired_with_a_copy():
+    """``second_sensor_on: null`` (the servo sensors' I_2 then repeats I_U): the monitor does not pair I_U with its
+    own copy, which would always pass; the check says why. With the phase V stated, a 2 % gain error of I_2
+    against I_V is found (gain difference -0.02 +- 0.003)."""
+    from feeddrive.cosim.monitor_servo import servo_checks
+    from feeddrive.estimator.validation import ValidationOptions
+
+    h, n = 1e-4, 20000
+    t = h * np.arange(n)
+    rng = np.random.default_rng(1)
+    phi = 2 * np.pi * 50 * t
+    i = {k: 5 * np.cos(phi - a) + 0.05 * rng.standard_normal(n) for k, a in zip(("I_U", "I_V", "I_W"),
+                                                                                  (0, 2 * np.pi / 3, 4 * np.pi / 3))}
+    signals = i | {"I_2": 1.02 * i["I_V"] + 0.05 * rng.standard_normal(n), "phi_el": phi}
+    args = (signals, h, 4, None, 0.01, 0.005, 0.005, 0.0, ValidationOptions(alpha=0.01))
+    out, faults, skipped = servo_checks(*args, second_on=None)
+    assert "phase_sensor_pair" not in out
+    assert skipped["phase_sensor_pair"] == "not checked: one current sensor per phase (second_sensor_on: none)"
+    out, faults, _ = servo_checks(*args, second_on="V")
+    assert not out["phase_sensor_pair"]["valid"] and out["phase_sensor_pair"]["phase"] == "V"
+    assert out["phase_sensor_pair"]["gain_diff"] == pytest.approx(-0.02, abs=0.003)
+    assert [f["sensor"] for f in faults] == ["I_V or I_2"]
