@@ -62,6 +62,7 @@ INPUT_UNITS = ("A", "A", "rad", "V", "V", "V", "V", "m")
 OUTPUTS = ("I_U", "I_V", "I_W", "I_2", "u_d_ref", "u_q_ref", "u_d", "u_q", "theta_enc", "x_mot", "x_lin")
 OUTPUT_UNITS = ("A", "A", "A", "A", "V", "V", "V", "V", "rad", "m", "m")
 _FIELDS = ("gain", "offset", "noise")
+_SIN120 = math.sqrt(3.0) / 2
 
 
 class LinearScale(StrictConfig):
@@ -218,6 +219,7 @@ class ServoSensors(Component):
         self._m = cfg.oversample if self.fine_rate else 1
         self._acc = [0.0] * 8
         self._weights = interval_mean_weights(self._m)
+        self._averaged = tuple(j for j, k in enumerate(self._kinds) if k == 1)  # the interval-mean channels
         self._lp = [0.0] * 8
         self._filters = []
         for j, c in enumerate(OUTPUTS[:8]):
@@ -268,12 +270,23 @@ class ServoSensors(Component):
         raw = [i_d * math.cos(phi - a) - i_q * math.sin(phi - a) for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
         return [*raw, raw[self._second], u_d_ref, u_q_ref, u_d, u_q], theta, x_table
 
+    def _fine(self) -> list[float]:
+        """``_true``'s analogue channels, written for the plant-rate loop: one cos and one sin per step
+        (``cos(phi - a) = cos phi cos a + sin phi sin a``), the scales unpacked."""
+        v, s = self._inputs, self._scales
+        i_d, i_q = v[0] * s[0], v[1] * s[1]
+        phi = self._p * v[2] * s[2]
+        c, sn = math.cos(phi), math.sin(phi)
+        a, b = i_d * c - i_q * sn, i_d * sn + i_q * c  # phase U; and the quadrature term
+        raw = (a, -0.5 * a + _SIN120 * b, -0.5 * a - _SIN120 * b)  # U, V (a = 120 deg), W (240 deg)
+        return [raw[0], raw[1], raw[2], raw[self._second], v[3] * s[3], v[4] * s[4], v[5] * s[5], v[6] * s[6]]
+
     def step(self, n: int) -> None:
         if self.fine_rate:  # every plant step: the sub-sample into the sums and the filters
-            x, _, _ = self._true()
+            x = self._fine()
             w = self._weights[n % self._m]
             acc = self._acc
-            for j in range(8):
+            for j in self._averaged:
                 acc[j] += w * x[j]
             for j, coefs, states in self._filters:  # direct form II transposed, per second-order section
                 v = x[j]
