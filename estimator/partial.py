@@ -8,8 +8,11 @@ and names the others with the rule that refuses them and its numbers:
   ``Cd sign(w)`` is a constant torque, the same as an offset or a load torque: Cd (and T0) refused;
 * ``speed range``: ``|w|`` spans too narrow a range (``MIN_SPEED_SPREAD`` of its largest value between the 5th
   and 95th percentiles) for ``ft w`` to be told from ``Cd sign(w)``: ft and Cd refused;
-* ``sample period``: the electrical time constant ``L/R`` (its 95 % upper bound) is shorter than
-  ``MIN_TAU_SAMPLES`` sample periods: L refused, R and K from the quasi-static equation ``u = R i + K w``;
+* ``sample period``: an equation's time constant, its derivative parameter over its resistance read from the
+  model (``time_constants``: L/R; the PMSM's L_q/R and L_d/R), has a 95 % upper bound shorter than
+  ``MIN_TAU_SAMPLES`` sample periods: that parameter refused and fixed at 0, the others from the quasi-static
+  equation (DC: ``u = R i + K w``). And at an NC's rate (``MAX_HALF_PHASE``) a parameter on which IV (its halves
+  sampled every 2 h alias the signals) and LS disagree beyond what LS's noise bias explains (``_rate_rule``);
 * ``second lag``: the current follows the voltage through two time constants of comparable size (a sensor's
   low-pass on the current): L/R is one of them and the data cannot tell which (identifiability.py): L refused,
   kept in the fit as a lumped term, R and K given;
