@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import replace
+from functools import lru_cache
 
 import casadi as ca
 import numpy as np
@@ -118,6 +119,7 @@ def _weak(exc: NotEnoughExcitation, reg, fixed: dict, refused: dict, lumped: set
     return False
 
 
+@lru_cache(maxsize=16)
 def time_constants(model) -> list[tuple[str, str, str, str]]:
     """``(equation, state, slope, resistance)`` of each equation with a first-order time constant ``slope /
     resistance``: the physical parameter multiplying the state's derivative (DC: L; PMSM: L_q, L_d; Jt) and the
@@ -158,24 +160,27 @@ def _tau_rule(fit, reg, h: float, fixed: dict, refused: dict, model) -> bool:
     return changed
 
 
-def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped: set) -> None:
-    """L refused (and kept in the fit as a lumped term) when the current shows a second lag (identifiability.py)."""
-    if reg.equation != "electrical" or "L" in refused or not {"R", "L"} <= set(reg.names):
-        return
+def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped: set, model) -> None:
+    """An inductance refused (and kept in the fit as a lumped term) when its current shows a second lag
+    (identifiability.py): the equation of ``reg`` whose state is a current [A], with its time constant slope /
+    resistance read from the model (``time_constants``: L/R; the PMSM's L_q/R in the q-axis regression)."""
     rows = p.rows[reg.equation]
     if not rows.any() or not rows[np.argmax(rows):len(rows) - np.argmax(rows[::-1])].all():
         return  # the d2i/dt2 column needs contiguous samples
-    Di = _signals_for(p, reg).get("Di")
-    if Di is None:
-        return
-    try:
-        test = second_lag(y[rows], Phi[rows], tuple(reg.names), Di[rows], p.h, p.block)
-    except (np.linalg.LinAlgError, ValueError):  # a test that cannot run refuses nothing, never a traceback
-        return
-    why = lag_reason(test, float(fit.theta[reg.names.index("R")]))
-    if why:
-        refused["L"] = why
-        lumped.add("L")
+    for eq, state, a, r in time_constants(model):
+        if eq != reg.equation or model.variables[state].unit != "A" or a in refused or not {a, r} <= set(reg.names):
+            continue
+        Di = _signals_for(p, reg).get("D" + state)
+        if Di is None:
+            continue
+        try:
+            test = second_lag(y[rows], Phi[rows], tuple(reg.names), Di[rows], p.h, p.block, a, r)
+        except (np.linalg.LinAlgError, ValueError):  # a test that cannot run refuses nothing, never a traceback
+            continue
+        why = lag_reason(test, float(fit.theta[reg.names.index(r)]), a, state)
+        if why:
+            refused[a] = why
+            lumped.add(a)
 
 
 def _rate_rule(data: MotionData, ls: MethodResult, iv: MethodResult, options: EstimationOptions, fixed: dict,
@@ -258,7 +263,7 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
             if _tau_rule(fit, reg, p.h, fixed, refused, opts.model):
                 again = True
                 continue
-            _lag_rule(p, reg, y, Phi, fit, refused, lumped)
+            _lag_rule(p, reg, y, Phi, fit, refused, lumped, opts.model)
             fits[reg.equation] = fit
             update_constants(p, reg, fit.theta)
         if again:

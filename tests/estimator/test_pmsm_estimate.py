@@ -147,3 +147,23 @@ def test_a_measured_torque_replaces_its_definition_in_the_mechanical_equation():
     alone = estimate_parameters(MotionData(H, w=d["w"], torque=torque), EstimationOptions(model="pmsm", filter=FILTER))
     assert tuple(alone.parameters) == ("Jt", "ft", "Cd")
     assert max(abs(e) for e in rel_errors(alone.result, truth).values()) < 0.005
+
+
+def test_a_lagged_current_measurement_refuses_l_q_by_the_second_lag_rule():
+    """The phase currents measured through a 3 ms first-order lag (a sensor's filter) next to L_q/R = 11 ms: the
+    q-axis fit with a d2i_q/dt2 column finds the two time constants, L_q is refused with both candidates and kept as
+    a lumped term. (No field weakening: with i_d ~ -17 A the lagged p w L_d i_d term biases R enough that the
+    smaller time constant falls below a tenth of the larger, and the rule does not fire: reported.)"""
+    from scipy import signal
+
+    d = closed_loop("pmsm", (("fw", 0.0),))
+    healthy = estimate_parameters(motion(d), EstimationOptions(model="pmsm", filter=FILTER))
+    assert "L_q" in healthy.parameters and not healthy.refused
+    a = math.exp(-H / 3e-3)
+    lagged = dict(d) | {k: signal.lfilter([1 - a], [1, -a], d[k], zi=[a * d[k][0]])[0] for k in ("i_q", "i_d")}
+    est = estimate_parameters(motion(lagged), EstimationOptions(model="pmsm", filter=FILTER))
+    why = est.refused["L_q"]
+    assert why.startswith("the current lags the voltage through two time constants") and "L_q/R" in why, why
+    assert "L_q" in est.lumped
+    small = float(why.split(" ms and ")[1].split(" ms")[0])
+    assert small == pytest.approx(3.0, rel=0.3)  # the sensor's lag, within 30 %
