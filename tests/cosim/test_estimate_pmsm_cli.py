@@ -94,3 +94,22 @@ def test_an_ncs_4ms_trace_gives_r_within_its_interval_or_refuses_it(tmp_path, ca
         else:
             assert seg["refused"]["R"].startswith("sample period 0.004 s: IV ("), seg["refused"]["R"]
         assert seg["parameters"]["L_q"]["value"] == pytest.approx(8e-3, rel=0.01)
+
+
+def test_cosim_design_on_a_pmsm_axis_scores_the_dq_parameters(capsys):
+    """``cosim design`` on examples/pmsm_axis.yaml: the PMSM's parameters, the dq noises from the servo sensors
+    (three phases of 0.05 A through Park: 0.0408 A), the current vector's peak; --verify is DC-only, said in one
+    line."""
+    from feeddrive.cosim.cli import main
+
+    example = Path(__file__).resolve().parents[2] / "examples" / "pmsm_axis.yaml"
+    assert main(["design", str(example), "--accel", "1,3", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "i_q 0.0408248 A" in out and "(the encoder's speed: not in the prediction)" in out
+    header = next(line for line in out.splitlines() if line.lstrip().startswith("accel"))
+    assert header.split()[3:10] == ["R", "%", "L_d", "%", "L_q", "%", "psi_f"]
+    rows = {float(line.split()[0]): line for line in out.splitlines() if line.strip()[:1].isdigit()}
+    assert float(rows[3.0].split()[-1 if "<-" not in rows[3.0] else -3]) == pytest.approx(4.9, abs=0.3)  # peak A
+    code = main(["design", str(example), "--accel", "3", "--verify", "2", "--no-progress"])
+    _, err = capsys.readouterr()
+    assert code == 2 and "--verify: the campaign check compares the DC drive's estimates" in err
