@@ -35,8 +35,8 @@ from feeddrive.estimator.mismatch import (
     sensitivity_directions,
     speed_segments,
 )
-from feeddrive.estimator.residue_tests import residue_tests
-from feeddrive.estimator.simulation import simulate
+from feeddrive.estimator.residue_tests import block_samples, integrated_noise_covariance, residue_tests
+from feeddrive.estimator.simulation import W_EPS, _ode, simulate
 from feeddrive.models.drives import measured
 
 
@@ -62,6 +62,40 @@ def _null_std(run, params: Mapping[str, float], f: Mapping[str, np.ndarray], ins
         z = filter.apply({x: noise[x] * rng.standard_normal(f[x].size) for x in ins}, h)
         var.append(float(np.mean((run(params, {**f, **{x: f[x] + z[x] for x in ins}})[k] - base) ** 2)))
     return float(np.sqrt(noise[state] ** 2 + np.mean(var)))
+
+
+def _integrated_null(model, equation: str, ins: tuple[str, ...], params: Mapping[str, float],
+                     f: Mapping[str, np.ndarray], k: np.ndarray, noise: Mapping[str, float], h: float,
+                     rate_hz: float):
+    """The null covariance of a segmented residue's blocks (``residue_tests.integrated_noise_covariance``): the
+    state's sensor noise plus its inputs' noises integrated by the equation from each segment's start, an AR(1) at
+    the block rate, ``rho = exp(-a tb)``, ``ratio = sum_j (b_j tb s_j)^2 / s_x^2`` with ``a = -df/dx`` and ``b_j
+    = df/du_j`` of the equation's ODE at the motion's RMS point (DC: ``ft / Jt`` and ``K / Jt``: mismatch.py's;
+    PMSM: ``K_t / Jt`` for i_q). None without every noise."""
+    state = model.equations[equation].solves_for
+    if state not in noise or any(x not in noise for x in ins) or not noise[state] > 0:
+        return None
+    names = tuple(sorted(ins))
+    ode, _, phys, _ = _ode(model, (equation,), names)
+    p = [float(params.get(v.name, v.nominal or 0.0)) for v in phys] + [W_EPS]
+    x0 = float(np.sqrt(np.mean(f[state][k] ** 2)))
+    s0 = np.array([float(np.sqrt(np.mean(f[x][k] ** 2))) for x in names])
+
+    def rhs(x: float, s: np.ndarray) -> float:
+        return float(ode(x, s, p))
+
+    dx = 1e-6 * max(x0, 1.0)
+    a = -(rhs(x0 + dx, s0) - rhs(x0 - dx, s0)) / (2 * dx)
+    tb = block_samples(rate_hz, h) * h
+    ratio = 0.0
+    for j, x in enumerate(names):
+        e = np.zeros(len(names))
+        e[j] = 1e-6 * max(abs(s0[j]), 1.0)
+        b = (rhs(x0, s0 + e) - rhs(x0, s0 - e)) / (2 * e[j])
+        ratio += (b * tb * noise[x]) ** 2
+    rho = float(np.exp(-max(a, 0.0) * tb))
+    ratio /= noise[state] ** 2
+    return lambda nb: integrated_noise_covariance(nb, rho, ratio)
 
 
 def check_model_equations(signals: Mapping[str, np.ndarray], h: float, parameters: Mapping[str, float], model,
@@ -177,9 +211,12 @@ def check_model_equations(signals: Mapping[str, np.ndarray], h: float, parameter
         reg = [x for x in ins if x in (instruments or {})] or list(ins)
         X = np.column_stack([fi[x] for x in reg])[k]
         sigma = _null_std(run, params, f, ins, state, noise or {}, h, filter, k)
+        # a segmented residue (the speed) integrates its inputs' noise from each segment's start: its null colour
+        null = _integrated_null(model, eq.name, ins, params, f, k, noise or {}, h, rate_hz) if segmented else None
         tests, rms, corr, band = residue_tests(state, (f[state] - simulated)[k], D, X, h, alpha, rate_hz, lags,
                                                ar_order, sigma, noise_dof,
-                                               labels[k] if segmented else None, constant=not segmented)
+                                               labels[k] if segmented else None, constant=not segmented,
+                                               segment_covariance=null)
         checks[state] = ResidueCheck(state, tests, rms, np.nan if sigma is None else sigma, simulated,
                                      np.where(k, f[state] - simulated, np.nan), corr, band)
     results = [(f"{name} {t}", r) for name, c in checks.items() for t, r in c.tests.items()]
