@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from feeddrive.cosim import monitor_checks as checks
+from feeddrive.cosim.model_check_servo import servo_model_check
 from feeddrive.estimator import redundancy_servo as rs
 from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
@@ -313,8 +314,6 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     data = MotionData(h, w=best["w"], signals=dq, t0=start, delays=delays)
     adequacy = check_motion(data, options)  # before the estimation: a mismatch explains a refusal
     result["adequacy"] = adequacy.to_dict()
-    result["not_checked"]["model (paper, output error)"] = ("not checked: the output-error check simulates the DC "
-                                                           "model; the PMSM's is the residue check")
     try:
         est = estimate_parameters(data, options, dict(cfg.bounds))
     except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
@@ -330,8 +329,15 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     flags = dict(est.flags)
     if flags:
         result["flags"] = flags
-    mismatch = adequacy.mismatch
-    result["validated"] = bool(valid and not flags and adequacy.verdict == "adequate")
+    # the paper's output-error check, simulated from the model's equations; the residue check reported beside it
+    paper, why = servo_model_check(pipe, signals, dq, best, h, est, faults)
+    if paper is None:
+        result["not_checked"]["model (paper, output error)"] = why
+    else:
+        result["mismatch"] = paper.to_dict()  # (not trace.mismatch: Fig. 13-14's plots draw the DC residues)
+    mismatch = adequacy.mismatch if paper is None else not paper.passed
+    result["validated"] = bool(valid and not flags and not mismatch and (paper is not None
+                                                                          or adequacy.verdict == "adequate"))
     checks.note_not_validated(result, flags, valid, mismatch, adequacy.verdict)
     if result["validated"]:
         pipe.diagnose(result)

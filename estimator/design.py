@@ -35,11 +35,36 @@ import numpy as np
 from feeddrive.estimator.derivative import zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.estimate import EstimationOptions, MotionData, prepare
+from feeddrive.estimator.model_terms import ls_parts, signals_for
+from feeddrive.estimator.motion import FIELDS
 from feeddrive.estimator.simulation import rk4_step
-from feeddrive.models import feed_drive
+from feeddrive.models.drives import drive_model, measured
 
-MODEL = feed_drive()
+MODEL = drive_model("dc")
 PHYSICAL = tuple(v.name for v in MODEL.parameters if v.kind == "physical" and not v.optional)
+
+
+def physical(model) -> tuple[str, ...]:
+    """The model's physical parameters the design scores (not the optional offset)."""
+    return tuple(v.name for v in model.parameters if v.kind == "physical" and not v.optional)
+
+
+def motion_data(signals: Mapping[str, np.ndarray], h: float, model) -> MotionData:
+    """The model's measured signals of ``signals`` as a motion (DC ``u, i, w``; PMSM ``u_q, u_d, i_q, i_d, w``)."""
+    names = [k for k in (*measured(model), "w") if k in signals]
+    fields = {k: signals[k] for k in names if k in FIELDS}
+    return MotionData(h, **fields, signals={k: signals[k] for k in names if k not in FIELDS})
+
+
+def peaks(signals: Mapping[str, np.ndarray], model) -> tuple[float, float]:
+    """Peak current and voltage amplitudes [A, V] of the measured signals: the vector sum of those in A (in V)
+    at each sample (DC: |i|, |u|; PMSM: the dq current and voltage vectors' amplitudes)."""
+    out = []
+    for unit in ("A", "V"):
+        xs = [np.asarray(signals[k], dtype=float) for k in measured(model)
+              if k in signals and model.variables[k].unit == unit]
+        out.append(float(np.max(np.sqrt(sum(x ** 2 for x in xs)))) if xs else 0.0)
+    return out[0], out[1]
 
 
 def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float] | None = None,
@@ -85,15 +110,17 @@ def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float
     return {v.name: Y[k] for k, v in enumerate(model.outputs)}
 
 
-def _error_gains(reg, theta: np.ndarray) -> dict[str, float]:
-    """Equation error ``y - Phi theta`` per unit of each signal (the regressions are linear in the signals
-    except sign(w), whose noise is negligible away from the excluded low speeds)."""
-    zero = {name: np.zeros(1) for name in reg.signals}
-    y0, P0 = reg.evaluate(zero)
+def _error_gains(reg, theta: np.ndarray, at: Mapping[str, float] | None = None) -> dict[str, float]:
+    """Equation error ``y - Phi theta`` per unit of each signal, at the operating point ``at`` (signal -> value;
+    default 0). The DC regressions are linear in the signals (except sign(w), whose noise is negligible away from
+    the excluded low speeds), so the point does not matter; the PMSM's ``p w L_d i_d`` is bilinear, and its
+    gains are taken at the motion's RMS speed and currents."""
+    base = {name: np.full(1, float((at or {}).get(name, 0.0))) for name in reg.signals}
+    y0, P0 = reg.evaluate(base)
     gains = {}
     for name in reg.signals:
-        if name != "sgn_w":
-            y1, P1 = reg.evaluate(zero | {name: np.ones(1)})
+        if name != "sgn_w" and name not in reg.constants:
+            y1, P1 = reg.evaluate(base | {name: base[name] + 1.0})
             gains[name] = float((y1[0] - P1[0] @ theta) - (y0[0] - P0[0] @ theta))
     return gains
 
@@ -123,40 +150,53 @@ def predicted_std(signals: Mapping[str, np.ndarray], h: float, noise: Mapping[st
 
     Parameters
     ----------
-    signals : mapping with ``u`` [V], ``i`` [A], ``w`` [rad/s], each shape (n,)
-        Noise-free signals of the motion.
+    signals : mapping of str to ndarray, each shape (n,)
+        Noise-free measured signals of the motion (``options.model``'s: DC ``u`` [V], ``i`` [A], ``w``
+        [rad/s]; PMSM ``u_q, u_d, i_q, i_d, w``).
     h : float
         Sampling period [s].
-    noise : mapping with ``u`` [V], ``i`` [A] and optionally ``w`` [rad/s]
-        White noise std of the voltage, current and speed measurements at the sampling rate.
+    noise : mapping of str to float
+        White noise std of each measured signal at the sampling rate (DC ``u``, ``i`` and optionally ``w``);
+        a signal not given is noise-free.
     options : EstimationOptions
-        The estimator's options (filter, speed threshold).
+        The estimator's options (model, filter, speed threshold).
     params : mapping or None
         True parameters (nominal by default), to turn theta_m = p / K into relative errors.
 
     Returns
     -------
     dict of str to float
-        ``std_p / p`` for R, L, K, Jt, ft, Cd.
+        ``std_p / p`` for the model's physical parameters (DC: R, L, K, Jt, ft, Cd). An equation fitted jointly
+        with a partner (the PMSM's d axis with the q axis) is predicted from its own samples only.
     """
-    truth = MODEL.nominal() | dict(params or {})
-    prep = prepare(MotionData(h=h, u=signals["u"], i=signals["i"], w=signals["w"]), options)
+    model = options.model
+    truth = model.nominal() | dict(params or {})
+    prep = prepare(motion_data(signals, h, model), options)
     g_f, g_d = _pipeline_responses(h, options)
     rel_var: dict[str, float] = {}
     for reg in prep.regressions:
         scale = truth[reg.normaliser] if reg.normaliser else 1.0
         theta = np.array([truth[name] / scale for name in reg.names])
-        gains = _error_gains(reg, theta)
-        acov = sum(noise.get(s, 0.0) ** 2 * np.correlate(g, g, "full")
-                   for s in ("u", "i", "w") if (g := gains.get(s, 0.0) * g_f + gains.get("D" + s, 0.0) * g_d).any())
-        _, Phi = reg.evaluate(prep.signals)
-        Phi = Phi * prep.rows[reg.equation][:, None]  # excluded samples contribute nothing
-        mid = len(acov) // 2
-        B = acov[mid] * Phi.T @ Phi
-        for k in range(1, min(mid, len(Phi) - 1) + 1):
-            C = Phi[:-k].T @ Phi[k:]
-            B += acov[mid + k] * (C + C.T)
-        A_inv = np.linalg.pinv(Phi.T @ Phi)
+        A, B = 0.0, 0.0
+        # its own samples, and its partner's (the PMSM's d axis, whose p w L_q i_q carries most of L_q)
+        for r, (_, Phi, _, rows) in zip((reg, prep.partners.get(reg.equation)), ls_parts(prep, reg)):
+            sig = signals_for(prep, r)
+            at = {k: (float(np.sqrt(np.mean(sig[k][rows] ** 2))) if k not in r.constants else float(sig[k][0]))
+                  for k in r.signals}
+            gains = _error_gains(r, np.array([truth[n] / scale for n in r.names]), at | {"sgn_w": 1.0})
+            acov = sum(noise.get(x, 0.0) ** 2 * np.correlate(g, g, "full")
+                       for x in dict.fromkeys((*measured(model), "w"))
+                       if (g := gains.get(x, 0.0) * g_f + gains.get("D" + x, 0.0) * g_d).any())
+            Phi = Phi * rows[:, None]  # excluded samples contribute nothing
+            A = A + Phi.T @ Phi
+            if np.ndim(acov) == 0:  # no noise reaches this equation
+                continue
+            mid = len(acov) // 2
+            B = B + acov[mid] * Phi.T @ Phi
+            for k in range(1, min(mid, len(Phi) - 1) + 1):
+                C = Phi[:-k].T @ Phi[k:]
+                B = B + acov[mid + k] * (C + C.T)
+        A_inv = np.linalg.pinv(A)
         cov = A_inv @ B @ A_inv
         for j, name in enumerate(reg.names):
             rel_var[name] = cov[j, j] / theta[j] ** 2
@@ -164,7 +204,7 @@ def predicted_std(signals: Mapping[str, np.ndarray], h: float, noise: Mapping[st
         if reg.normaliser:
             for name in reg.names:
                 rel_var[name] += rel_var[reg.normaliser]
-    return {name: float(np.sqrt(rel_var[name])) for name in PHYSICAL if name in rel_var}
+    return {name: float(np.sqrt(rel_var[name])) for name in physical(model) if name in rel_var}
 
 
 @dataclass(frozen=True)
@@ -194,10 +234,10 @@ def design_acceleration(reference: Callable[[float], np.ndarray], accels: Sequen
         Candidate accelerations [m/s^2].
     h : float
         Sampling period [s].
-    noise : mapping with ``u`` [V], ``i`` [A] and optionally ``w`` [rad/s]
-        Measurement noise std.
+    noise : mapping of str to float
+        Measurement noise std of each measured signal (as for ``predicted_std``).
     options, params
-        As for ``predicted_std``.
+        As for ``predicted_std`` (``options.model``: the drive simulated and scored).
 
     Returns
     -------
@@ -210,12 +250,13 @@ def design_acceleration(reference: Callable[[float], np.ndarray], accels: Sequen
     EstimatorInputError
         When no candidate is feasible.
     """
-    limits = MODEL.nominal() | dict(params or {})
+    model = options.model
+    limits = model.nominal() | dict(params or {})
     candidates = []
     for a in accels:
         w_ref = reference(float(a))
-        sig = simulate_closed_loop(w_ref, h, params)
-        peak_i, peak_u = float(np.max(np.abs(sig["i"]))), float(np.max(np.abs(sig["u"])))
+        sig = simulate_closed_loop(w_ref, h, params, model=model)
+        peak_i, peak_u = peaks(sig, model)
         rel = predicted_std(sig, h, noise, options, params)
         feasible = peak_i < 0.99 * limits["i_max"] and peak_u < 0.99 * limits["u_max"]
         candidates.append(Candidate(float(a), len(w_ref) * h, rel, float(sum(v ** 2 for v in rel.values())),

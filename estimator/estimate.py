@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import replace
 
+import casadi as ca
 import numpy as np
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
@@ -47,7 +48,7 @@ from feeddrive.estimator.motion import (
 )
 from feeddrive.estimator.regression import derive_regression
 from feeddrive.estimator.simulation import MODEL, simulate
-from feeddrive.models.drives import differentiated, measured
+from feeddrive.models.drives import differentiated, measured, parameter_defined
 
 _signals_for = signals_for  # its former private name, still imported by partial and physical
 
@@ -74,7 +75,10 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
         raw.pop("position", None)  # a tachometer is preferred to the differentiated encoder
     known_signals = measured_signals(model)
     unknown = sorted(set(raw) - set(FIELDS) - set(known_signals))
-    if unknown or (model is not MODEL and ("torque" in raw or set(raw) & {"u", "i"} - set(known_signals))):
+    # a torque signal: the normaliser times the output (DC: K i), or the model's own torque signal (PMSM)
+    defined = parameter_defined(model)
+    if unknown or (model is not MODEL and (("torque" in raw and "torque" not in defined)
+                                           or set(raw) & {"u", "i"} - set(known_signals))):
         bad = (unknown or sorted({"torque", "u", "i"} & set(raw)))[0]
         raise EstimatorInputError(f"signal {bad!r} is not measured on the {model.name} model: expected "
                                   f"{', '.join(measured(model))} (and position)")
@@ -113,13 +117,16 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     owner = owners(model)  # cheap: each equation's parameters are kept per model (kernels)
     regressions, overrides = [], {}
     for eq in model.equations.values():
-        known, over = dict(options.known), {}
-        if eq.normaliser and "torque" in sig:
+        known, over, kept = dict(options.known), {}, ()
+        if "torque" in sig and "torque" in defined \
+                and ca.depends_on(eq.residual, model.variables["torque"].sym):
+            kept = ("torque",)  # measured: it replaces its definition (1.5 p (psi_f i_q + (L_d - L_q) i_d i_q))
+        elif eq.normaliser and "torque" in sig:
             known[eq.normaliser] = 1.0  # the torque signal is the normaliser times the output (K i)
             over[eq.output] = sig["torque"]
         mine = [n for n in free if owner.get(n) == eq.name or n == eq.normaliser]
         borrowed = tuple(n for n in equation_parameters_of(model, eq.name) if n in free and n not in mine)
-        reg = derive_regression(model, eq.name, mine, known, borrowed)
+        reg = derive_regression(model, eq.name, mine, known, borrowed, kept)
         if reg.names and all({**sig, **over}.get(x) is not None for x in reg.signals if x not in reg.constants):
             regressions.append(reg)
             overrides[eq.name] = over
@@ -273,7 +280,7 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
             continue
         eq = model.equations[reg.equation]
         sig = _signals_for(source, reg)
-        inputs = {x: sig[x] for x in reg.signals if x in meas and x != eq.solves_for}
+        inputs = {x: sig[x] for x in reg.signals if (x in meas or x == "torque") and x != eq.solves_for}
         # a torque signal replaces normaliser * output: simulate with the normaliser at 1
         values = dict(par, **{eq.normaliser: 1.0}) if source.overrides[reg.equation] else par
         out[eq.solves_for] = simulate((reg.equation,), inputs, values, h, {eq.solves_for: sig[eq.solves_for][0]},

@@ -28,8 +28,8 @@ from scipy import stats
 MIN_LAG_RATIO = 0.1
 
 
-def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.ndarray, h: float, block: int
-               ) -> dict | None:
+def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.ndarray, h: float, block: int,
+               slope: str = "L", resistance: str = "R") -> dict | None:
     """The electrical fit with a ``d2i/dt2`` column, and the two time constants it implies.
 
     Parameters
@@ -41,6 +41,8 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
     names : tuple of str
     Di : ndarray, shape (n,)
         The filtered current's derivative [A/s] on the same rows (contiguous samples).
+    slope, resistance : str
+        The columns of the derivative's coefficient and of the current's (DC: L, R; the PMSM's q axis: L_q, R).
     h : float
         Sample period [s].
     block : int
@@ -53,7 +55,7 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
         complex, "R": R of the augmented fit [Ohm]}``; None when the test cannot run (too few batches,
         R or L not fitted, R not positive).
     """
-    if not {"R", "L"} <= set(names):
+    if not {resistance, slope} <= set(names):
         return None
     X = np.column_stack([Phi, np.gradient(Di, h)])
     if len(y) <= X.shape[1] + 2 * max(1, int(block)) or not np.all(np.isfinite(X)) or not np.all(np.isfinite(y)):
@@ -64,7 +66,7 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
     theta, *_ = np.linalg.lstsq(Xs, y, rcond=None)
     t = _newey_west_t(Xs, y - Xs @ theta, max(1, int(block)), theta)
     theta = theta / scale
-    R, L, M = theta[names.index("R")], theta[names.index("L")], theta[-1]
+    R, L, M = theta[names.index(resistance)], theta[names.index(slope)], theta[-1]
     if not (R > 0 and np.isfinite(M) and np.isfinite(t)):
         return None
     a1, a2 = L / R, M / R
@@ -73,7 +75,7 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
     return {"t": t, "taus": taus, "R": float(R)}
 
 
-def lag_reason(test: Mapping | None, R: float) -> str | None:
+def lag_reason(test: Mapping | None, R: float, slope: str = "L", state: str = "i") -> str | None:
     """The refusal of L when ``second_lag`` found a second lag that matters (module docstring), else None."""
     if test is None or test["taus"] is None:
         return None
@@ -82,10 +84,10 @@ def lag_reason(test: Mapping | None, R: float) -> str | None:
     if not (test["t"] > q and small > 0 and small >= MIN_LAG_RATIO * big):
         return None
     return (f"the current lags the voltage through two time constants, {big * 1e3:.3g} ms and {small * 1e3:.3g} ms "
-            f"(d2i/dt2 term t = {test['t']:.3g} > {q:.3g}): one is L/R, the other a lag of the current measurement "
-            f"(a sensor filter) or of the amplifier, and u, i, w cannot tell which; L is either {R * small:.3g} or "
-            f"{R * big:.3g} H (R = {R:.3g}), the first-order fit's {R * (big + small):.3g} H is neither (kept in the fit, "
-            f"as a lumped term, for R and K)")
+            f"(d2{state}/dt2 term t = {test['t']:.3g} > {q:.3g}): one is {slope}/R, the other a lag of the current "
+            f"measurement (a sensor filter) or of the amplifier, and the signals cannot tell which; {slope} is either "
+            f"{R * small:.3g} or {R * big:.3g} H (R = {R:.3g}), the first-order fit's {R * (big + small):.3g} H is "
+            f"neither (kept in the fit, as a lumped term, for the others)")
 
 
 def _newey_west_t(X: np.ndarray, e: np.ndarray, lags: int, theta: np.ndarray) -> float:

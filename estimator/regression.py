@@ -132,19 +132,21 @@ class Regression:
 
 
 def derive_regression(model, equation: str, free: list[str], known: Mapping[str, float],
-                      borrowed: tuple[str, ...] = ()) -> Regression:
-    return _derive(model, equation, tuple(free), tuple(sorted(known.items())), tuple(borrowed))
+                      borrowed: tuple[str, ...] = (), measured: tuple[str, ...] = ()) -> Regression:
+    return _derive(model, equation, tuple(free), tuple(sorted(known.items())), tuple(borrowed), tuple(measured))
 
 
-def equation_residual(model, equation: str) -> ca.SX:
+def equation_residual(model, equation: str, measured: tuple[str, ...] = ()) -> ca.SX:
     """The residual of one equation as the estimator sees it: no load (inputs zero), and the algebraic
-    signals defined from physical parameters (the PMSM's air-gap torque) replaced by their definition."""
+    signals defined from physical parameters (the PMSM's air-gap torque) replaced by their definition,
+    unless they are ``measured`` (a torque signal: then the residual holds it as a signal)."""
     from feeddrive.models.drives import parameter_defined
 
     residual = model.equations[equation].residual
     inputs = [v.sym for v in model.inputs]
     residual = ca.substitute(residual, ca.vertcat(*inputs), ca.DM.zeros(len(inputs)))
-    subs = [n for n in parameter_defined(model) if ca.depends_on(residual, model.variables[n].sym)]
+    subs = [n for n in parameter_defined(model)
+            if n not in measured and ca.depends_on(residual, model.variables[n].sym)]
     if subs:
         residual = ca.substitute(residual, ca.vertcat(*[model.variables[n].sym for n in subs]),
                                  ca.vertcat(*[model._substitute_algebraic(model.algebraic[n]) for n in subs]))
@@ -158,8 +160,8 @@ def equation_parameters(model, equation: str) -> tuple[str, ...]:
 
 
 @lru_cache(maxsize=64)
-def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple, borrowed: tuple[str, ...] = ()
-            ) -> Regression:
+def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple, borrowed: tuple[str, ...] = (),
+            measured: tuple[str, ...] = ()) -> Regression:
     """Derive the regression of one model equation.
 
     Parameters
@@ -175,6 +177,8 @@ def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple, bor
         Parameters fixed to a known value.
     borrowed : tuple of str
         Parameters estimated by another equation: kept as symbols, evaluated as constant signals.
+    measured : tuple of str
+        Parameter-defined algebraic signals that are measured (``torque``): kept as signals.
 
     Returns
     -------
@@ -183,7 +187,7 @@ def _derive(model, equation: str, free: tuple[str, ...], known_items: tuple, bor
     known = dict(known_items)
     eq = model.equations[equation]
     # no machining during a high-speed motion: inputs (load torque) are zero
-    residual = equation_residual(model, equation)
+    residual = equation_residual(model, equation, measured)
     params = [v for v in model.parameters if ca.depends_on(residual, v.sym)]
     names = [v.name for v in params if v.name in free and v.name not in known and v.name not in borrowed]
     fixed = [v for v in params if v.name not in names and v.name not in borrowed]

@@ -65,7 +65,8 @@ def reference(nc, item: int, accel: float, h: float, tail: float = 0.1) -> np.nd
 
 def main(args: argparse.Namespace) -> int:
     from feeddrive.cosim.scenario import load_scenario
-    from feeddrive.estimator.design import PHYSICAL, design_acceleration
+    from feeddrive.estimator.design import design_acceleration, physical
+    from feeddrive.estimator.motion import EstimationOptions
 
     # checked now, not after the whole design sweep
     if args.verify < 0 or args.verify == 1:
@@ -86,12 +87,11 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"--accel: expected comma-separated numbers [m/s^2], got {args.accel!r}") from None
     if any(not a > 0 for a in accels):
         raise InputError(f"--accel: accelerations must be > 0 m/s^2, got {accels}")
-    noise = {"u": scenario.sensors.voltage.noise, "i": scenario.sensors.current[0].noise,
-             "w": scenario.sensors.tachometer.noise}
-    from feeddrive.estimator.design import MODEL
+    model, noise, note = drive_noise(scenario)
+    options = EstimationOptions(model=model)
 
     # the design simulates the built-in model: a vendor plant's own parameter names are not used
-    params = {k: v for k, v in scenario.plant.parameters.items() if k in MODEL.nominal()}
+    params = {k: v for k, v in scenario.plant.parameters.items() if k in model.nominal()}
     from tqdm import tqdm
 
     from feeddrive.cosim.progress import enabled
@@ -106,19 +106,47 @@ def main(args: argparse.Namespace) -> int:
             return reference(scenario.nc, item, a, scenario.step)
 
         started: list[float] = []
-        best, candidates = design_acceleration(ref, accels, scenario.step, noise, params=params)
+        best, candidates = design_acceleration(ref, accels, scenario.step, noise, options, params=params)
         bar.update()
-    print(f"{scenario.name}: nc.program[{item}].{kind}, default accel {move.accel} m/s^2; noise u {noise['u']} V, "
-          f"i {noise['i']} A, w {noise['w']} rad/s")
-    print(f"{'accel':>6} {'time s':>7} " + " ".join(f"{p + ' %':>8}" for p in PHYSICAL) + f" {'J':>9} {'peak A':>7}")
+    names = physical(model)
+    print(f"{scenario.name}: nc.program[{item}].{kind}, default accel {move.accel} m/s^2; noise "
+          + ", ".join(f"{k} {v:g} {model.variables[k].unit}" for k, v in noise.items()) + note)
+    print(f"{'accel':>6} {'time s':>7} " + " ".join(f"{p + ' %':>8}" for p in names) + f" {'J':>9} {'peak A':>7}")
     for c in candidates:
         mark = " <- best" if c is best else "" if c.feasible else " (saturates)"
-        print(f"{c.accel:6.2f} {c.duration:7.2f} " + " ".join(f"{100 * c.rel_std[p]:8.3f}" for p in PHYSICAL)
+        print(f"{c.accel:6.2f} {c.duration:7.2f} " + " ".join(f"{100 * c.rel_std[p]:8.3f}" for p in names)
               + f" {c.criterion:9.3g} {c.peak_current:7.1f}{mark}")
     print(f"chosen slope: {best.accel} m/s^2 (criterion: sum of squared relative standard errors)")
     if args.verify:
+        if model.name != "FeedDrive":
+            raise InputError(f"--verify: the campaign check compares the DC drive's estimates; the {model.name} "
+                             f"design is printed above without it")
         verify(args, scenario, item, kind, move.accel, best.accel, noise, params)
     return 0
+
+
+def drive_noise(scenario) -> tuple:
+    """The axis's drive model, the white noise std of each of its measured signals, and a note on what is left out.
+
+    DC: the voltage, the first current sensor and the tachometer. PMSM (``axis.drive.kind: pmsm``, the servo
+    sensors' component): the dq voltages' channel, and the dq currents from three phase sensors of noise s by
+    the amplitude-invariant Park transform, ``s sqrt(2 / 3)``; the speed from the encoder is differentiated
+    quantisation, not white noise, and is left out of the prediction (said in the note).
+    """
+    from feeddrive.cosim.drive import SERVO
+    from feeddrive.cosim.sensors_servo import ServoSensorsConfig
+    from feeddrive.models.drives import drive_model, with_design
+
+    drive = scenario.axis.drive
+    if drive is None or drive.kind == "dc":
+        return drive_model("dc"), {"u": scenario.sensors.voltage.noise, "i": scenario.sensors.current[0].noise,
+                                   "w": scenario.sensors.tachometer.noise}, ""
+    spec = next((c for c in scenario.components if c.name == SERVO), None)
+    cfg = ServoSensorsConfig(**(spec.config if spec is not None else {}))
+    model = with_design(drive_model(drive.kind), {"p": float(drive.pole_pairs or cfg.pole_pairs)})
+    i = float(np.sqrt(np.mean([ph.noise ** 2 for ph in cfg.phases]) * 2 / 3))
+    noise = {"u_q": cfg.voltage.noise, "u_d": cfg.voltage.noise, "i_q": i, "i_d": i}
+    return model, noise, " (the encoder's speed: not in the prediction)"
 
 
 def verify(args, scenario, item: int, kind: str, default: float, best: float, noise, params) -> None:

@@ -66,8 +66,8 @@ from feeddrive.estimator.pooling import pool
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
          "state": None, "i_q": "i_q", "i_d": "i_d", "u_q": "u_q", "u_d": "u_d"}
 #: roles of each drive kind (``--drive``): the DC motor's voltage and current, or a PMSM's dq ones
-DRIVE_ROLES = {"dc": ("voltage", "current", "torque"), "pmsm": ("i_q", "i_d", "u_q", "u_d"),
-               "pmsm-spm": ("i_q", "i_d", "u_q", "u_d")}
+DRIVE_ROLES = {"dc": ("voltage", "current", "torque"), "pmsm": ("i_q", "i_d", "u_q", "u_d", "torque"),
+               "pmsm-spm": ("i_q", "i_d", "u_q", "u_d", "torque")}
 
 
 class NothingEstimated(InputError):

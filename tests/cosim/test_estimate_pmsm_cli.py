@@ -62,3 +62,54 @@ def test_dc_roles_with_a_pmsm_and_bad_pole_pairs_are_one_line_errors(recording, 
     assert code == 2 and "unknown role(s) ['current']" in err and "Traceback" not in err
     code, _, err = run(capsys, recording, *MAP, "--pole-pairs", "0")
     assert code == 2 and "--pole-pairs 0: expected a positive number" in err
+
+
+def test_an_ncs_4ms_trace_gives_r_within_its_interval_or_refuses_it(tmp_path, capsys):
+    """The co-simulated tool changes (the NC's reference held over each 0.1 ms step) traced at 4 ms: IV's halves
+    (8 ms) alias the current's transients, R came out 3 % low with an interval excluding 0.70. Now every motion
+    gives R within its interval or refuses it with the sample-period rule's numbers."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_monitor_pmsm import AXIS, _run
+
+    axis = {k: v for k, v in AXIS.items() if k != "monitor"} | {"name": "pmsm-4ms"}
+    result = _run(tmp_path, axis, "pmsm-4ms")
+    signals = result.out_dir / "signals.csv"
+    header = signals.read_text().split("\n", 1)[0].split(",")
+    rec = np.loadtxt(signals, delimiter=",", skiprows=1)
+    cols = [header.index(c) for c in ("time [s]", "plant.voltage [V]", "plant.u_d [V]", "plant.current [A]",
+                                      "plant.i_d [A]", "plant.speed [rad/s]", "nc.state [1]")]
+    rec = rec[::40, cols]  # an NC's trace: instantaneous samples every 4 ms
+    path = tmp_path / "rec4ms.csv"
+    np.savetxt(path, rec, delimiter=",", comments="",
+               header="time [s],u_q [V],u_d [V],i_q [A],i_d [A],w [rad/s],state [1]", fmt="%.12g")
+    code, out, _ = run(capsys, path, "--map", "time=time", "u_q=u_q", "u_d=u_d", "i_q=i_q", "i_d=i_d", "speed=w",
+                       "state=state", "--drive", "pmsm", "--pole-pairs", "4", "--json")
+    assert code == 0
+    segs = json.loads(out)["segments"]
+    assert len(segs) == 2
+    for seg in segs:
+        if "R" in seg["parameters"]:
+            lo, hi = seg["parameters"]["R"]["ci95"]
+            assert lo <= 0.7 <= hi, seg["parameters"]["R"]
+        else:
+            assert seg["refused"]["R"].startswith("sample period 0.004 s: IV ("), seg["refused"]["R"]
+        assert seg["parameters"]["L_q"]["value"] == pytest.approx(8e-3, rel=0.01)
+
+
+def test_cosim_design_on_a_pmsm_axis_scores_the_dq_parameters(capsys):
+    """``cosim design`` on examples/pmsm_axis.yaml: the PMSM's parameters, the dq noises from the servo sensors
+    (three phases of 0.05 A through Park: 0.0408 A), the current vector's peak; --verify is DC-only, said in one
+    line."""
+    from feeddrive.cosim.cli import main
+
+    example = Path(__file__).resolve().parents[2] / "examples" / "pmsm_axis.yaml"
+    assert main(["design", str(example), "--accel", "1,3", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "i_q 0.0408248 A" in out and "(the encoder's speed: not in the prediction)" in out
+    header = next(line for line in out.splitlines() if line.lstrip().startswith("accel"))
+    assert header.split()[3:10] == ["R", "%", "L_d", "%", "L_q", "%", "psi_f"]
+    rows = {float(line.split()[0]): line for line in out.splitlines() if line.strip()[:1].isdigit()}
+    assert float(rows[3.0].split()[-1 if "<-" not in rows[3.0] else -3]) == pytest.approx(4.9, abs=0.3)  # peak A
+    code = main(["design", str(example), "--accel", "3", "--verify", "2", "--no-progress"])
+    _, err = capsys.readouterr()
+    assert code == 2 and "--verify: the campaign check compares the DC drive's estimates" in err

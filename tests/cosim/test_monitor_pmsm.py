@@ -179,3 +179,18 @@ def test_known_nominal_and_bounds_take_the_drive_models_names(tmp_path):
     bad.write_text("name: s\naxis: {name: PK, pitch: 0.01, drive: {kind: pmsm, pole_pairs: 4}}\nstep: 1.0e-4\n"
                    "nc: {program: [{dwell: {time: 0.1}}]}\nmonitor: {known: {K: 1.0}}\n")
     assert cosim_main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_the_papers_output_error_check_passes_a_healthy_motion_and_flags_a_load_torque_step(tmp_path):
+    """The paper's model check (issue 25 item 4) on the PMSM, from the model's equations (estimator/model_check.py):
+    the healthy motion passes at mismatch_alpha = 1 % with the q, d and mechanical equations tested on their second
+    sensors; a 0.5 N.m load torque stepping in at 0.8 s, inside the first tool change, is a model mismatch."""
+    healthy = _run(tmp_path, copy.deepcopy(AXIS), "healthy").report["motions"][0]
+    mm = healthy["mismatch"]
+    assert mm["passed"] and healthy["validated"], mm
+    assert set(mm["checks"]) == {"i_q", "i_d", "w"} and "not tested" not in mm["rule"]
+    data = copy.deepcopy(AXIS)
+    data["events"] = [{"time": 0.8, "target": "plant.T0", "value": 0.5}]
+    loaded = _run(tmp_path, data, "load-step").report["motions"][0]
+    assert loaded["mismatch"]["passed"] is False and not loaded["validated"], loaded["mismatch"]
+    assert loaded["verdict"] == "model mismatch"
