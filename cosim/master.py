@@ -17,9 +17,11 @@ of ``Y``. Time is ``t0 + n h`` with an integer n.
 Two loops, the same results bit for bit (tests/cosim/test_fastloop.py). The fast path (``Master.loop`` says
 which ran and why; report.json has it as ``loop``): when the plant is an FMI 2.0 Co-Simulation FMU with Real
 outputs and the standard sensors follow it at the finest rate (cosim/fastloop/fine.py ``plan``), the two
-step in compiled blocks (cosim/fastloop/fineloop.c) from one tick at which a Python component steps or an
-event lands to the next, recording the rows inside the block; the NC, the monitor and the user components
-step in Python at their rates in between. Otherwise (Model Exchange, FMI 3.0, other sensors,
+step in compiled blocks (cosim/fastloop/fineloop.c, driven by cosim/fastloop/blocks.py) from one tick at which
+a Python component steps or an event lands to the next, recording the rows inside the block. The standard NC
+steps in the block too, and the monitor's steps that only buffer a motion's samples; the NC's steps that
+insert an identification, the monitor's at a motion's start or end, and the user components step in Python.
+Otherwise (Model Exchange, FMI 3.0, other sensors,
 a plant split into FMUs, no C compiler, ``FEEDDRIVE_FASTLOOP=0``) every tick runs the Python loop.
 
 Default wiring of the standard components (by port name; a scenario's ``connections`` override it)::

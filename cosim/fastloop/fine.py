@@ -5,7 +5,8 @@
 stepping order, both at the finest rate, the plant's inputs read from components outside the block (or
 numbers) and the sensors' from the plant (or numbers). Anything else (Model Exchange, FMI 3.0, another
 sensor class, a plant split into FMUs, ``FEEDDRIVE_FASTLOOP=0``, no C compiler) runs the Python loop, with
-the reason in ``Master.loop``.
+the reason in ``Master.loop``. The standard NC and the monitor's buffering join the block where their ports
+allow (:func:`_absorbed`); ``Master.loop`` names them.
 """
 from __future__ import annotations
 
@@ -135,10 +136,13 @@ def _absorbed(master: Any, plant: Any, sensors: Any) -> tuple[Any, Any]:
 
 
 class FineLoop:
-    """The plant and the sensors stepped by ``fine_run``; their Python objects are synced by :meth:`sync`.
+    """The plant and the sensors (and the NC, the monitor's buffering) stepped by ``fine_run``; their Python
+    objects are synced by :meth:`sync` (the NC's also around its steps in Python, the monitor's by
+    :meth:`flush_monitor` after each block).
 
-    ``run(k, n, hold)`` steps ticks k .. k + n - 1 and leaves the outputs (plant's, then the sensors' 8)
-    in ``out``; failures raise the same errors as the Python loop (through the plant's own methods).
+    ``run(k, n, Y)`` steps ticks k .. k + n - 1 (or to a monitor's stop) and leaves the outputs (the NC's 7
+    when it steps here, the plant's, then the sensors' 8: the bus ``Y[a:b]``) in ``out``; failures raise the
+    same errors as the Python loop (through the plant's own methods).
     """
 
     def __init__(self, lib: Any, master: Any, plant: Any, sensors: Any, nc: Any = None, monitor: Any = None) -> None:
