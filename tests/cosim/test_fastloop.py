@@ -98,6 +98,17 @@ def test_identification_requests_bit_identical(monkeypatch, feeddrive_fmu, data,
     assert type(unfinished[1]) is type(unfinished[0])  # the NC's motion index stays an int (report.json)
 
 
+def test_pmsm_axis_with_servo_sensors_bit_identical(monkeypatch, feeddrive_fmu):
+    """A PMSM axis: the servo sensors (a Python component) feed the monitor, which then steps in Python at every
+    recording step; the NC still steps in the compiled loop."""
+    data = yaml.safe_load((EXAMPLES / "pmsm_monitor.yaml").read_text()) | {"stop_time": 0.8}
+    py, fast = run_both(monkeypatch, data)
+    assert fast["loop"] == COMPILED
+    assert_identical(py, fast)
+    x = fast["data"][:, fast["names"].index("nc.x_ref")]
+    assert x.max() > 0.15 and fast["reports"]["monitor"]["unfinished_motion"] == 1  # mid tool change (m)
+
+
 def test_vendor_fmu_at_oversample_10_bit_identical(monkeypatch, tmp_path):
     """The example's vendor FMU (rpm, mm: a role map with scales) at 10 plant steps per recording step."""
     fmu = runpy.run_path(str(EXAMPLES / "vendor_fmu" / "build_vendor_fmu.py"))["main"](
