@@ -6,8 +6,8 @@ Dask spawns a LocalCluster's workers by default: each starts a new interpreter a
 at load) with its first run, which kept a fresh cluster of 2 workers well below 2 times one process
 (issue 26). Forked (``distributed.worker.multiprocessing-method: fork``), the workers inherit this process's
 imports, as the local pool's workers do (cosim/campaign/execute.py), and the cluster starts in a fraction of
-the time. A cluster started elsewhere (``--scheduler``) cannot be forked from here; its workers still run
-``prepare`` once each, before their first run.
+the time. The cluster leaves out Dask's diagnostics that cost CPU (``QUIET``). A cluster started elsewhere
+(``--scheduler``) cannot be forked from here; its workers run ``prepare`` once each, as their first task.
 """
 from __future__ import annotations
 
@@ -15,9 +15,18 @@ from collections.abc import Callable
 from multiprocessing import get_all_start_methods
 from typing import Any
 
+#: Dask's diagnostics that cost CPU for nothing a campaign reads: the workers' statistical profiler (a thread
+#: sampling every thread's stack every 10 ms: ~9 % of the workers' CPU on bench_campaign), the event loops'
+#: tick every 20 ms and the system monitor every 0.5 s in each process, the scheduler's work stealing every
+#: 100 ms (runs wait on the scheduler until a worker is free: nothing to steal); together ~0.5 s of this
+#: process's CPU (the scheduler and the nannies of a LocalCluster run here) per 8 runs
+QUIET = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+         "distributed.admin.system-monitor.interval": "5s", "distributed.scheduler.work-stealing": False}
+
 
 def local_cluster(workers: int, run: str | Callable | None = None, **options: Any) -> Any:
-    """A ``distributed.LocalCluster`` of ``workers`` worker processes (one thread each) forked warm.
+    """A ``distributed.LocalCluster`` of ``workers`` worker processes (one thread each) forked warm, without
+    the diagnostics of ``QUIET``.
 
     Parameters
     ----------
@@ -49,6 +58,6 @@ def local_cluster(workers: int, run: str | Callable | None = None, **options: An
     if callable(prepare):
         prepare()
     method = "fork" if "fork" in get_all_start_methods() else "spawn"
-    with dask.config.set({"distributed.worker.multiprocessing-method": method}):
+    with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
         return LocalCluster(**({"n_workers": workers, "threads_per_worker": 1, "processes": True,
                                 "dashboard_address": None} | options))
