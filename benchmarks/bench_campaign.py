@@ -11,10 +11,14 @@ pool's workers and the runs they forked; for Dask, read in each worker), and the
 have on ``--workers`` free cores is estimated as ``serial CPU / (this process's CPU + the workers' CPU /
 workers)`` (the runs spread evenly over the workers). The pool's workers are forked from this process
 once the run's imports are done; a fresh LocalCluster's workers import the stack with their first run
-(``dask``); ``dask warm`` is the same cluster after one campaign, as a long-lived cluster's workers are.
-The load average is printed first.
+(``dask spawned``, Dask's default); ``dask warm`` is that cluster after one campaign, as a long-lived
+cluster's workers are; ``dask`` is a fresh cluster of ``cosim.campaign.local_cluster``, whose workers are
+forked from this process (warm, as the pool's). As for the pool, the campaign's time is ``run_campaign``'s;
+a cluster's start is not in it and is printed apart (``start s``: the pool starts its workers inside
+``run_campaign``). The load average is printed first.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
+        [--modes serial pool dask "dask spawned" "dask warm"]
 """
 from __future__ import annotations
 
@@ -36,6 +40,9 @@ BASE = {"name": "bench", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "built
         "monitor": {"baseline": "nominal"}}
 
 
+MODES = ("serial", "pool", "dask", "dask spawned", "dask warm")
+
+
 def _cpu() -> tuple[float, float]:
     """CPU seconds (user + system) of this process, and of the child processes it has waited for."""
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -47,6 +54,7 @@ def main() -> int:
     parser.add_argument("--runs", type=int, default=8, help="runs in the campaign")
     parser.add_argument("--workers", type=int, default=2, help="local processes and Dask workers")
     parser.add_argument("--drift-motions", type=int, default=20, help="motions of the drift example (0: skip)")
+    parser.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES, help="the executors measured")
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     from distributed import Client, LocalCluster
@@ -54,6 +62,7 @@ def main() -> int:
     from feeddrive.fmu_build import builtin_fmu
 
     builtin_fmu()  # build outside the timings
+    from feeddrive.cosim.campaign import local_cluster
     from feeddrive.cosim.campaign.cosim_run import run_cosim
 
     run_cosim.prepare()  # this process's imports too: every mode starts from a process that has them
@@ -61,14 +70,18 @@ def main() -> int:
                         sweep={"plant.parameters.Cd": [1.3]}, run_options={"methods": ["ls", "iv"]})
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
-    times, aggregates, cpu = {}, {}, {}
+    times, aggregates, cpu, start = {}, {}, {}, {}
+    modes = ["serial"] + [m for m in MODES[1:] if m in args.modes]  # the serial run: the reference
     with tempfile.TemporaryDirectory() as tmp:
-        for mode in ("serial", "pool", "dask", "dask warm"):
+        for mode in modes:
             out = Path(tmp, mode.replace(" ", "-"))
             own, children = _cpu()
             if mode.startswith("dask"):
-                with LocalCluster(n_workers=args.workers, threads_per_worker=1, dashboard_address=None) as cluster, \
-                        Client(cluster) as client:
+                t = time.perf_counter()
+                cluster = local_cluster(args.workers) if mode == "dask" else LocalCluster(
+                    n_workers=args.workers, threads_per_worker=1, dashboard_address=None)
+                start[mode] = time.perf_counter() - t
+                with cluster, Client(cluster) as client:
                     if mode == "dask warm":  # a long-lived cluster: its workers ran a campaign before
                         run_campaign(campaign, Path(tmp, "warm-up"), scheduler=cluster.scheduler_address, plots=False)
                     # the cluster's start-up is not the campaign's; the workers' CPU is read in the workers
@@ -90,14 +103,14 @@ def main() -> int:
     same = all(a == aggregates["serial"] for a in aggregates.values())
     print(f"campaign of {args.runs} runs (2 s tool change, monitor, LS + IV), {args.workers} workers; "
           f"aggregates identical: {same}")
-    print(f"{'mode':9} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'(here':>6} {'workers)':>8} "
-          f"{'on free cores':>14}")
+    print(f"{'mode':12} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'(here':>6} {'workers)':>8} "
+          f"{'on free cores':>14} {'start s':>8}")
     serial_cpu = sum(cpu["serial"])
     for mode, t in times.items():
         own, children = cpu[mode]
         ideal = serial_cpu / (own + children / (1 if mode == "serial" else args.workers))
-        print(f"{mode:9} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
-              f"{own:6.1f} {children:8.1f} {ideal:14.2f}")
+        print(f"{mode:12} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
+              f"{own:6.1f} {children:8.1f} {ideal:14.2f} {f'{start[mode]:8.2f}' if mode in start else ''}")
     if args.drift_motions:
         sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
         from drift import run_drift

@@ -17,9 +17,11 @@ of ``Y``. Time is ``t0 + n h`` with an integer n.
 Two loops, the same results bit for bit (tests/cosim/test_fastloop.py). The fast path (``Master.loop`` says
 which ran and why; report.json has it as ``loop``): when the plant is an FMI 2.0 Co-Simulation FMU with Real
 outputs and the standard sensors follow it at the finest rate (cosim/fastloop/fine.py ``plan``), the two
-step in compiled blocks (cosim/fastloop/fineloop.c) from one tick at which a Python component steps or an
-event lands to the next, recording the rows inside the block; the NC, the monitor and the user components
-step in Python at their rates in between. Otherwise (Model Exchange, FMI 3.0, other sensors,
+step in compiled blocks (cosim/fastloop/fineloop.c, driven by cosim/fastloop/blocks.py) from one tick at which
+a Python component steps or an event lands to the next, recording the rows inside the block. The standard NC
+steps in the block too, and the monitor's steps that only buffer a motion's samples; the NC's steps that
+insert an identification, the monitor's at a motion's start or end, and the user components step in Python.
+Otherwise (Model Exchange, FMI 3.0, other sensors,
 a plant split into FMUs, no C compiler, ``FEEDDRIVE_FASTLOOP=0``) every tick runs the Python loop.
 
 Default wiring of the standard components (by port name; a scenario's ``connections`` override it)::
@@ -43,6 +45,7 @@ from tqdm import tqdm
 from feeddrive.cosim import fastloop
 from feeddrive.cosim.component import Component, load_component_class
 from feeddrive.cosim.errors import InputError, ScenarioError, SimulationError, format_path
+from feeddrive.cosim.fastloop import blocks
 from feeddrive.cosim.nc import SETTLING
 from feeddrive.cosim.port_units import mismatch
 from feeddrive.cosim.recorder import Recorder
@@ -318,7 +321,7 @@ class Master:
         Y = [0.0] * self.n_signals + self._constants
         schedule, period = self._schedule()
         fine, self.loop = fastloop.plan(self)
-        fast = self._fast_tables(schedule, period) if fine is not None else None
+        fast = blocks.tables(self, fine, schedule, period) if fine is not None else None
         where: list[Any] = [0, None]  # the fast path's tick and component, for the error message
         for c in comps:
             a, b = self._slices[c]
@@ -338,7 +341,7 @@ class Master:
                 for k0 in range(0, ticks, BLOCK * m):
                     k1 = min(k0 + BLOCK * m, ticks)
                     if fine is not None:  # the plant and the sensors in compiled blocks
-                        e, next_event = self._fast_block(fine, fast, k0, k1, Y, rows, e, next_event, where)
+                        e, next_event = blocks.run_blocks(self, fine, fast, k0, k1, Y, rows, e, next_event, where)
                         k = k1 - 1
                     else:
                         for k in range(k0, k1):
@@ -376,87 +379,6 @@ class Master:
         if signals_path is not None:
             recorder.write_csv(signals_path)
         return recorder
-
-    # -- the fast path: plant and sensors in compiled blocks (cosim/fastloop) ----------------------------
-    def _fast_tables(self, schedule: list[list[tuple]], period: int) -> tuple:
-        """Per tick residue modulo ``P = lcm(period, m)``: the entries before the plant and after the sensors,
-        whether a row is recorded, the ticks from there to the end of the block (a tick after which a Python
-        component steps, or before one at which a Python component steps) and whether the compiled loop records
-        rows in such a block (a recording tick before its last one, whose row the master records)."""
-        names = list(self.components)
-        i_plant, i_sensors = names.index("plant"), names.index("sensors")
-        order = {c: j for j, c in enumerate(self.components.values())}
-        P = math.lcm(period, self.m)
-        pre = [[x for x in schedule[r % period] if order[x[0]] < i_plant] for r in range(P)]
-        post = [[x for x in schedule[r % period] if order[x[0]] > i_sensors] for r in range(P)]
-        is_rec = [self.m == 1 or (r + 1) % self.m == 0 for r in range(P)]
-        ends = [bool(post[t] or pre[(t + 1) % P]) for t in range(P)]
-        if not any(ends):  # nothing in Python at all: blocks of one period
-            ends[P - 1] = True
-        span = [0] * P
-        nxt = next(t for t in range(P) if ends[t]) + P  # the first end, one period later
-        for r in range(P - 1, -1, -1):
-            nxt = r if ends[r] else nxt
-            span[r] = nxt - r + 1
-        inside = [self.m - 1 - r % self.m < span[r] - 1 for r in range(P)]  # the next recording tick is inside
-        return pre, post, is_rec, span, P, inside
-
-    def _fast_block(self, fine: Any, fast: tuple, k: int, k1: int, Y: list, rows: list, e: int, next_event: int,
-                    where: list) -> tuple[int, int]:
-        """Ticks k .. k1 - 1 with the plant and the sensors in compiled blocks; returns the events' state.
-
-        On a failure ``where`` gets the tick and the component (for the master's error message)."""
-        pre, post, is_rec, span, P, inside = fast
-        recorder = self.recorder
-        events, rec = self._events, self._rec_get
-        plant, sensors = fine.plant, fine.sensors
-        set_plant, get_plant = plant.set_inputs, self._getters[list(self.components).index("plant")]
-        crun, state, out = fine.crun, fine.address, fine.out
-        a, b = self._slices[plant][0], self._slices[sensors][1]
-        c = None
-        try:
-            while k < k1:
-                if k == next_event:
-                    plant._k = k  # the time of an event's failure (FMUComponent._raise)
-                    while k == next_event:
-                        _, name, param, value = events[e]
-                        c = self.components[name]
-                        c.set_parameter(param, value)
-                        if c is sensors:
-                            fine.noise_changed()
-                        e += 1
-                        next_event = events[e][0] if e < len(events) else -1
-                r0 = r = k % P
-                for c, set_inputs, getter, step, get_outputs, ya, yb, d in pre[r]:
-                    set_inputs(getter(Y))
-                    step(k // d)
-                    Y[ya:yb] = get_outputs()
-                n = span[r]
-                if k + n > k1:
-                    n = k1 - k
-                if k < next_event < k + n:
-                    n = next_event - k
-                c = plant
-                set_plant(get_plant(Y))
-                if crun(state, k, n, 1):  # stopped inside: new noise rows (then go on), or a failure (raises)
-                    fine.resume(k, n)
-                if inside[r0]:
-                    fine.take_rows(Y, rows, recorder)
-                Y[a:b] = out[:]
-                k += n
-                r = (k - 1) % P
-                for c, set_inputs, getter, step, get_outputs, ya, yb, d in post[r]:
-                    set_inputs(getter(Y))
-                    step((k - 1) // d)
-                    Y[ya:yb] = get_outputs()
-                if is_rec[r]:
-                    rows.append(rec(Y))
-        except BaseException:
-            where[:] = [k, c]
-            if fine.s.rec_rows:  # the rows recorded in the block before its failure
-                fine.take_rows(Y, rows, recorder)
-            raise
-        return e, next_event
 
     def _schedule(self) -> tuple[list[list[tuple]], int]:
         """Per tick residue ``k % period``: the components that step at tick k, in stepping order.

@@ -83,7 +83,7 @@ class Monitor(Component):
         self.pipeline = MonitorPipeline(cfg, self.history, self.axis)
         self.clock0 = _time.time() - t0  # machine time of simulated time 0
         capacity = min(n_steps + 1, int(round(cfg.max_motion_s / h)) + 1)
-        self._rows: list = [None] * capacity
+        self._rows = np.empty((capacity, len(self.input_names)))  # the motion's samples, one row per step
         self._k = 0  # samples buffered in the current motion
         self._motion = None  # index of the motion being buffered
         self._start = 0
@@ -116,8 +116,22 @@ class Monitor(Component):
         if n >= self._age_step:
             self._request, self._age_step = 1.0, math.inf
 
+    def block_state(self) -> tuple[float | None, float]:
+        """``(motion, age_step)``: the motion being buffered (None: none) and the step from which the request
+        rises. Until then a step whose ``state`` is RAPID with that ``motion`` only buffers its inputs, and one
+        whose state is not RAPID while no motion is buffered does nothing: :meth:`step_block` takes such steps."""
+        return self._motion, self._age_step
+
+    def step_block(self, rows: np.ndarray) -> None:
+        """``step`` over consecutive steps that continue the buffered motion (see :meth:`block_state`), with
+        their inputs ``rows``, shape (steps, inputs): buffers them (as many as fit, as ``step``). The compiled
+        fine loop (cosim/fastloop) calls it for the steps inside a block."""
+        take = min(len(rows), len(self._rows) - self._k)
+        self._rows[self._k:self._k + take] = rows[:take]
+        self._k += take
+
     def _end_motion(self) -> None:
-        rows = np.array(self._rows[:self._k], dtype=float)
+        rows = self._rows[:self._k].copy()  # the buffer serves the next motion
         motion, self._motion = int(self._motion), None
         if rows.shape[0] < 2:
             return

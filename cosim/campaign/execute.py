@@ -175,15 +175,40 @@ def _check_scheduler(scheduler: str) -> None:
                             "Dask scheduler, such as tcp://host:8786") from None
 
 
-def _dask(run, specs, scheduler, on_done, timeout=None) -> None:
+def _connect(scheduler: str, run: str | Callable) -> tuple[Any, list]:
+    """A client of the Dask scheduler, and one task per worker that runs the run function's ``prepare`` hook:
+    submitted now, the workers import while this process resolves the runs' scenarios."""
     from distributed import Client
-    from distributed import as_completed as dask_completed
-    from distributed.scheduler import KilledWorker
 
     try:
         client = Client(scheduler, timeout="20s")
     except (OSError, TimeoutError) as exc:
         raise CampaignError(f"--scheduler {scheduler}: cannot connect to the Dask scheduler ({exc})") from None
+    try:
+        fn = resolve_function(run) if isinstance(run, str) else run
+    except CampaignError:  # the runs' check names it
+        return client, []
+    if not callable(getattr(fn, "prepare", None)):
+        return client, []
+    try:
+        return client, [client.submit(_prepare_worker, run, key=f"campaign-prepare-{address}", workers=[address],
+                                      pure=False) for address in client.scheduler_info()["workers"]]
+    except Exception:  # noqa: BLE001 - only a head start: each run calls the hook anyway
+        return client, []
+
+
+def _prepare_worker(run: str | Callable) -> None:
+    """A worker's head start: the run function's ``prepare`` (a failure is left to the runs, which record it)."""
+    try:
+        getattr(resolve_function(run) if isinstance(run, str) else run, "prepare")()
+    except Exception:  # noqa: BLE001, S110 - execute calls it again and records the failure with each run
+        pass
+
+
+def _dask(run, specs, client, on_done, timeout=None) -> None:
+    from distributed import as_completed as dask_completed
+    from distributed.scheduler import KilledWorker
+
     futures = []
     try:
         futures = [client.submit(execute, run, spec, timeout, key=f"campaign-{spec.id}", pure=False)
@@ -196,7 +221,6 @@ def _dask(run, specs, scheduler, on_done, timeout=None) -> None:
                 on_done(_lost(by_key[future.key], f"crashed: Dask workers died running it ({exc})"))
     finally:
         client.cancel(futures)
-        client.close()
 
 
 @dataclass
@@ -243,7 +267,6 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
         Wall-time limit of each run [s] (default the campaign's ``timeout``); a run over it is killed
         and recorded as failed (``hung``).
     """
-    from tqdm import tqdm
 
     if workers < 1:
         raise CampaignError(f"--workers: expected >= 1, got {workers}")
@@ -259,11 +282,31 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
     finished = {i: r for i, r in done.items() if i in ids and not (retry_failed and r["status"] == "failed")}
     pending = [s for s in specs if s.id not in finished]
     fn = run if run is not None else campaign.run
-    # a bad entry or scenario is one input error now, not N failed runs later
-    check = getattr(resolve_function(fn) if isinstance(fn, str) else fn, "validate", None)
-    for spec in pending if check else ():
-        check(spec)
-    bar = tqdm(total=len(specs), initial=len(finished), desc=campaign.name, unit="run", disable=not progress)
+    client, warm = _connect(scheduler, fn) if scheduler and pending else (None, [])
+    try:
+        # a bad entry or scenario is one input error now, not N failed runs later
+        check = getattr(resolve_function(fn) if isinstance(fn, str) else fn, "validate", None)
+        for spec in pending if check else ():
+            check(spec)
+        _execute(campaign, fn, pending, len(specs), finished, out, workers, client, progress, timeout)
+    finally:
+        if client is not None:
+            client.cancel(warm)
+            client.close()
+    records = sorted(finished.values(), key=lambda r: r["index"])
+    aggregates = aggregate(records)
+    aggregates.write(out)
+    if plots:
+        plot_campaign(records, aggregates, out / "plots")
+    return CampaignResult(out, records, len(pending), aggregates)
+
+
+def _execute(campaign: Campaign, fn: str | Callable, pending: list[RunSpec], total: int, finished: dict[str, dict],
+             out: Path, workers: int, client: Any, progress: bool, timeout: float | None) -> None:
+    """Run the pending specs (on Dask when ``client``), writing each record as it comes."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, initial=len(finished), desc=campaign.name, unit="run", disable=not progress)
 
     def on_done(record: dict) -> None:
         _write_atomic(out / "runs" / f"{record['id']}.json", json.dumps(record, indent=1))
@@ -273,15 +316,9 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
     try:
         if not pending:
             pass
-        elif scheduler:
-            _dask(fn, pending, scheduler, on_done, timeout)
+        elif client is not None:
+            _dask(fn, pending, client, on_done, timeout)
         else:
             _local(fn, pending, min(workers, len(pending)), on_done, timeout)
     finally:
         bar.close()
-    records = sorted(finished.values(), key=lambda r: r["index"])
-    aggregates = aggregate(records)
-    aggregates.write(out)
-    if plots:
-        plot_campaign(records, aggregates, out / "plots")
-    return CampaignResult(out, records, len(pending), aggregates)

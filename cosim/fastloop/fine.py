@@ -5,7 +5,8 @@
 stepping order, both at the finest rate, the plant's inputs read from components outside the block (or
 numbers) and the sensors' from the plant (or numbers). Anything else (Model Exchange, FMI 3.0, another
 sensor class, a plant split into FMUs, ``FEEDDRIVE_FASTLOOP=0``, no C compiler) runs the Python loop, with
-the reason in ``Master.loop``.
+the reason in ``Master.loop``. The standard NC and the monitor's buffering join the block where their ports
+allow (:func:`_absorbed`); ``Master.loop`` names them.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from feeddrive.cosim import fmi_progress
 from feeddrive.cosim.fastloop.build import BuildFailed, library
 
 MAX_FILTERS, MAX_SECTIONS = 5, 4
-DONE, FMI_ERROR, NON_FINITE, NEED_ROWS = 0, 1, 2, 3
+DONE, FMI_ERROR, NON_FINITE, NEED_ROWS, NEED_NC, MONITOR = 0, 1, 2, 3, 4, 5
 
 _p, _i, _l, _d = ctypes.c_void_p, ctypes.c_int, ctypes.c_long, ctypes.c_double
 
@@ -39,7 +40,16 @@ class _Fine(ctypes.Structure):
         ("true_index", _l * 5), ("true_const", _d * 5), ("rows", _p), ("krow", _l), ("block", _l),
         ("gains", _d * 6), ("q", _d), ("conv", _d), ("inv_wh", _d), ("buffer", _p), ("window", _l),
         ("jbuf", _l), ("have_buffer", _i), ("out", _p),
-        ("rec_buf", _p), ("rec_m", _l), ("n_rec", _l), ("rec_rows", _l), ("rec_cap", _l), ("rec_src", _p), ("tick", _l), ("function", _i), ("status", _i), ("status_code", _i),
+        ("rec_buf", _p), ("rec_m", _l), ("n_rec", _l), ("rec_rows", _l), ("rec_cap", _l), ("rec_src", _p),
+        ("tick", _l), ("function", _i), ("status", _i), ("status_code", _i), ("pout", _p),
+        ("nc", _i), ("nc_d", _l), ("nc_done", _l), ("nc_h", _d), ("nc_tol", _d), ("nc_inv_h", _d), ("nc_conv", _d),
+        ("nc_kv", _d), ("nc_ff", _d), ("segs", _p), ("nseg", _l), ("nc_k", _l), ("ts", _d), ("x0", _d), ("v0", _d),
+        ("a", _d), ("nstate", _d), ("nload", _d), ("t_next", _d), ("nmotion", _d), ("x_prev", _d), ("t_now", _d),
+        ("x_meas", _d), ("request_high", _i), ("pending", _i), ("request", _d), ("nc_pos", _l), ("nc_pos_const", _d),
+        ("u_src", _p), ("u_const", _p), ("u_scale", _p), ("u_offset", _p), ("u_identity", _i),
+        ("mon", _i), ("mon_d", _l), ("n_mon", _l), ("mon_src", _p), ("mon_const", _p), ("mon_state", _l),
+        ("mon_motion_in", _l), ("mon_active", _i), ("mon_motion", _d), ("age_step", _d), ("mon_buf", _p),
+        ("mon_rows", _l), ("mon_cap", _l),
     ]
 
 
@@ -84,18 +94,62 @@ def plan(master: Any) -> tuple[FineLoop | None, str]:
         lib = library()
     except BuildFailed as exc:
         return None, f"python loop: {exc}"
-    return FineLoop(lib, master, plant, sensors), "compiled fine loop (plant FMU, sensors)"
+    nc, monitor = _absorbed(master, plant, sensors)
+    fine = FineLoop(lib, master, plant, sensors, nc, monitor)
+    parts = ["NC"] * (nc is not None) + ["plant FMU", "sensors"] + ["monitor's buffering"] * (monitor is not None)
+    return fine, f"compiled fine loop ({', '.join(parts)})"
+
+
+def _absorbed(master: Any, plant: Any, sensors: Any) -> tuple[Any, Any]:
+    """The NC and the monitor that the compiled loop steps too, or None each.
+
+    The NC (:class:`NCComponent`): right before the plant, which is the first component at the finest rate
+    (or the NC at the finest rate too: it steps at the start of its cycle), its position from the plant or a number, its request from
+    outside the block (constant over it) and the plant's inputs from the NC or numbers. The monitor
+    (:class:`Monitor`): after the sensors, every input from the block or a number; the compiled loop
+    buffers a motion's samples and stops where the monitor's step does more (cosim/monitor.py ``step_block``).
+    """
+    from feeddrive.cosim.monitor import Monitor
+    from feeddrive.cosim.nc import NCComponent
+
+    names, rates, n_sig = list(master.components), master.rates, master.n_signals
+    nc, monitor = master.components.get("nc"), master.components.get("monitor")
+    ip, b = names.index("plant"), master._slices[sensors][1]
+    first_fine = next(j for j, n in enumerate(names) if rates[n] == 1)
+    if type(nc) is NCComponent and names.index("nc") == ip - 1 and (first_fine == ip or rates["nc"] == 1):
+        na, nb = master._slices[nc]
+        pos, request = master._input_index["nc"]
+        if (master._slices[plant][0] <= pos < b or pos >= n_sig) and not na <= request < b and all(
+                na <= i < nb or i >= n_sig for i in master._input_index["plant"]):
+            a = na
+        else:
+            nc = None
+    else:
+        nc = None
+    if nc is None:
+        a = master._slices[plant][0]
+    if type(monitor) is not Monitor or names.index("monitor") < names.index("sensors") or not all(
+            a <= i < b or i >= n_sig for i in master._input_index["monitor"]) or not all(
+            a <= i < b for i in master._input_index["monitor"][7:9]):
+        monitor = None
+    return nc, monitor
 
 
 class FineLoop:
-    """The plant and the sensors stepped by ``fine_run``; their Python objects are synced by :meth:`sync`.
+    """The plant and the sensors (and the NC, the monitor's buffering) stepped by ``fine_run``; their Python
+    objects are synced by :meth:`sync` (the NC's also around its steps in Python, the monitor's by
+    :meth:`flush_monitor` after each block).
 
-    ``run(k, n, hold)`` steps ticks k .. k + n - 1 and leaves the outputs (plant's, then the sensors' 8)
-    in ``out``; failures raise the same errors as the Python loop (through the plant's own methods).
+    ``run(k, n, Y)`` steps ticks k .. k + n - 1 (or to a monitor's stop) and leaves the outputs (the NC's 7
+    when it steps here, the plant's, then the sensors' 8: the bus ``Y[a:b]``) in ``out``; failures raise the
+    same errors as the Python loop (through the plant's own methods).
     """
 
-    def __init__(self, lib: Any, master: Any, plant: Any, sensors: Any) -> None:
-        self.plant, self.sensors = plant, sensors
+    def __init__(self, lib: Any, master: Any, plant: Any, sensors: Any, nc: Any = None, monitor: Any = None) -> None:
+        self.plant, self.sensors, self.nc, self.monitor = plant, sensors, nc, monitor
+        #: the components the compiled loop steps (the master keeps the NC out of its Python steps inside a
+        #: block and gives the monitor the samples the block buffered, see cosim/fastloop/blocks.py)
+        self.absorbed = {c for c in (nc, monitor) if c is not None}
         #: ``fine_run(address, k, n, hold)``: the compiled loop, its state's address (the master calls it directly)
         self.crun = lib.fine_run
         self.s = s = _Fine()
@@ -128,17 +182,26 @@ class FineLoop:
             if plant._u_prev is not None:
                 self._prev[:] = plant._u_prev
                 s.have_prev = 1
-        a = master._slices[plant][0]
-        self.out = (_d * (ny + 8))()
-        s.out = _addr(self.out)
-        self._load_sensors(master, a)
+        #: the block's part of the master's bus Y: [a, b), the NC's outputs first when it steps here
+        self.a = a = master._slices[nc if nc is not None else plant][0]
+        self.b = master._slices[sensors][1]
+        self.p = p = master._slices[plant][0] - a  # the plant's first output in out
+        self.out = (_d * (self.b - a))()
+        s.out, s.pout = _addr(self.out), _addr(self.out) + p * ctypes.sizeof(_d)
+        s.nc_done = -1
+        self._load_sensors(master, master._slices[plant][0])
         self._load_recorder(master, a)
+        if nc is not None:
+            self._load_nc_ports(master)
+            self.load_nc()
+        if monitor is not None:
+            self._load_monitor(master)
 
     def _load_recorder(self, master: Any, a: int) -> None:
         """Recorded columns from the block (``rec_src``) and from the rest of the bus (``static``)."""
         import numpy as np
 
-        s, width = self.s, self.plant._ny + 8
+        s, width = self.s, self.b - self.a
         cols = master._rec_index
         self._rec_src = (_l * max(len(cols), 1))(*[i - a if a <= i < a + width else -1 for i in cols])
         #: recorded columns not from the block, and their index in the master's bus Y
@@ -191,8 +254,9 @@ class FineLoop:
         if sn._buffer is not None:
             self._buffer[:] = sn._buffer
             s.have_buffer = 1
-        self.out[self.plant._ny:] = sn._y
-        self.out[:self.plant._ny] = self.plant.get_outputs()
+        p, ny = self.p, self.plant._ny
+        self.out[p + ny:] = sn._y
+        self.out[p:p + ny] = self.plant.get_outputs()
         self.noise_changed(reset=True)
 
     def noise_changed(self, reset: bool = False) -> None:
@@ -204,26 +268,118 @@ class FineLoop:
             s.krow = sn._k
         s.gains[:] = sn._gains
 
-    def run(self, k: int, n: int, hold: int) -> None:
-        """Step ticks k .. k + n - 1 (``hold``: the plant's inputs were set since the last call)."""
-        if self.crun(self.address, k, n, hold):
-            self.resume(k, n)
-
-    def resume(self, k: int, n: int) -> None:
-        """After ``fine_run`` stopped at ``s.tick`` inside ticks k .. k + n - 1: draw new noise rows and go on,
-        or raise the failure as the Python loop would."""
+    def run(self, k: int, n: int, Y: list) -> int:
+        """Step ticks k .. k + n - 1, or to a tick whose monitor step the master takes (the block's last then):
+        returns the tick after the last one stepped. The plant's inputs were set (``plant.set_inputs``) from
+        ``Y``, the master's bus, which also holds the NC's request and the monitor's state."""
         s = self.s
+        if self.nc is not None:
+            s.request = Y[self._request] if self._request < len(Y) else self._request_const
+        if self.monitor is not None:
+            motion, age = self.monitor.block_state()
+            s.mon_active, s.mon_motion, s.age_step = motion is not None, motion or 0.0, age
+        hold = 1
         while True:
-            status = s.status_code
+            status = self.crun(self.address, k, n, hold)
+            if status == DONE:
+                return k + n
+            if status == MONITOR:
+                return s.tick + 1
             self._failure(status)
-            self.sensors._k = s.krow  # a new block of noise rows: drawn by the sensors as the Python loop would
-            self.sensors._new_block()
-            self.noise_changed(reset=True)
             n -= s.tick - k
             k = s.tick
-            if not self.crun(self.address, k, n, 0):
-                self.plant._k = k + n
-                return
+            if status == NEED_NC:  # the NC's step at tick k inserts pieces: in Python, as the Python loop
+                self._nc_in_python(k, Y)
+                hold = 1
+            else:  # a new block of noise rows: drawn by the sensors as the Python loop would
+                self.sensors._k = s.krow
+                self.sensors._new_block()
+                self.noise_changed(reset=True)
+                hold = 0
+            self.plant._k = k
+
+    def flush_monitor(self) -> None:
+        """Give the monitor the samples the block buffered (its steps inside the block)."""
+        s = self.s
+        if self.monitor is not None and s.mon_rows:
+            self.monitor.step_block(self.mon_buf[:s.mon_rows])
+            s.mon_rows = 0
+
+    def _nc_in_python(self, k: int, Y: list) -> None:
+        """The NC's set_inputs and step at tick k in Python (the C loop goes on from the plant's step)."""
+        nc, s = self.nc, self.s
+        self.sync_nc()
+        Y[self.a:self.b] = self.out[:]
+        nc.set_inputs(self._nc_get(Y))
+        nc.step(k // self._nc_d)
+        Y[self.a:self.a + 7] = self.out[:7] = nc.get_outputs()
+        self.plant.set_inputs(self._plant_get(Y))
+        self.load_nc()
+        s.nc_done = k
+
+    def _load_nc_ports(self, master: Any) -> None:
+        """Where the NC's inputs and the plant's come from (indices in out, or numbers)."""
+        s, nc, plant, a, n_sig = self.s, self.nc, self.plant, self.a, master.n_signals
+        names = list(master.components)
+        self._nc_get = master._getters[names.index("nc")]
+        self._plant_get = master._getters[names.index("plant")]
+        self._nc_d = s.nc_d = master.rates["nc"]
+        Y0 = master._constants
+        pos, self._request = master._input_index["nc"]
+        s.nc_pos, s.nc_pos_const = (-1, Y0[pos - n_sig]) if pos >= n_sig else (pos - a, 0.0)
+        self._request_const = Y0[self._request - n_sig] if self._request >= n_sig else 0.0
+        src = master._input_index["plant"]
+        self._u_src = (_l * max(len(src), 1))(*[-1 if i >= n_sig else i - a for i in src])
+        self._u_const = (_d * max(len(src), 1))(*[Y0[i - n_sig] if i >= n_sig else 0.0 for i in src])
+        lin = {k: (sc, o) for k, sc, o in getattr(plant, "_in_lin", [])}
+        self._u_scale = (_d * max(len(src), 1))(*[lin.get(k, (1.0, 0.0))[0] for k in range(len(src))])
+        self._u_offset = (_d * max(len(src), 1))(*[lin.get(k, (1.0, 0.0))[1] for k in range(len(src))])
+        s.u_src, s.u_const = _addr(self._u_src), _addr(self._u_const)
+        s.u_scale, s.u_offset = _addr(self._u_scale), _addr(self._u_offset)
+        s.u_identity = int(plant.__dict__.get("set_inputs") is not None)  # FMUComponent._set_inputs_identity
+        s.nc_h, s.nc_tol, s.nc_inv_h, s.nc_conv = nc._h, nc._tol, nc._inv_h, nc._conv
+        s.nc_kv, s.nc_ff = nc._kv, nc._ff
+        self.out[:7] = nc.get_outputs()
+        s.nc = 1
+
+    def load_nc(self) -> None:
+        """The NC's state (its pieces included: an inserted identification changes them) into the loop."""
+        s, nc = self.s, self.nc
+        self._segs = (_d * (7 * len(nc._segs)))(*[float(v) for seg in nc._segs for v in seg[:7]])
+        s.segs, s.nseg, s.nc_k = _addr(self._segs), len(nc._segs), nc._k
+        s.ts, s.x0, s.v0, s.a, s.nstate, s.nload = nc._ts, nc._x0, nc._v0, nc._a, nc._state, nc._load
+        s.t_next, s.nmotion, s.x_prev, s.t_now, s.x_meas = nc._t_next, nc._motion, nc._x_prev, nc._t_now, nc._x_meas
+        s.request_high, s.pending = nc._request_high, nc._pending
+
+    def sync_nc(self) -> None:
+        """The loop's NC state back into the NCComponent (state and motion as the ints it keeps)."""
+        s, nc = self.s, self.nc
+        nc._k, nc._ts, nc._x0, nc._v0, nc._a, nc._load = s.nc_k, s.ts, s.x0, s.v0, s.a, s.nload
+        nc._state, nc._motion = int(s.nstate), int(s.nmotion)
+        nc._t_next, nc._x_prev, nc._t_now, nc._x_meas = s.t_next, s.x_prev, s.t_now, s.x_meas
+        nc._request_high = bool(s.request_high)
+        nc._y = self.nc_outputs()
+
+    def nc_outputs(self) -> list:
+        """The NC's outputs as the NCComponent gives them (state and motion as ints)."""
+        y = self.out[:7]
+        y[5], y[6] = int(y[5]), int(y[6])
+        return y
+
+    def _load_monitor(self, master: Any) -> None:
+        """The monitor's inputs (indices in out, or numbers) and the buffer of the samples a block buffers."""
+        import numpy as np
+
+        s, a, n_sig, Y0 = self.s, self.a, master.n_signals, master._constants
+        src = master._input_index["monitor"]
+        self._mon_src = (_l * len(src))(*[-1 if i >= n_sig else i - a for i in src])
+        self._mon_const = (_d * len(src))(*[Y0[i - n_sig] if i >= n_sig else 0.0 for i in src])
+        s.mon_src, s.mon_const, s.n_mon = _addr(self._mon_src), _addr(self._mon_const), len(src)
+        s.mon_state, s.mon_motion_in = src[7] - a, src[8] - a
+        s.mon_d = d = master.rates["monitor"]
+        self.mon_buf = np.empty((master.block * master.m // d + 2, len(src)))
+        s.mon_buf, s.mon_cap = self.mon_buf.ctypes.data, self.mon_buf.shape[0]
+        s.mon = 1
 
     def _failure(self, status: int) -> None:
         s, plant = self.s, self.plant
@@ -234,7 +390,7 @@ class FineLoop:
         if status == NON_FINITE:
             plant._k = s.tick + 1
             self.sync()
-            plant._non_finite(list(self.out[:plant._ny]))
+            plant._non_finite(list(self.out[self.p:self.p + plant._ny]))
             raise AssertionError("unreachable: a non-finite output")  # pragma: no cover
 
     def sync(self) -> None:
@@ -251,4 +407,6 @@ class FineLoop:
         if s.have_buffer:
             sn._buffer = self._buffer[:]
         sn._j, sn._k = s.jbuf, s.krow
-        sn._y = self.out[plant._ny:]
+        sn._y = self.out[self.p + plant._ny:]
+        if self.nc is not None:
+            self.sync_nc()

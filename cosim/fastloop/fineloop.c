@@ -84,9 +84,37 @@ typedef struct {
     long tick;
     int function, status;
     int status_code;       /* what fine_run returned */
+    /* the layout of out: [NC's 7 outputs when nc] plant's ny, sensors' 8; pout: the plant's first */
+    double *pout;
+    /* the NC (cosim/nc.py NCComponent.set_inputs, step, _advance, _load_segment) when nc */
+    int nc;
+    long nc_d, nc_done;    /* ticks per NC cycle; the tick whose NC step Python took (-1: none) */
+    double nc_h, nc_tol, nc_inv_h, nc_conv, nc_kv, nc_ff;
+    const double *segs;    /* nseg pieces of 7: t_start, x0, v0, a, state, load, item */
+    long nseg, nc_k;
+    double ts, x0, v0, a, nstate, nload, t_next, nmotion, x_prev, t_now, x_meas;
+    int request_high, pending;
+    double request;        /* the request input, from outside the block (constant over it) */
+    long nc_pos;           /* the position input's index in out, or -1: nc_pos_const */
+    double nc_pos_const;
+    const long *u_src;     /* each plant input's index in out, or -1: u_const */
+    const double *u_const, *u_scale, *u_offset;
+    int u_identity;
+    /* the monitor's buffering of a motion (cosim/monitor.py Monitor.step) when mon */
+    int mon;
+    long mon_d, n_mon;
+    const long *mon_src;   /* each monitor input's index in out, or -1: mon_const */
+    const double *mon_const;
+    long mon_state, mon_motion_in; /* the inputs state and motion: indices in out */
+    int mon_active;        /* a motion is being buffered: mon_motion */
+    double mon_motion, age_step;
+    double *mon_buf;       /* mon_cap rows of n_mon: the inputs of the steps that buffer a sample */
+    long mon_rows, mon_cap;
 } fine_t;
 
-enum { FINE_DONE = 0, FINE_FMI_ERROR = 1, FINE_NON_FINITE = 2, FINE_NEED_ROWS = 3 };
+enum { FINE_DONE = 0, FINE_FMI_ERROR = 1, FINE_NON_FINITE = 2, FINE_NEED_ROWS = 3, FINE_NEED_NC = 4,
+       FINE_MONITOR = 5 };
+#define RAPID 1.0
 
 static const int SOURCE[5] = {2, 2, 0, 1, 3};
 
@@ -116,7 +144,7 @@ static void measure(fine_t *s, const double *tr) {
     double w_enc = (theta - s->buffer[j]) * s->inv_wh;
     s->buffer[j] = theta;
     s->jbuf = j + 1 < s->window ? j + 1 : 0;
-    double *sy = s->out + s->ny;
+    double *sy = s->pout + s->ny;
     sy[0] = g[0] * i1 + o[0];
     sy[1] = g[1] * i2 + o[1];
     sy[2] = g[2] * voltage + o[2];
@@ -125,6 +153,61 @@ static void measure(fine_t *s, const double *tr) {
     sy[5] = theta;
     sy[6] = w_enc;
     sy[7] = theta / s->conv;
+}
+
+/* NCComponent._load_segment */
+static void load_segment(fine_t *s, long k) {
+    const double *g = s->segs + 7 * k;
+    s->nc_k = k;
+    s->ts = g[0]; s->x0 = g[1]; s->v0 = g[2]; s->a = g[3];
+    s->nload = g[5];
+    s->t_next = k + 1 < s->nseg ? g[7] - s->nc_tol : INFINITY;
+    if (g[4] == RAPID && s->nstate != RAPID) s->nmotion += 1.0;
+    s->nstate = g[4];
+}
+
+/* NCComponent.set_inputs and step for NC step j; returns 0, or 1 when Python must take it (a request's rising
+ * edge, or a piece boundary while an identification is pending: both insert pieces) */
+static int nc_step(fine_t *s, long j) {
+    int high = s->request >= 0.5;
+    if (high && !s->request_high) return 1;
+    double t = (double)(j + 1) * s->nc_h;
+    if (t >= s->t_next) {
+        if (s->pending) return 1;
+        long k = s->nc_k;
+        while (k + 1 < s->nseg && t >= s->segs[7 * (k + 1)] - s->nc_tol) k++;
+        load_segment(s, k);
+    }
+    s->request_high = high;
+    s->x_meas = s->nc_pos >= 0 ? s->out[s->nc_pos] : s->nc_pos_const;
+    double tau = t - s->ts;
+    double a = s->a, v0 = s->v0;
+    double x = s->x0 + tau * (v0 + 0.5 * a * tau);
+    double x_prev = s->x_prev;
+    double *y = s->out;
+    y[0] = (s->nc_ff * (x - x_prev) * s->nc_inv_h + s->nc_kv * (x_prev - s->x_meas)) * s->nc_conv;
+    y[1] = s->nload; y[2] = x; y[3] = v0 + a * tau; y[4] = a; y[5] = s->nstate; y[6] = s->nmotion;
+    s->x_prev = x; s->t_now = t;
+    for (long i = 0; i < s->nu; i++) { /* FMUComponent.set_inputs: the plant holds them until the next cycle */
+        double v = s->u_src[i] >= 0 ? s->out[s->u_src[i]] : s->u_const[i];
+        s->base[i] = s->u_identity ? v : s->u_scale[i] * v + s->u_offset[i];
+    }
+    return 0;
+}
+
+/* Monitor.step for its step j: 1 when Python must take it (a motion starts or ends, the request's age is
+ * reached, or the buffer is full), else the sample is buffered when a motion is */
+static int mon_step(fine_t *s, long j) {
+    double state = s->out[s->mon_state], motion = s->out[s->mon_motion_in];
+    if ((double)j >= s->age_step) return 1;
+    if (state == RAPID) {
+        if (!s->mon_active || motion != s->mon_motion || s->mon_rows == s->mon_cap) return 1;
+        double *row = s->mon_buf + s->mon_rows * s->n_mon;
+        for (long i = 0; i < s->n_mon; i++) row[i] = s->mon_src[i] >= 0 ? s->out[s->mon_src[i]] : s->mon_const[i];
+        s->mon_rows++;
+        return 0;
+    }
+    return s->mon_active;
 }
 
 #define CALL(code, expr) do { s->rec->function = (code); int st_ = (expr); \
@@ -147,6 +230,10 @@ static int run(fine_t *s, long first, long count, int hold) {
         if (s->sensors && (n + 1) % s->m == 0 && s->krow == s->block) {
             s->tick = n; /* a new block of noise rows: drawn in Python, before this tick */
             return FINE_NEED_ROWS;
+        }
+        if (s->nc && n % s->nc_d == 0 && n != s->nc_done && nc_step(s, n / s->nc_d)) {
+            s->tick = n; /* the NC's step in Python, then on from this tick */
+            return FINE_NEED_NC;
         }
         double t = s->t0 + (double)n * s->h;
         s->rec->time = t;
@@ -178,13 +265,13 @@ static int run(fine_t *s, long first, long count, int hold) {
         int finite = 1;
         for (long i = 0; i < s->ny; i++) {
             double v = s->out_identity ? s->y[i] : s->out_scale[i] * s->y[i] + s->out_offset[i];
-            s->out[i] = v;
+            s->pout[i] = v;
             finite &= isfinite(v) != 0;
         }
         if (!finite) { s->tick = n; s->function = 0; return FINE_NON_FINITE; }
         if (!s->sensors) continue;
         double tr[5];
-        for (int i = 0; i < 5; i++) tr[i] = s->true_index[i] >= 0 ? s->out[s->true_index[i]] : s->true_const[i];
+        for (int i = 0; i < 5; i++) tr[i] = s->true_index[i] >= 0 ? s->pout[s->true_index[i]] : s->true_const[i];
         if (s->mean) { /* SensorsComponent.step */
             double wt = s->weights[n % s->m];
             s->acc[0] += wt * tr[0];
@@ -205,6 +292,10 @@ static int run(fine_t *s, long first, long count, int hold) {
             s->lp[s->filt_channel[f]] = x;
         }
         if ((n + 1) % s->m == 0) measure(s, tr);
+        if (s->mon && (n + 1) % s->mon_d == 0 && n < end - 1 && mon_step(s, n / s->mon_d)) {
+            s->tick = n; /* this tick ends the block: the monitor steps in Python */
+            return FINE_MONITOR;
+        }
         if (s->n_rec && (n + 1) % s->rec_m == 0 && n < end - 1 && s->rec_rows < s->rec_cap) {
             double *row = s->rec_buf + s->rec_rows * s->n_rec;
             for (long j = 0; j < s->n_rec; j++)

@@ -3,6 +3,7 @@ aggregates. The machinery tests use ``toy_run``, a pure-Python run function with
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -160,6 +161,39 @@ def test_local_pool_and_dask_give_identical_aggregates(tmp_path):
         assert [(r["id"], r["status"], r["result"]) for r in other.records] == \
                [(r["id"], r["status"], r["result"]) for r in serial.records]
     assert len(executions(tmp_path)) == 36
+
+
+#: pids of the processes that ran ``warm_toy_run.prepare`` (a forked worker inherits the list)
+PREPARED: list[int] = []
+
+
+def warm_toy_run(spec):
+    return toy_run(spec)
+
+
+warm_toy_run.prepare = lambda: PREPARED.append(os.getpid())
+
+
+@pytest.mark.slow
+def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
+    """``local_cluster``: worker processes (not threads) forked from this process after the run's prepare hook
+    ran here, so they start with its imports; the campaign's records are the serial run's."""
+    from distributed import Client
+
+    from feeddrive.cosim.campaign import local_cluster
+
+    c = campaign(tmp_path, fail_if_Cd=1.3)
+    serial = run_campaign(c, tmp_path / "serial", run=warm_toy_run, plots=False)
+    PREPARED.clear()
+    with local_cluster(2, run=warm_toy_run) as cluster, Client(cluster) as client:
+        seen = client.run(lambda: (os.getpid(), list(PREPARED)))
+        dask = run_campaign(c, tmp_path / "dask", scheduler=cluster.scheduler_address, run=warm_toy_run, plots=False)
+    assert len(seen) == 2 and all(pid != os.getpid() and prepared == [os.getpid()] for pid, prepared in seen.values())
+    assert dask.aggregates == serial.aggregates
+    assert [(r["id"], r["status"], r["result"]) for r in dask.records] == \
+           [(r["id"], r["status"], r["result"]) for r in serial.records]
+    with pytest.raises(CampaignError, match="workers: expected >= 1, got 0"):
+        local_cluster(0)
 
 
 def test_campaign_file_errors_name_key_and_line(tmp_path):

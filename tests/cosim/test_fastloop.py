@@ -13,7 +13,9 @@ from feeddrive.cosim.master import Master
 from feeddrive.cosim.scenario import scenario_from_dict
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
-COMPILED = "compiled fine loop (plant FMU, sensors)"
+COMPILED = "compiled fine loop (NC, plant FMU, sensors)"
+#: with a monitor, whose buffering of a motion's samples the compiled loop does too
+WITH_MONITOR = "compiled fine loop (NC, plant FMU, sensors, monitor's buffering)"
 #: report entries that are wall or CPU times, not results
 TIMES = ("processing_s", "processing_cpu_s", "max_processing_s", "max_processing_cpu_s")
 
@@ -39,7 +41,7 @@ def run_both(monkeypatch, data: dict) -> tuple[dict, dict]:
 
 
 def assert_identical(py: dict, fast: dict) -> None:
-    assert py["loop"] == "python loop: FEEDDRIVE_FASTLOOP=0" and fast["loop"] == COMPILED
+    assert py["loop"] == "python loop: FEEDDRIVE_FASTLOOP=0" and fast["loop"] in (COMPILED, WITH_MONITOR)
     assert py["names"] == fast["names"] and py["data"].shape == fast["data"].shape
     for j, name in enumerate(py["names"]):  # bit-identical, NaN (monitor outputs before a motion) included
         np.testing.assert_array_equal(fast["data"][:, j], py["data"][:, j], err_msg=name)
@@ -61,6 +63,50 @@ def test_examples_bit_identical(monkeypatch, feeddrive_fmu, name, stop):
     if stop is None:  # the whole tool change: the monitor identified the motion in both
         motions = fast["reports"]["monitor"]["motions"]
         assert motions and motions[0]["parameters"]["R"]["value"] == pytest.approx(0.6, rel=0.02)
+
+
+def monitored(program: list, monitor: dict, stop: float, **nc) -> dict:
+    return {"name": "request", "axis": "X", "step": 1e-4, "plant": {"fmu": "builtin"}, "sensors": {"seed": 4},
+            "nc": {"program": program, "identification": {"distance": 0.1}, **nc}, "monitor": monitor,
+            "stop_time": stop}
+
+
+SHORT = [{"dwell": {"time": 0.1}}, {"rapid": {"to": 0.03}}]  # too short to identify: the monitor requests one
+
+
+@pytest.mark.parametrize("data, inserted", [
+    # the request rises after the program ended: the NC inserts the identification at once
+    (monitored(SHORT, {"max_motions": 0}, 2.6), [0.5473]),
+    # it rises in a dwell: pending until the next program item, an NC cycle of 4 plant steps
+    (monitored(SHORT + [{"dwell": {"time": 0.3}}, {"feed": {"to": 0.05, "feed": 0.01}}], {"max_motions": 0}, 3.0,
+               cycle=4e-4) | {"plant": {"fmu": "builtin", "oversample": 2}}, [0.8472136]),
+    # by age (max_age_s) from the start, then after the identification: the monitor's age step ends a block
+    (monitored(SHORT + [{"dwell": {"time": 0.3}}, {"rapid": {"to": 0.0}}], {"max_age_s": 0.05, "max_motions": 10},
+               2.5), [0.1, 2.4896378]),
+])
+def test_identification_requests_bit_identical(monkeypatch, feeddrive_fmu, data, inserted):
+    """The NC and the monitor's buffering in the compiled loop: a request's edge and a pending identification
+    (the NC's steps that insert pieces run in Python), motions that start and end inside a stretch, a motion
+    unfinished at the end: the Python loop's bits, and the identification motion inserted when requested."""
+    py, fast = run_both(monkeypatch, data)
+    assert fast["loop"] == WITH_MONITOR
+    assert_identical(py, fast)
+    assert fast["reports"]["nc"]["identifications_inserted_s"] == pytest.approx(inserted, abs=1e-6)
+    x = fast["data"][:, fast["names"].index("plant.position")]
+    assert x.max() > 0.09  # the identification's 0.1 m out and back ran (m)
+    unfinished = [r["reports"]["monitor"]["unfinished_motion"] for r in (py, fast)]
+    assert type(unfinished[1]) is type(unfinished[0])  # the NC's motion index stays an int (report.json)
+
+
+def test_pmsm_axis_with_servo_sensors_bit_identical(monkeypatch, feeddrive_fmu):
+    """A PMSM axis: the servo sensors (a Python component) feed the monitor, which then steps in Python at every
+    recording step; the NC still steps in the compiled loop."""
+    data = yaml.safe_load((EXAMPLES / "pmsm_monitor.yaml").read_text()) | {"stop_time": 0.8}
+    py, fast = run_both(monkeypatch, data)
+    assert fast["loop"] == COMPILED
+    assert_identical(py, fast)
+    x = fast["data"][:, fast["names"].index("nc.x_ref")]
+    assert x.max() > 0.15 and fast["reports"]["monitor"]["unfinished_motion"] == 1  # mid tool change (m)
 
 
 def test_vendor_fmu_at_oversample_10_bit_identical(monkeypatch, tmp_path):

@@ -1,0 +1,63 @@
+"""A local Dask cluster whose worker processes start warm: forked from this process once the run function's
+``prepare`` hook has run here.
+
+Dask spawns a LocalCluster's workers by default: each starts a new interpreter and imports the whole stack
+(the estimator, scipy.stats, statsmodels, pint's unit registry: ~1.5 s on an idle core, several runs' worth
+at load) with its first run, which kept a fresh cluster of 2 workers well below 2 times one process
+(issue 26). Forked (``distributed.worker.multiprocessing-method: fork``), the workers inherit this process's
+imports, as the local pool's workers do (cosim/campaign/execute.py), and the cluster starts in a fraction of
+the time. The cluster leaves out Dask's diagnostics that cost CPU (``QUIET``). A cluster started elsewhere
+(``--scheduler``) cannot be forked from here; its workers run ``prepare`` once each, as their first task.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from multiprocessing import get_all_start_methods
+from typing import Any
+
+#: Dask's diagnostics that cost CPU for nothing a campaign reads: the workers' statistical profiler (a thread
+#: sampling every thread's stack every 10 ms: ~9 % of the workers' CPU on bench_campaign), the event loops'
+#: tick every 20 ms and the system monitor every 0.5 s in each process, the scheduler's work stealing every
+#: 100 ms (runs wait on the scheduler until a worker is free: nothing to steal); together ~0.5 s of this
+#: process's CPU (the scheduler and the nannies of a LocalCluster run here) per 8 runs
+QUIET = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+         "distributed.admin.system-monitor.interval": "5s", "distributed.scheduler.work-stealing": False}
+
+
+def local_cluster(workers: int, run: str | Callable | None = None, **options: Any) -> Any:
+    """A ``distributed.LocalCluster`` of ``workers`` worker processes (one thread each) forked warm, without
+    the diagnostics of ``QUIET``.
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes, >= 1.
+    run : str or callable, optional
+        The campaign's run function (``package.module:function`` or the function; default
+        ``run_cosim``): its ``prepare`` hook runs here first, so that the forked workers have its imports.
+    **options
+        More ``LocalCluster`` keywords (e.g. ``dashboard_address``; default none).
+
+    Returns
+    -------
+    distributed.LocalCluster
+        Close it (``with local_cluster(2) as cluster: run_campaign(..., scheduler=cluster.scheduler_address)``).
+    """
+    import dask
+    from distributed import LocalCluster
+
+    from feeddrive.cosim.campaign.execute import resolve_function
+    from feeddrive.cosim.campaign.schema import CampaignError
+
+    if workers < 1:
+        raise CampaignError(f"workers: expected >= 1, got {workers}")
+    if run is None:
+        from feeddrive.cosim.campaign.cosim_run import run_cosim as run
+    fn = resolve_function(run) if isinstance(run, str) else run
+    prepare = getattr(fn, "prepare", None)
+    if callable(prepare):
+        prepare()
+    method = "fork" if "fork" in get_all_start_methods() else "spawn"
+    with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
+        return LocalCluster(**({"n_workers": workers, "threads_per_worker": 1, "processes": True,
+                                "dashboard_address": None} | options))
