@@ -162,11 +162,13 @@ class PlotWorkers:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def draw(self, jobs: Sequence[Callable[[], list[Path]]]) -> list[Path]:
+    def draw(self, jobs: Sequence[Callable[[], list[Path]]], meanwhile: Callable[[], Any] | None = None
+             ) -> list[Path]:
         """Draw ``jobs``; returns their files in the order of ``jobs``.
 
-        :class:`FigureJob` s go to the workers, one at a time to each idle one; any other job is drawn
-        here meanwhile (and every job when there is no worker)."""
+        :class:`FigureJob` s go to the workers, one at a time to each idle one; ``meanwhile()`` (work of
+        the run that does not need the figures) and any other job run here while they draw (every job
+        when there is no worker)."""
         results: dict[int, list[Path]] = {}
         queue = [j for j, job in enumerate(jobs) if isinstance(job, FigureJob)] if self._conns else []
         idle = list(self._conns)
@@ -188,6 +190,8 @@ class PlotWorkers:
                     busy[conn] = j
 
         dispatch()
+        if meanwhile is not None:
+            meanwhile()
         for j, job in enumerate(jobs):  # this process's share, while the workers draw
             if j not in queue and j not in results and j not in busy.values():
                 results[j] = list(job())

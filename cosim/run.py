@@ -142,7 +142,9 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
         signals = recorder.signals()
         if workers is not None:
-            paths["plots"] = workers.draw(plot_jobs(master, recorder.time, signals, out_dir / "plots", scenario.name))
+            # report.html's imports and template are loaded while the workers draw: the page then only renders
+            paths["plots"] = workers.draw(plot_jobs(master, recorder.time, signals, out_dir / "plots", scenario.name),
+                                          meanwhile=_prepare_page if page else None)
     except BaseException as exc:
         rec = master.recorder
         report |= {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
@@ -216,6 +218,13 @@ def _write_page(out_dir: Path, report: dict) -> None:
         write_run_page(out_dir, json.loads((out_dir / "report.json").read_text(encoding="utf-8")))
     except Exception as exc:  # noqa: BLE001 - the run's outcome is what matters here
         print(f"{out_dir / 'report.html'}: not written ({type(exc).__name__}: {exc})", file=sys.stderr)
+
+
+def _prepare_page() -> None:
+    """Load what report.html needs (jinja2, the template compiled) before the run's data is final."""
+    from feeddrive.cosim.report import prepare
+
+    prepare()
 
 
 def prepare_out_dir(out_dir: str | Path, overwrite: bool) -> Path:

@@ -54,7 +54,9 @@ def test_workers_draw_in_order_in_other_processes_and_leave_nothing_behind(tmp_p
         jobs = [FigureJob(__name__, "write_pid", (tmp_path / f"f{k}.txt",)) for k in range(5)]
         here = tmp_path / "here.txt"
         jobs.insert(2, lambda: write_pid(here))  # not a FigureJob (a user component's write_plots): drawn here
-        paths = workers.draw(jobs)
+        meanwhile = []  # the run's own work while the workers draw (report.html's template)
+        paths = workers.draw(jobs, meanwhile=lambda: meanwhile.append(os.getpid()))
+    assert meanwhile == [os.getpid()]
     assert paths == [tmp_path / "f0.txt", tmp_path / "f1.txt", here] + [tmp_path / f"f{k}.txt" for k in range(2, 5)]
     assert int(here.read_text()) == os.getpid()
     pids = {int((tmp_path / f"f{k}.txt").read_text()) for k in range(5)}
