@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-#: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots)
-RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure"), ("motion_{k}_currents.png", "currents_figure"))
+#: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots, cost)
+RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure", 3.0), ("motion_{k}_currents.png", "currents_figure", 2.0))
 #: rows of the profiles figure: (label, unit, candidate signals in order of preference: measured first)
 PROFILES = (("voltage u", "V", ("sensors.u", "plant.voltage")),
             ("current i", "A", ("sensors.Im2", "sensors.Im1", "plant.current")),
@@ -44,12 +44,14 @@ class FigureJob:
     """One figure (or a few) drawn by ``module.function(*args)``, which returns the file(s) it wrote.
 
     The function is found by name where the job runs: pickling the job does not import its module (and
-    matplotlib) in the run's process.
+    matplotlib) in the run's process. ``cost`` is the figure's drawing time relative to the others' (about
+    its number of panels and texts): the costliest are sent first, so that the workers end together.
     """
 
     module: str
     function: str
     args: tuple = ()
+    cost: float = 1.0
 
     def __call__(self) -> list[Path]:
         out = getattr(importlib.import_module(self.module), self.function)(*self.args)
@@ -98,9 +100,9 @@ def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder:
             continue
         part = {name: np.ascontiguousarray(signals[name][idx]) for name in wanted if name in signals}
         t = np.ascontiguousarray(time[idx])
-        for pattern, function in RUN_FIGURES:
-            jobs.append(FigureJob("feeddrive.cosim.plots", function, (k, t, part, folder / pattern.format(k=k),
-                                                                       title)))
+        for pattern, function, cost in RUN_FIGURES:
+            path = folder / pattern.format(k=k)
+            jobs.append(FigureJob("feeddrive.cosim.plots", function, (k, t, part, path, title), cost))
     return jobs
 
 
@@ -110,13 +112,14 @@ def monitor_figure_jobs(traces: Sequence, motions: Sequence[Mapping], folder: st
     ``monitor_correlation<k>.png`` of each kept trace, ``monitor_trends.png`` of the axis."""
     folder = Path(folder)
     module = "feeddrive.cosim.monitor_plots"
-    jobs = [FigureJob(module, "plot_motion", (tr, folder / f"monitor_motion{tr.motion}.png")) for tr in traces]
-    jobs += [FigureJob(module, "plot_correlation", (tr, folder / f"monitor_correlation{tr.motion}.png"))
+    # costs measured against the run's figures (cosim.plots): 4 and 2 panels, and 6 panels for the trends
+    jobs = [FigureJob(module, "plot_motion", (tr, folder / f"monitor_motion{tr.motion}.png"), 6.0) for tr in traces]
+    jobs += [FigureJob(module, "plot_correlation", (tr, folder / f"monitor_correlation{tr.motion}.png"), 4.0)
              for tr in traces if tr.mismatch is not None]
     if any(m.get("parameters") for m in motions):
         axis = motions[-1].get("axis")
         jobs.append(FigureJob(module, "plot_trends", (list(motions), folder / "monitor_trends.png",
-                                                      f"axis {axis}" if axis else "", thresholds)))
+                                                      f"axis {axis}" if axis else "", thresholds), 6.0))
     return jobs
 
 
@@ -166,11 +169,12 @@ class PlotWorkers:
              ) -> list[Path]:
         """Draw ``jobs``; returns their files in the order of ``jobs``.
 
-        :class:`FigureJob` s go to the workers, one at a time to each idle one; ``meanwhile()`` (work of
+        :class:`FigureJob` s go to the workers, costliest first, one at a time to each idle one; ``meanwhile()`` (work of
         the run that does not need the figures) and any other job run here while they draw (every job
         when there is no worker)."""
         results: dict[int, list[Path]] = {}
         queue = [j for j, job in enumerate(jobs) if isinstance(job, FigureJob)] if self._conns else []
+        queue.sort(key=lambda j: -jobs[j].cost)  # the costliest first: the last ones sent are the short ones
         idle = list(self._conns)
         busy: dict[Any, int] = {}  # worker's connection -> its job
 
