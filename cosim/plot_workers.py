@@ -134,9 +134,11 @@ class PlotWorkers:
     processes : int or None
         Processes drawing at once (see :func:`drawing_processes`); with 1 there is no worker and
         :meth:`draw` draws every job here.
+    preload : sequence of str
+        Modules the workers import before their first figure (those of the jobs' functions).
     """
 
-    def __init__(self, processes: int | None = None) -> None:
+    def __init__(self, processes: int | None = None, preload: Sequence[str] = ()) -> None:
         self._conns: list[Any] = []  # this process's end of each worker's pipe
         self._pid: int | None = None  # the first worker (the others are its children)
         k = drawing_processes(processes)
@@ -151,7 +153,7 @@ class PlotWorkers:
         try:
             pid = os.fork()
             if pid == 0:  # pragma: no cover - the first worker; coverage cannot follow it
-                _first_worker(pipes)
+                _first_worker(pipes, tuple(preload))
         finally:
             gc.unfreeze()
         self._pid = pid
@@ -249,14 +251,14 @@ def _kill(pid: int) -> None:
         pass
 
 
-def _first_worker(pipes: list) -> None:  # pragma: no cover - runs in a worker
+def _first_worker(pipes: list, preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a worker
     """The first worker: warm up, fork the others (with matplotlib loaded), serve, wait for them, exit."""
     code = 0
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle: the run ends the workers
         for mine, _ in pipes:  # the run's ends: EOF reaches a worker when the run is gone
             mine.close()
-        _warm_up()
+        _warm_up(preload)
         children = []
         for j in range(1, len(pipes)):
             pid = os.fork()
@@ -295,14 +297,18 @@ def _serve(conn: Any, pipes: list) -> None:  # pragma: no cover - runs in a work
                 conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
 
 
-def _warm_up() -> None:  # pragma: no cover - runs in a worker
+def _warm_up(preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a worker
     """What every figure needs once per process, done before the first one is asked for: the imports,
     the font cache and the Agg renderer's first text (a figure drawn into memory and dropped)."""
     import io
 
+    import matplotlib
+
+    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    import feeddrive.cosim.monitor_plots  # noqa: F401 - imports cosim.plots, cosim.trends and matplotlib
+    for name in preload:  # the jobs' modules (cosim.plots, cosim.monitor_plots: run.FIGURE_MODULES)
+        importlib.import_module(name)
 
     fig, ax = plt.subplots(figsize=(2, 1))
     ax.plot([0.0, 1.0], [0.0, 1.0], label="x")

@@ -40,6 +40,8 @@ from feeddrive.cosim.plot_workers import PlotWorkers, run_figure_jobs
 from feeddrive.cosim.recorder import Sampling, write_sampling_sidecar
 from feeddrive.cosim.scenario import Scenario, load_scenario
 
+#: the modules of the run's figures (cosim.plot_workers.FigureJob), loaded by the drawing processes at the start
+FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
 OUTPUTS = ("signals.csv", "signals.meta.json", "scenario.resolved.yaml", "report.json", "report.html")
 
 
@@ -126,7 +128,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         scenario = updated
     master = Master.from_scenario(scenario)
     # the figures' processes start now: their import of matplotlib overlaps the simulation (cosim.plot_workers)
-    workers = PlotWorkers() if plots else None
+    workers = PlotWorkers(preload=FIGURE_MODULES) if plots else None
     wall = _time.perf_counter()
     try:
         master.setup()
