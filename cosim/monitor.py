@@ -151,7 +151,6 @@ class Monitor(Component):
         """Monitor plots of the kept motions and the parameter trends of the axis into ``folder``."""
         from feeddrive.cosim.plots import draw_concurrently
 
-        Path(folder).mkdir(parents=True, exist_ok=True)
         return draw_concurrently(self.plot_jobs(folder))
 
     def plot_jobs(self, folder: str | Path) -> list:
@@ -159,6 +158,7 @@ class Monitor(Component):
         drawing processes (``cosim run``)."""
         from feeddrive.cosim.plot_workers import monitor_figure_jobs
 
+        Path(folder).mkdir(parents=True, exist_ok=True)
         if self.config.db:
             with History(self.config.db) as history:
                 motions = history.motions(self.axis)

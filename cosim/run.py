@@ -176,6 +176,8 @@ def plot_jobs(master: Master, time: np.ndarray, signals: dict[str, np.ndarray], 
     """The run's figures (cosim.plots) and those of components that draw their own (the monitor): as
     ``FigureJob`` s for the drawing processes, or a component's ``write_plots`` drawn in this process."""
     jobs: list = run_figure_jobs(time, signals, folder, title)
+    if jobs:  # made before any figure: the workers draw in any order
+        folder.mkdir(parents=True, exist_ok=True)
     for comp in master.components.values():
         if callable(getattr(comp, "plot_jobs", None)):
             jobs += comp.plot_jobs(folder)
