@@ -148,14 +148,17 @@ class PlotWorkers:
         for stream in (sys.stdout, sys.stderr):  # nothing buffered here is written again by a worker
             stream.flush()
         # objects existing now stay out of the workers' garbage collections: their first collection would
-        # otherwise touch every inherited object and copy its page (supervise.py does the same)
+        # otherwise touch every inherited object and copy its page (supervise.py does the same). In a
+        # supervised run everything is frozen already and stays so (unfreezing would undo supervise's freeze)
+        frozen_before = gc.get_freeze_count()
         gc.freeze()
         try:
             pid = os.fork()
             if pid == 0:  # pragma: no cover - the first worker; coverage cannot follow it
                 _first_worker(pipes, tuple(preload))
         finally:
-            gc.unfreeze()
+            if not frozen_before:
+                gc.unfreeze()
         self._pid = pid
         for mine, theirs in pipes:
             theirs.close()
