@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -46,8 +47,11 @@ def test_the_run_does_not_import_matplotlib_and_its_figures_are_drawn(tmp_path):
     """The example's five figures are written, by processes of their own: the run never imports matplotlib
     (its import and the figures took longer than the simulation). scipy.stats is imported only by scipy
     itself (scipy.signal's peak finding), never by the project."""
+    # two drawing processes whatever the CPUs (and whatever `cosim campaign`, run in this process by another
+    # test, set: it asks for one)
+    env = os.environ | {"FEEDDRIVE_PLOT_PROCESSES": "2"}
     proc = subprocess.run([sys.executable, "-X", "importtime", "-c", RUN, str(ROOT / "examples" / "tool_change.yaml"),
-                           str(tmp_path / "run")], capture_output=True, text=True, timeout=600)
+                           str(tmp_path / "run")], capture_output=True, text=True, timeout=600, env=env)
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["matplotlib"] == []
