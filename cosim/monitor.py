@@ -163,14 +163,22 @@ class Monitor(Component):
 
     def write_plots(self, folder: str | Path) -> list[Path]:
         """Monitor plots of the kept motions and the parameter trends of the axis into ``folder``."""
-        from feeddrive.cosim.monitor_plots import plot_monitor
+        from feeddrive.cosim.plots import draw_concurrently
 
+        return draw_concurrently(self.plot_jobs(folder))
+
+    def plot_jobs(self, folder: str | Path) -> list:
+        """The figures of :meth:`write_plots` as ``cosim.plot_workers.FigureJob`` s, drawn by the run's
+        drawing processes (``cosim run``)."""
+        from feeddrive.cosim.plot_workers import monitor_figure_jobs
+
+        Path(folder).mkdir(parents=True, exist_ok=True)
         if self.config.db:
             with History(self.config.db) as history:
                 motions = history.motions(self.axis)
         else:
             motions = self.results
-        return plot_monitor(self.traces, motions, Path(folder), self.pipeline.thresholds() if self.pipeline else None)
+        return monitor_figure_jobs(self.traces, motions, Path(folder), self.pipeline.thresholds() if self.pipeline else None)
 
     def terminate(self) -> None:
         if self.history is not None:

@@ -9,7 +9,6 @@
 """
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -19,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from feeddrive.cosim.plot_workers import monitor_figure_jobs  # noqa: E402
 from feeddrive.cosim.plots import draw_concurrently, envelope  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
@@ -142,16 +142,4 @@ def plot_monitor(traces: Sequence, motions: Sequence[dict], folder: Path, thresh
     """
     folder.mkdir(parents=True, exist_ok=True)
     # one job per figure, drawn at the same time in forked processes (cosim.plots.draw_concurrently)
-    jobs = [functools.partial(_one, plot_motion, tr, folder / f"monitor_motion{tr.motion}.png") for tr in traces]
-    jobs += [functools.partial(_one, plot_correlation, tr, folder / f"monitor_correlation{tr.motion}.png")
-             for tr in traces if tr.mismatch is not None]
-    if any(m.get("parameters") for m in motions):
-        axis = motions[-1].get("axis")
-        jobs.append(functools.partial(_one, plot_trends, motions, folder / "monitor_trends.png",
-                                      f"axis {axis}" if axis else "", thresholds))
-    return draw_concurrently(jobs)
-
-
-def _one(draw, *args) -> list[Path]:  # noqa: ANN001 - a figure function returning its file
-    """``[draw(*args)]``: a figure function as a job of draw_concurrently."""
-    return [draw(*args)]
+    return draw_concurrently(monitor_figure_jobs(traces, motions, folder, thresholds))

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import multiprocessing
-import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -22,11 +21,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-#: (label, unit, candidate signals in order of preference: measured first)
-PROFILES = (("voltage u", "V", ("sensors.u", "plant.voltage")),
-            ("current i", "A", ("sensors.Im2", "sensors.Im1", "plant.current")),
-            ("speed w", "rad/s", ("sensors.w_tach", "plant.speed")))
-
+from feeddrive.cosim.plot_workers import CURRENTS, PROFILES, drawing_processes, motions  # noqa: E402, F401 - re-exported
 
 #: samples drawn per trace at most, as min/max pairs: twice the figures' width in pixels (9 in at 110 dpi)
 DISPLAY_BUCKETS = 1000
@@ -64,15 +59,6 @@ def envelope(t: np.ndarray, y: np.ndarray, buckets: int = DISPLAY_BUCKETS) -> tu
     return np.asarray(t)[keep], y[keep]
 
 
-def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
-    """``motion index -> sample indices`` of each high-speed motion (NC state 1), from nc.state/nc.motion."""
-    if "nc.state" not in signals or "nc.motion" not in signals:
-        return {}
-    state, motion = signals["nc.state"], signals["nc.motion"]
-    rapid = state == 1
-    return {int(k): np.flatnonzero(rapid & (motion == k)) for k in np.unique(motion[rapid])}
-
-
 def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str | Path,
              title: str = "") -> list[Path]:
     """Draw the figures of a run into ``out_dir`` (created); returns the files written.
@@ -88,43 +74,71 @@ def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str |
     title : str
         Prefix of the figure titles (the scenario name).
     """
-    out_dir = Path(out_dir)
-    written: list[Path] = []
-    for k, idx in motions(signals).items():
-        if idx.size < 2:
-            continue
-        t = time[idx]
-        rows = [(label, unit, [s for s in names if s in signals]) for label, unit, names in PROFILES]
-        rows = [(label, unit, names[0], names[-1]) for label, unit, names in rows if names]
-        if rows:
-            fig, axes = plt.subplots(len(rows), 1, sharex=True, figsize=(9, 2.2 * len(rows) + 0.6))
-            for ax, (label, unit, measured, true) in zip(np.atleast_1d(axes), rows):
-                ax.plot(*envelope(t, signals[measured][idx]), lw=0.6, label=measured)
-                if true != measured:
-                    ax.plot(*envelope(t, signals[true][idx]), lw=0.9, label=true)
-                ax.set_ylabel(f"{label} [{unit}]")
-                ax.grid(alpha=0.3)
-                _legend_outside(ax)
-            np.atleast_1d(axes)[-1].set_xlabel("time [s]")
-            fig.suptitle(f"{title} high-speed motion {k}: voltage, current and speed")
-            written.append(_save(fig, out_dir / f"motion_{k}_profiles.png"))
-        if "sensors.Im1" in signals and "sensors.Im2" in signals:
-            im1, im2 = signals["sensors.Im1"][idx], signals["sensors.Im2"][idx]
-            fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(9, 5))
-            ax1.plot(*envelope(t, im1), lw=0.6, label="Im1")
-            ax1.plot(*envelope(t, im2), lw=0.6, label="Im2")
-            ax1.set_ylabel("current [A]")
-            _legend_outside(ax1)
-            ax2.plot(*envelope(t, im1 - im2), lw=0.6, color="C3")
-            ax2.axhline(float(np.mean(im1 - im2)), color="k", lw=0.8, ls="--", label="mean")
-            ax2.set_ylabel("residue Im1 - Im2 [A]")
-            ax2.set_xlabel("time [s]")
-            _legend_outside(ax2)
-            for ax in (ax1, ax2):
-                ax.grid(alpha=0.3)
-            fig.suptitle(f"{title} high-speed motion {k}: redundant current sensors")
-            written.append(_save(fig, out_dir / f"motion_{k}_currents.png"))
-    return written
+    from feeddrive.cosim.plot_workers import run_figure_jobs
+
+    return [path for job in run_figure_jobs(time, signals, out_dir, title) for path in job()]
+
+
+def profiles_figure(k: int, t: np.ndarray, signals: Mapping[str, np.ndarray], path: Path, title: str = ""
+                    ) -> list[Path]:
+    """Voltage, current and speed of high-speed motion ``k`` against time (paper Fig. 3 and 8) into ``path``.
+
+    Parameters
+    ----------
+    k : int
+        The motion's index.
+    t : ndarray, shape (n,)
+        The motion's sample times [s].
+    signals : mapping name -> ndarray, shape (n,)
+        The motion's samples of the recorded signals.
+    path : Path
+        The PNG file.
+    title : str
+        Prefix of the title (the scenario name).
+
+    Returns
+    -------
+    list of Path
+        ``[path]``, or ``[]`` when none of the signals was recorded.
+    """
+    rows = [(label, unit, [s for s in names if s in signals]) for label, unit, names in PROFILES]
+    rows = [(label, unit, names[0], names[-1]) for label, unit, names in rows if names]
+    if not rows:
+        return []
+    fig, axes = plt.subplots(len(rows), 1, sharex=True, figsize=(9, 2.2 * len(rows) + 0.6))
+    for ax, (label, unit, measured, true) in zip(np.atleast_1d(axes), rows):
+        ax.plot(*envelope(t, signals[measured]), lw=0.6, label=measured)
+        if true != measured:
+            ax.plot(*envelope(t, signals[true]), lw=0.9, label=true)
+        ax.set_ylabel(f"{label} [{unit}]")
+        ax.grid(alpha=0.3)
+        _legend_outside(ax)
+    np.atleast_1d(axes)[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{title} high-speed motion {k}: voltage, current and speed")
+    return [_save(fig, path)]
+
+
+def currents_figure(k: int, t: np.ndarray, signals: Mapping[str, np.ndarray], path: Path, title: str = ""
+                    ) -> list[Path]:
+    """The two current measurements of high-speed motion ``k`` and their residue r = Im1 - Im2 (paper
+    Fig. 9 and 10) into ``path``; parameters as :func:`profiles_figure` (``[]``: a sensor is missing)."""
+    if not all(name in signals for name in CURRENTS):
+        return []
+    im1, im2 = (signals[name] for name in CURRENTS)
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(9, 5))
+    ax1.plot(*envelope(t, im1), lw=0.6, label="Im1")
+    ax1.plot(*envelope(t, im2), lw=0.6, label="Im2")
+    ax1.set_ylabel("current [A]")
+    _legend_outside(ax1)
+    ax2.plot(*envelope(t, im1 - im2), lw=0.6, color="C3")
+    ax2.axhline(float(np.mean(im1 - im2)), color="k", lw=0.8, ls="--", label="mean")
+    ax2.set_ylabel("residue Im1 - Im2 [A]")
+    ax2.set_xlabel("time [s]")
+    _legend_outside(ax2)
+    for ax in (ax1, ax2):
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{title} high-speed motion {k}: redundant current sensors")
+    return [_save(fig, path)]
 
 
 def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]], processes: int | None = None) -> list[Path]:
@@ -145,10 +159,7 @@ def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]], processes: int |
         Processes drawing at once, this one included (default: ``$FEEDDRIVE_PLOT_PROCESSES``, else the
         number of CPUs; a campaign sets 1, its runs already use every CPU).
     """
-    default = int(os.environ.get("FEEDDRIVE_PLOT_PROCESSES", "0") or 0)
-    k = max(1, min(len(jobs), processes or default or os.cpu_count() or 1))
-    if "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
-        k = 1  # a daemonic process (a multiprocessing.Pool or Dask worker of a campaign) may have no children
+    k = min(max(1, len(jobs)), drawing_processes(processes))
     groups = [list(range(i, len(jobs), k)) for i in range(k)]
 
     def draw(group: list[int]) -> list[list[Path]]:

@@ -36,9 +36,12 @@ import yaml
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
 from feeddrive.cosim.master import Master
+from feeddrive.cosim.plot_workers import PlotWorkers, run_figure_jobs
 from feeddrive.cosim.recorder import Sampling, write_sampling_sidecar
 from feeddrive.cosim.scenario import Scenario, load_scenario
 
+#: the modules of the run's figures (cosim.plot_workers.FigureJob), loaded by the drawing processes at the start
+FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
 OUTPUTS = ("signals.csv", "signals.meta.json", "scenario.resolved.yaml", "report.json", "report.html")
 
 
@@ -124,6 +127,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
             db.parent.mkdir(parents=True, exist_ok=True)
         scenario = updated
     master = Master.from_scenario(scenario)
+    # the figures' processes start now: their import of matplotlib overlaps the simulation (cosim.plot_workers)
+    workers = PlotWorkers(preload=FIGURE_MODULES) if plots else None
     wall = _time.perf_counter()
     try:
         master.setup()
@@ -138,15 +143,10 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         report["components"] = master.reports()
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
         signals = recorder.signals()
-        if plots:
-            from feeddrive.cosim.plots import draw_concurrently, plot_run
-
-            # the run's figures and those of components that draw their own (the monitor), drawn at the
-            # same time in forked processes: matplotlib's layout and PNG rendering were half of the command
-            jobs = [lambda: plot_run(recorder.time, signals, out_dir / "plots", title=scenario.name)]
-            jobs += [functools.partial(comp.write_plots, out_dir / "plots") for comp in master.components.values()
-                     if callable(getattr(comp, "write_plots", None))]
-            paths["plots"] = draw_concurrently(jobs)
+        if workers is not None:
+            # report.html's imports and template are loaded while the workers draw: the page then only renders
+            paths["plots"] = workers.draw(plot_jobs(master, recorder.time, signals, out_dir / "plots", scenario.name),
+                                          meanwhile=_prepare_page if page else None)
     except BaseException as exc:
         rec = master.recorder
         report |= {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
@@ -158,6 +158,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         raise
     finally:
         master.terminate()
+        if workers is not None:
+            workers.close()
     report["status"] = "ok"
     monitor = report["components"].get("monitor")
     if isinstance(monitor, dict) and "motions" in monitor:
@@ -168,6 +170,20 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     if page:
         _write_page(out_dir, report)
     return RunResult(out_dir, recorder.time, signals, dict(zip(recorder.names, recorder.units)), report, paths)
+
+
+def plot_jobs(master: Master, time: np.ndarray, signals: dict[str, np.ndarray], folder: Path, title: str) -> list:
+    """The run's figures (cosim.plots) and those of components that draw their own (the monitor): as
+    ``FigureJob`` s for the drawing processes, or a component's ``write_plots`` drawn in this process."""
+    jobs: list = run_figure_jobs(time, signals, folder, title)
+    if jobs:  # made before any figure: the workers draw in any order
+        folder.mkdir(parents=True, exist_ok=True)
+    for comp in master.components.values():
+        if callable(getattr(comp, "plot_jobs", None)):
+            jobs += comp.plot_jobs(folder)
+        elif callable(getattr(comp, "write_plots", None)):
+            jobs.append(functools.partial(comp.write_plots, folder))
+    return jobs
 
 
 def column_sampling(scenario: Scenario, names: Sequence[str]) -> dict[str, Sampling]:
@@ -206,6 +222,13 @@ def _write_page(out_dir: Path, report: dict) -> None:
         write_run_page(out_dir, json.loads((out_dir / "report.json").read_text(encoding="utf-8")))
     except Exception as exc:  # noqa: BLE001 - the run's outcome is what matters here
         print(f"{out_dir / 'report.html'}: not written ({type(exc).__name__}: {exc})", file=sys.stderr)
+
+
+def _prepare_page() -> None:
+    """Load what report.html needs (jinja2, the template compiled) before the run's data is final."""
+    from feeddrive.cosim.report import prepare
+
+    prepare()
 
 
 def prepare_out_dir(out_dir: str | Path, overwrite: bool) -> Path:

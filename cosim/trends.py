@@ -24,16 +24,14 @@ import datetime as _dt
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.dates as mdates  # noqa: E402
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.ticker import MaxNLocator, ScalarFormatter  # noqa: E402
+from feeddrive.cosim.errors import InputError
 
-from feeddrive.cosim.errors import InputError  # noqa: E402
+if TYPE_CHECKING:
+    import matplotlib.pyplot as plt
 
 #: the six monitored parameters and their SI units (a report's own ``unit`` wins when present)
 PARAMETERS = (("R", "Ohm"), ("L", "H"), ("K", "N.m/A"), ("Jt", "kg.m2"), ("ft", "N.m.s/rad"), ("Cd", "N.m"))
@@ -130,6 +128,8 @@ def _steps(x: np.ndarray, y: np.ndarray, pad: float) -> tuple[np.ndarray, np.nda
 def plot_trends(motions: Sequence[Mapping], path: Path, title: str = "", thresholds: Mapping | None = None,
                 x: str = "auto", units: Mapping[str, str] | None = None) -> Path:
     """Draw ``trend_figure`` into ``path`` (PNG); returns ``path``."""
+    import matplotlib.pyplot as plt
+
     fig = trend_figure(motions, title, thresholds, x, units)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
@@ -160,6 +160,14 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
     matplotlib.figure.Figure
         3 x 2 panels (R, L, K | Jt, ft, Cd); the caller closes it.
     """
+    # matplotlib here, not at the top: report.html reads the trends' data (trend_series) without drawing
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.dates as mdates
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
     series = trend_series(motions, thresholds)
     if not series:
         raise InputError(f"no motion with estimated parameters to plot{' for ' + title if title else ''}")

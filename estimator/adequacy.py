@@ -42,9 +42,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.polynomial import legendre
-from scipy import stats
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
+from feeddrive.estimator.distributions import f_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms
@@ -212,7 +212,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     except np.linalg.LinAlgError:
         return None, None, None, tuple(undetermined), None, (), "the residue's block covariance is singular"
     F = (k - q) / (q * k) * t2
-    p = float(stats.f.sf(F, q, k - q))
+    p = float(f_sf(F, q, k - q))
     # the term that carries the lack of fit: each term's share of the tested directions, weighted by their z
     z = np.abs(c) / np.sqrt(np.clip(np.diag(S), np.finfo(float).tiny, None))
     strongest = terms[int(np.argmax(np.abs(Vt[keep].T) @ z))]

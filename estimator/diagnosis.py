@@ -29,8 +29,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
+from feeddrive.estimator.distributions import norm_isf
 from feeddrive.estimator.errors import EstimatorInputError
 
 #: Table I: fault -> {sensitive parameter: direction of change (+1 up, -1 down, 0 either)}
@@ -83,7 +83,7 @@ class DiagnosisOptions:
 
     @property
     def z_crit(self) -> float:
-        return float(stats.norm.isf(self.alpha / 2))
+        return float(norm_isf(self.alpha / 2))
 
     def min_rel(self, name: str) -> float:
         m = self.min_relative

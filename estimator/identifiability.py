@@ -22,7 +22,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from scipy import stats
+
+from feeddrive.estimator.distributions import norm_ppf
 
 #: Smallest ratio of the two time constants for the second lag to matter to L.
 MIN_LAG_RATIO = 0.1
@@ -80,7 +81,7 @@ def lag_reason(test: Mapping | None, R: float, slope: str = "L", state: str = "i
     if test is None or test["taus"] is None:
         return None
     big, small = test["taus"]
-    q = float(stats.norm.ppf(0.975))
+    q = float(norm_ppf(0.975))
     if not (test["t"] > q and small > 0 and small >= MIN_LAG_RATIO * big):
         return None
     return (f"the current lags the voltage through two time constants, {big * 1e3:.3g} ms and {small * 1e3:.3g} ms "

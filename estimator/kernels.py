@@ -259,7 +259,7 @@ def last_columns_f_test(fit, q: int) -> tuple[float, float, float, float]:  # no
     tuple of float
         ``(F, df_num, df_denom, p_value)`` as ``f_test``'s ``fvalue``, ``df_num``, ``df_denom``, ``pvalue``.
     """
-    from scipy import stats
+    from feeddrive.estimator.distributions import f_sf
 
     Rbq = np.asarray(fit.params)[-q:, None]
     cov = np.asarray(fit.cov_params())[-q:, -q:]
@@ -269,4 +269,4 @@ def last_columns_f_test(fit, q: int) -> tuple[float, float, float, float]:  # no
     J = float(min(q, np.linalg.matrix_rank(cov)))
     F = float(np.squeeze(np.dot(np.dot(Rbq.T, invcov), Rbq))) / J
     df_denom = float(getattr(fit, "df_resid_inference", fit.df_resid))
-    return F, J, df_denom, float(stats.f.sf(F, J, df_denom))
+    return F, J, df_denom, float(f_sf(F, J, df_denom))

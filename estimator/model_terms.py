@@ -9,9 +9,9 @@ from collections.abc import Mapping
 
 import casadi as ca
 import numpy as np
-from scipy import stats
 
 from feeddrive.estimator.derivative import FUTURE, PAST
+from feeddrive.estimator.distributions import t_ppf
 from feeddrive.estimator.errors import NotEnoughExcitation
 from feeddrive.estimator.kernels import equation_parameters_of as equation_parameters  # derived once per model
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, ParameterEstimate, Prepared
@@ -60,7 +60,7 @@ def derived_estimates(result: MethodResult, model) -> dict[str, ParameterEstimat
         jac = np.asarray(jac, dtype=float).ravel()
         std = float(np.sqrt(max(jac @ np.asarray(result.covariance)[np.ix_(idx, idx)] @ jac, 0.0)))
         dof = result.dof if result.parameter_dof is None else float(np.min(np.asarray(result.parameter_dof)[idx]))
-        q = float(stats.t.ppf(0.975, max(dof, 1)))
+        q = float(t_ppf(0.975, max(dof, 1)))
         v = float(val)
         out[name] = ParameterEstimate(v, std, (v - q * std, v + q * std))
     return out

@@ -9,8 +9,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
+from feeddrive.estimator.distributions import t_ppf
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.regression import Regression
@@ -264,7 +264,7 @@ class MethodResult:
     @property
     def parameters(self) -> dict[str, ParameterEstimate]:
         dof = np.full(len(self.names), float(self.dof)) if self.parameter_dof is None else self.parameter_dof
-        t = stats.t.ppf(0.975, np.maximum(dof, 1))
+        t = t_ppf(0.975, np.maximum(dof, 1))
         std = np.sqrt(np.clip(np.diag(self.covariance), 0, None))
         return {n: ParameterEstimate(float(v), float(s), (float(v - q * s), float(v + q * s)))
                 for n, v, s, q in zip(self.names, self.values, std, t)}

@@ -34,8 +34,8 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from scipy import stats
 
+from feeddrive.estimator.distributions import norm_ppf, t_ppf
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.estimate import (
     _column_reference,
@@ -147,7 +147,7 @@ def _tau_rule(fit, reg, h: float, fixed: dict, refused: dict, model) -> bool:
         ja, jr = reg.names.index(a), reg.names.index(r)
         R, L = fit.theta[jr], fit.theta[ja]
         sl = float(np.sqrt(max(fit.cov[ja, ja], 0.0)))
-        q = float(stats.t.ppf(0.975, max(float(fit.theta_dof[ja]), 1.0)))
+        q = float(t_ppf(0.975, max(float(fit.theta_dof[ja]), 1.0)))
         if not R > 0:
             continue
         tau, tau_hi = L / R, (L + q * sl) / R
@@ -299,7 +299,7 @@ def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed
     dof = np.full(len(names), float(result.dof)) if result.parameter_dof is None else np.asarray(result.parameter_dof)
     # judged on the printed interval: its half-width against that of a standard error of max_relative_std
     # with many degrees of freedom (a t quantile with few dof widens both alike)
-    widen = stats.t.ppf(0.975, np.maximum(dof, 1.0)) / stats.norm.ppf(0.975)
+    widen = t_ppf(0.975, np.maximum(dof, 1.0)) / norm_ppf(0.975)
     out: list[int] = []
     while True:
         std = np.sqrt(np.clip(np.diag(cov), 0, None)) * widen
@@ -311,8 +311,8 @@ def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed
             break
         new = [max(over, key=lambda j: rel[j])]  # the worst first: fixing it may bring the others within the rule
         for j in new:
-            refused[names[j]] = (f"95 % interval +-{rel[j] * stats.norm.ppf(0.975):.0%} of the value, more than "
-                                 f"+-{options.max_relative_std * stats.norm.ppf(0.975):.0%} (a relative standard error "
+            refused[names[j]] = (f"95 % interval +-{rel[j] * norm_ppf(0.975):.0%} of the value, more than "
+                                 f"+-{options.max_relative_std * norm_ppf(0.975):.0%} (a relative standard error "
                                  f"above {options.max_relative_std:.0%}; {result.method_used.upper()}: {values[j]:.4g})")
             fixed[names[j]] = float(values[j])
         out += new

@@ -16,8 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
+from feeddrive.estimator.distributions import chi2_sf, t_ppf
 from feeddrive.estimator.motion import ORDER, MethodResult, ParameterEstimate
 
 
@@ -94,13 +94,13 @@ def pool(results: list[MethodResult], alpha: float = 0.01) -> Pooled:
         mean = float(np.sum(wgt * x[ok]) / np.sum(wgt))
         std = float(np.sqrt(1.0 / np.sum(wgt)))
         dof = sum(_dof(r, n) for r, k in zip(have, ok) if k)
-        q = float(stats.t.ppf(0.975, max(dof, 1.0)))
+        q = float(t_ppf(0.975, max(dof, 1.0)))
         params[n] = ParameterEstimate(mean, std, (mean - q * std, mean + q * std))
         count[n] = int(ok.sum())
         dofs[n] = max(dof, 1.0)
         if ok.sum() > 1:
             c = float(np.sum(wgt * (x[ok] - mean) ** 2))
-            per[n] = (c, int(ok.sum()) - 1, float(stats.chi2.sf(c, int(ok.sum()) - 1)))
+            per[n] = (c, int(ok.sum()) - 1, float(chi2_sf(c, int(ok.sum()) - 1)))
     common = [n for n in names if n in params and all(n in r.names for r in results)]
     chi2, dof = 0.0, 0
     if len(results) > 1 and common:
@@ -112,7 +112,7 @@ def pool(results: list[MethodResult], alpha: float = 0.01) -> Pooled:
         theta = np.linalg.lstsq(sum(W), sum(w @ x for w, (x, _) in zip(W, sub)), rcond=None)[0]
         chi2 = float(sum((x - theta) @ w @ (x - theta) for w, (x, _) in zip(W, sub)))
         dof = (len(results) - 1) * len(common)
-    joint_p = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
+    joint_p = float(chi2_sf(chi2, dof)) if dof else 1.0
     p_value = min(1.0, min((p for *_, p in per.values()), default=1.0) * max(len(per), 1))
     differ = [n for n, (_, _, p) in per.items() if p * len(per) <= alpha]
     verdict = f"differ: {', '.join(differ)}" if differ else "consistent"

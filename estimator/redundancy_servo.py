@@ -31,8 +31,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
+from feeddrive.estimator.distributions import chi2_sf, t_ppf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.validation import ResidueTest, ValidationOptions, gain_ratio, noise_std, residue_test
 
@@ -130,7 +130,7 @@ def phase_current_sum(i_u: np.ndarray, i_v: np.ndarray, i_w: np.ndarray, alpha: 
     X = np.column_stack([i_u, i_v, np.ones_like(i_u)])
     res = OLS(r, X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
     beta, cov = res.params, res.cov_params()
-    p = float(stats.chi2.sf(float(beta @ np.linalg.solve(cov, beta)), 3))
+    p = float(chi2_sf(float(beta @ np.linalg.solve(cov, beta)), 3))
     span = float(np.max(np.abs([i_u, i_v, i_w])))
     # single fault: the best of r = e I_k + b
     fits = []
@@ -441,6 +441,6 @@ def lost_motion(s_mot_mm: np.ndarray, s_lin_mm: np.ndarray, h: float, alpha: flo
     se = math.sqrt(v1 + v2) or np.finfo(float).tiny
     dof = (v1 + v2) ** 2 / ((v1**2 / (fwd.size - 1) if v1 else 0) + (v2**2 / (bwd.size - 1) if v2 else 0) or 1e-300)
     dof = float(min(dof, fwd.size + bwd.size - 2))
-    tq = float(stats.t.ppf(0.975, dof))
-    p = float(stats.t.sf((value - allowed_mm) / se, dof))
+    tq = float(t_ppf(0.975, dof))
+    p = float(t_sf((value - allowed_mm) / se, dof))
     return LostMotion(value, (value - tq * se, value + tq * se), p, p < alpha, (int(fwd.size), int(bwd.size)))

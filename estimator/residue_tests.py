@@ -10,8 +10,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg, stats
+from scipy import linalg
 
+from feeddrive.estimator.distributions import chi2_sf, f_sf, norm_isf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test
 
@@ -49,7 +50,7 @@ def ljung_box(x: np.ndarray, lags: int) -> float:
     acov = np.array([x[k:] @ x[:n - k] for k in range(lags + 1)]) / n
     rho = acov[1:] / acov[0]
     q = n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, lags + 1)))
-    return float(stats.chi2.sf(q, lags))
+    return float(chi2_sf(q, lags))
 
 
 def ols_f_test(y: np.ndarray, X: np.ndarray, R: np.ndarray) -> tuple[float, tuple[float, float], float]:
@@ -62,7 +63,7 @@ def ols_f_test(y: np.ndarray, X: np.ndarray, R: np.ndarray) -> tuple[float, tupl
     rb = R @ beta
     q = float(R.shape[0])
     fvalue = float(rb @ np.linalg.pinv(scale * R @ (pinv @ pinv.T) @ R.T) @ rb / q)
-    return fvalue, (q, dof), float(stats.f.sf(fvalue, q, dof))
+    return fvalue, (q, dof), float(f_sf(fvalue, q, dof))
 
 
 def block_samples(rate_hz: float, h: float) -> int:
@@ -157,7 +158,7 @@ def peak_test(y: np.ndarray, nuisance: np.ndarray, sizes: Sequence[int],
     if not scale > 0:
         return TestResult("peak", 0.0, (float(n), dof), 1.0)
     z = float(d.max() / scale)
-    return TestResult("peak", z, (float(n), dof), float(min(1.0, n * 2 * stats.t.sf(z, dof))))
+    return TestResult("peak", z, (float(n), dof), float(min(1.0, n * 2 * t_sf(z, dof))))
 
 
 def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: np.ndarray, h: float,
@@ -264,7 +265,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     wl = whiten(L)
     corr = (wl.T @ white) / np.sqrt(np.sum(wl ** 2, axis=0) * (white @ white)).clip(1e-300)
     correlation = corr.reshape(inputs.shape[1], lags + 1).T
-    band = float(stats.norm.isf(alpha / 2) / np.sqrt(white.size))
+    band = float(norm_isf(alpha / 2) / np.sqrt(white.size))
     if segment_covariance is not None:
         tests["peak"] = peak_test(np.concatenate(r_all), np.vstack(Z_all), [len(r) for r in r_all],
                                   segment_covariance)
@@ -274,5 +275,5 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     if noise_std is not None and noise_std > 0:
         dof = float(y.size)  # the residue is correlated over about a block: one degree of freedom per block
         ratio = rms ** 2 / noise_std ** 2
-        tests["size"] = TestResult("size", ratio, (dof, float(noise_dof)), float(stats.f.sf(ratio, dof, noise_dof)))
+        tests["size"] = TestResult("size", ratio, (dof, float(noise_dof)), float(f_sf(ratio, dof, noise_dof)))
     return tests, rms, correlation, band

@@ -48,8 +48,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import signal, stats
+from scipy import signal
 
+from feeddrive.estimator.distributions import chi2_sf, t_ppf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.kernels import bilinear_first_order
@@ -269,9 +270,9 @@ def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
     scale = max(float(resid @ resid) / dof, var_hf, np.finfo(float).tiny)
     cov = scale * np.linalg.pinv(X.T @ X)
     se = np.sqrt(np.diag(cov))
-    tq = stats.t.ppf(0.975, dof)
-    p = 2 * stats.t.sf(np.abs(coef) / np.where(se > 0, se, np.inf), dof)
-    p_structure = float(stats.chi2.sf(float(resid @ resid) / var_hf, dof)) if var_hf > 0 else 0.0
+    tq = t_ppf(0.975, dof)
+    p = 2 * t_sf(np.abs(coef) / np.where(se > 0, se, np.inf), dof)
+    p_structure = float(chi2_sf(float(resid @ resid) / var_hf, dof)) if var_hf > 0 else 0.0
     span = float(np.max(np.abs(levels)))
     gain = p[0] < options.alpha and abs(coef[0]) > options.gain_tol
     offset = p[1] < options.alpha and abs(coef[1]) > options.offset_tol * span

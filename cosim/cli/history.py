@@ -83,9 +83,9 @@ def thresholds(db: Path, axis: str, motions: list[dict]) -> dict:
         out = MonitorPipeline(config, history, axis).thresholds()
     used = next((m["drift_reference"] for m in reversed(motions) if m.get("drift_reference")), None)
     if used is not None:
-        from scipy.stats import norm
+        from feeddrive.estimator.distributions import norm_sf
 
-        out |= {"z_crit": used["z_crit"], "min_relative": used["min_relative"], "alpha": 2 * norm.sf(used["z_crit"])}
+        out |= {"z_crit": used["z_crit"], "min_relative": used["min_relative"], "alpha": 2 * norm_sf(used["z_crit"])}
     return out
 
 

@@ -1,0 +1,321 @@
+"""Processes that draw a run's figures, forked when the run starts (issue 23).
+
+A run's five PNGs and the import of matplotlib they need took longer than the co-simulation itself, and
+the user waited for them after it. :class:`PlotWorkers` forks its processes at the start of the run: each
+imports matplotlib and draws a first, throw-away figure (fonts, the Agg renderer) while the simulation
+runs in the parent, then waits for figures. At the end of the run the parent sends each figure as a
+:class:`FigureJob` (the drawing function's name and its data, pickled: a few MB) to the next idle
+process; the run itself never imports matplotlib.
+
+Jobs that are not :class:`FigureJob` (a user component's own ``write_plots``) are drawn in this process,
+while the workers draw theirs. Without ``fork`` (not POSIX), in a daemonic process (a campaign's Pool or
+Dask worker) or with one process asked for, there are no workers and every job is drawn here in turn.
+A worker that dies has its figure drawn here; a job's exception is raised here.
+"""
+from __future__ import annotations
+
+import gc
+import importlib
+import multiprocessing
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from multiprocessing.connection import wait
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots, cost)
+RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure", 3.0), ("motion_{k}_currents.png", "currents_figure", 2.0))
+#: rows of the profiles figure: (label, unit, candidate signals in order of preference: measured first)
+PROFILES = (("voltage u", "V", ("sensors.u", "plant.voltage")),
+            ("current i", "A", ("sensors.Im2", "sensors.Im1", "plant.current")),
+            ("speed w", "rad/s", ("sensors.w_tach", "plant.speed")))
+#: the redundant current sensors of the currents figure
+CURRENTS = ("sensors.Im1", "sensors.Im2")
+
+
+@dataclass(frozen=True)
+class FigureJob:
+    """One figure (or a few) drawn by ``module.function(*args)``, which returns the file(s) it wrote.
+
+    The function is found by name where the job runs: pickling the job does not import its module (and
+    matplotlib) in the run's process. ``cost`` is the figure's drawing time relative to the others' (about
+    its number of panels and texts): the costliest are sent first, so that the workers end together.
+    """
+
+    module: str
+    function: str
+    args: tuple = ()
+    cost: float = 1.0
+
+    def __call__(self) -> list[Path]:
+        out = getattr(importlib.import_module(self.module), self.function)(*self.args)
+        return [out] if isinstance(out, Path) else list(out)
+
+
+def drawing_processes(processes: int | None = None) -> int:
+    """Processes to draw with: ``processes``, else ``$FEEDDRIVE_PLOT_PROCESSES``, else the number of CPUs;
+    1 without ``fork`` or in a daemonic process (a campaign's Pool or Dask worker may have no children)."""
+    default = int(os.environ.get("FEEDDRIVE_PLOT_PROCESSES", "0") or 0)
+    k = max(1, processes or default or os.cpu_count() or 1)
+    if "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
+        return 1
+    return k
+
+
+def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
+    """``motion index -> sample indices`` of each high-speed motion (NC state 1), from nc.state/nc.motion."""
+    if "nc.state" not in signals or "nc.motion" not in signals:
+        return {}
+    state, motion = signals["nc.state"], signals["nc.motion"]
+    rapid = state == 1
+    return {int(k): np.flatnonzero(rapid & (motion == k)) for k in np.unique(motion[rapid])}
+
+
+def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder: str | Path,
+                    title: str = "") -> list[FigureJob]:
+    """The run's figures (cosim.plots) as jobs, each with only the samples of its motion.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Sample times [s].
+    signals : mapping name -> ndarray, shape (n,)
+        Recorded signals (``component.port``).
+    folder : path
+        Directory of the PNG files.
+    title : str
+        Prefix of the figure titles (the scenario name).
+    """
+    folder = Path(folder)
+    wanted = [name for _, _, names in PROFILES for name in names] + list(CURRENTS)
+    jobs = []
+    for k, idx in motions(signals).items():
+        if idx.size < 2:
+            continue
+        part = {name: np.ascontiguousarray(signals[name][idx]) for name in wanted if name in signals}
+        t = np.ascontiguousarray(time[idx])
+        for pattern, function, cost in RUN_FIGURES:
+            path = folder / pattern.format(k=k)
+            jobs.append(FigureJob("feeddrive.cosim.plots", function, (k, t, part, path, title), cost))
+    return jobs
+
+
+def monitor_figure_jobs(traces: Sequence, motions: Sequence[Mapping], folder: str | Path,
+                        thresholds: Mapping | None = None) -> list[FigureJob]:
+    """The monitor's figures (cosim.monitor_plots) as jobs: ``monitor_motion<k>.png`` and
+    ``monitor_correlation<k>.png`` of each kept trace, ``monitor_trends.png`` of the axis."""
+    folder = Path(folder)
+    module = "feeddrive.cosim.monitor_plots"
+    # costs measured against the run's figures (cosim.plots): 4 and 2 panels, and 6 panels for the trends
+    jobs = [FigureJob(module, "plot_motion", (tr, folder / f"monitor_motion{tr.motion}.png"), 6.0) for tr in traces]
+    jobs += [FigureJob(module, "plot_correlation", (tr, folder / f"monitor_correlation{tr.motion}.png"), 4.0)
+             for tr in traces if tr.mismatch is not None]
+    if any(m.get("parameters") for m in motions):
+        axis = motions[-1].get("axis")
+        jobs.append(FigureJob(module, "plot_trends", (list(motions), folder / "monitor_trends.png",
+                                                      f"axis {axis}" if axis else "", thresholds), 6.0))
+    return jobs
+
+
+class PlotWorkers:
+    """Drawing processes forked now, used by :meth:`draw` at the end of the run; :meth:`close` ends them.
+
+    The first worker is forked at once; it imports matplotlib, draws a throw-away figure, then forks the
+    others from itself, so the simulation shares the machine with one import, not one per worker.
+
+    Parameters
+    ----------
+    processes : int or None
+        Processes drawing at once (see :func:`drawing_processes`); with 1 there is no worker and
+        :meth:`draw` draws every job here.
+    preload : sequence of str
+        Modules the workers import before their first figure (those of the jobs' functions).
+    """
+
+    def __init__(self, processes: int | None = None, preload: Sequence[str] = ()) -> None:
+        self._conns: list[Any] = []  # this process's end of each worker's pipe
+        self._pid: int | None = None  # the first worker (the others are its children)
+        k = drawing_processes(processes)
+        if k < 2:
+            return
+        pipes = [multiprocessing.Pipe(duplex=True) for _ in range(k)]
+        for stream in (sys.stdout, sys.stderr):  # nothing buffered here is written again by a worker
+            stream.flush()
+        # objects existing now stay out of the workers' garbage collections: their first collection would
+        # otherwise touch every inherited object and copy its page (supervise.py does the same). In a
+        # supervised run everything is frozen already and stays so (unfreezing would undo supervise's freeze)
+        frozen_before = gc.get_freeze_count()
+        gc.freeze()
+        try:
+            pid = os.fork()
+            if pid == 0:  # pragma: no cover - the first worker; coverage cannot follow it
+                _first_worker(pipes, tuple(preload))
+        finally:
+            if not frozen_before:
+                gc.unfreeze()
+        self._pid = pid
+        for mine, theirs in pipes:
+            theirs.close()
+            self._conns.append(mine)
+
+    def __enter__(self) -> PlotWorkers:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def draw(self, jobs: Sequence[Callable[[], list[Path]]], meanwhile: Callable[[], Any] | None = None
+             ) -> list[Path]:
+        """Draw ``jobs``; returns their files in the order of ``jobs``.
+
+        :class:`FigureJob` s go to the workers, costliest first, one at a time to each idle one; ``meanwhile()`` (work of
+        the run that does not need the figures) and any other job run here while they draw (every job
+        when there is no worker)."""
+        results: dict[int, list[Path]] = {}
+        queue = [j for j, job in enumerate(jobs) if isinstance(job, FigureJob)] if self._conns else []
+        queue.sort(key=lambda j: -jobs[j].cost)  # the costliest first: the last ones sent are the short ones
+        idle = list(self._conns)
+        busy: dict[Any, int] = {}  # worker's connection -> its job
+
+        def dispatch() -> None:
+            while queue and idle:
+                conn, j = idle.pop(0), queue.pop(0)
+                try:
+                    conn.send(jobs[j])
+                except OSError:  # the worker is gone: its job is drawn here, it gets no more
+                    self._conns.remove(conn)
+                    conn.close()
+                    results[j] = list(jobs[j]())
+                except Exception:  # noqa: BLE001 - data that cannot be pickled: drawn here
+                    idle.insert(0, conn)
+                    results[j] = list(jobs[j]())
+                else:
+                    busy[conn] = j
+
+        dispatch()
+        if meanwhile is not None:
+            meanwhile()
+        for j, job in enumerate(jobs):  # this process's share, while the workers draw
+            if j not in queue and j not in results and j not in busy.values():
+                results[j] = list(job())
+        while busy:
+            for conn in wait(list(busy)):
+                j = busy.pop(conn)
+                try:
+                    status, value = conn.recv()
+                except (EOFError, OSError):  # the worker died: its figure is drawn here, it gets no more
+                    self._conns.remove(conn)
+                    conn.close()
+                    results[j] = list(jobs[j]())
+                    continue
+                if status != "ok":
+                    raise value
+                results[j] = value
+                idle.append(conn)
+            dispatch()
+        for j in queue:  # every worker died
+            results[j] = list(jobs[j]())
+        return [path for j in range(len(jobs)) for path in results[j]]
+
+    def close(self) -> None:
+        """End the workers: each finishes its figure and exits; this waits for them (10 s at most, then the
+        first worker, whose exit ends the others, is killed)."""
+        for conn in self._conns:
+            try:
+                conn.send(None)
+            except OSError:
+                pass
+        deadline = time.monotonic() + 10.0
+        for conn in self._conns:  # EOF: the worker has exited (its end is closed with it)
+            try:
+                while conn.poll(max(0.0, deadline - time.monotonic())):
+                    conn.recv()
+            except (EOFError, OSError):
+                pass
+            conn.close()
+        self._conns = []
+        if self._pid is not None:
+            if time.monotonic() > deadline:
+                _kill(self._pid)
+            os.waitpid(self._pid, 0)
+            self._pid = None
+
+
+def _kill(pid: int) -> None:
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+def _first_worker(pipes: list, preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a worker
+    """The first worker: warm up, fork the others (with matplotlib loaded), serve, wait for them, exit."""
+    code = 0
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle: the run ends the workers
+        for mine, _ in pipes:  # the run's ends: EOF reaches a worker when the run is gone
+            mine.close()
+        _warm_up(preload)
+        children = []
+        for j in range(1, len(pipes)):
+            pid = os.fork()
+            if pid == 0:
+                _serve(pipes[j][1], pipes)
+                os._exit(0)
+            children.append(pid)
+        _serve(pipes[0][1], pipes)
+        for pid in children:
+            os.waitpid(pid, 0)
+    except BaseException:  # noqa: BLE001 - the run sees EOF and draws the figures itself
+        code = 1
+    finally:
+        os._exit(code)  # no atexit handlers, no flush of buffers inherited from the run
+
+
+def _serve(conn: Any, pipes: list) -> None:  # pragma: no cover - runs in a worker
+    """Draw each job received on ``conn`` until None or EOF, sending back ``("ok", files)`` or ``("error", exc)``."""
+    # every other worker's end closed here: the run sees EOF when that worker is gone
+    for _, theirs in pipes:
+        if theirs is not conn:
+            theirs.close()
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError):
+            return
+        if job is None:
+            return
+        try:
+            conn.send(("ok", list(job())))
+        except Exception as exc:  # noqa: BLE001 - handed to the run, which raises it
+            try:
+                conn.send(("error", exc))
+            except Exception:  # noqa: BLE001 - an exception that cannot be pickled
+                conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+
+
+def _warm_up(preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a worker
+    """What every figure needs once per process, done before the first one is asked for: the imports,
+    the font cache and the Agg renderer's first text (a figure drawn into memory and dropped)."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    for name in preload:  # the jobs' modules (cosim.plots, cosim.monitor_plots: run.FIGURE_MODULES)
+        importlib.import_module(name)
+
+    fig, ax = plt.subplots(figsize=(2, 1))
+    ax.plot([0.0, 1.0], [0.0, 1.0], label="x")
+    ax.set_xlabel("time [s]")
+    ax.legend(fontsize=7)
+    fig.savefig(io.BytesIO(), dpi=20)
+    plt.close(fig)

@@ -1,0 +1,77 @@
+"""Tail probabilities and quantiles of the t, normal, chi-square and F distributions (scipy.special).
+
+``scipy.stats`` builds the docstrings of its ~130 distributions when it is imported (0.5-2 s, more than
+a motion's whole treatment); the estimator needs seven functions of four of them. These are the special
+functions ``scipy.stats`` evaluates itself for them (``t._ppf`` is ``stdtrit``, ``chi2._sf`` is ``chdtrc``,
+...), with its answers outside the special functions' domain: a statistic below the support has tail
+probability 1, a probability of 0 or 1 has the support's end as quantile, and an invalid argument (a
+probability outside [0, 1], degrees of freedom <= 0, NaN) gives NaN. tests/estimator/test_distributions.py
+checks each against scipy.stats.
+
+Every function takes scalars or arrays (broadcast together) and returns a float for scalar arguments,
+else an ndarray of the broadcast shape.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import special
+
+__all__ = ["chi2_sf", "f_sf", "norm_isf", "norm_ppf", "norm_sf", "t_ppf", "t_sf"]
+
+
+def _out(value: np.ndarray) -> float | np.ndarray:
+    return float(value) if np.ndim(value) == 0 else value
+
+
+def _positive(df: np.ndarray) -> np.ndarray:
+    """Valid degrees of freedom: > 0 (``inf`` included: the limit distribution). NaN is not."""
+    return df > 0
+
+
+def t_sf(x: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
+    """``P(T > x)`` of Student's t with ``df`` degrees of freedom (``scipy.stats.t.sf``)."""
+    x, df = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(df, dtype=float))
+    return _out(np.where(_positive(df), special.stdtr(df, -x), np.nan))
+
+
+def t_ppf(q: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
+    """Quantile ``x`` with ``P(T <= x) = q`` of Student's t (``scipy.stats.t.ppf``)."""
+    q, df = np.broadcast_arrays(np.asarray(q, dtype=float), np.asarray(df, dtype=float))
+    valid = _positive(df) & (q >= 0) & (q <= 1)
+    with np.errstate(invalid="ignore"):
+        out = special.stdtrit(df, q)
+    out = np.where(q == 0, -np.inf, np.where(q == 1, np.inf, out))
+    return _out(np.where(valid, out, np.nan))
+
+
+def norm_ppf(q: float | np.ndarray) -> float | np.ndarray:
+    """Quantile of the standard normal distribution (``scipy.stats.norm.ppf``)."""
+    q = np.asarray(q, dtype=float)
+    return _out(np.where((q >= 0) & (q <= 1), special.ndtri(q), np.nan))
+
+
+def norm_sf(x: float | np.ndarray) -> float | np.ndarray:
+    """``P(Z > x)`` for the standard normal distribution (``scipy.stats.norm.sf``)."""
+    return _out(special.ndtr(-np.asarray(x, dtype=float)))
+
+
+def norm_isf(q: float | np.ndarray) -> float | np.ndarray:
+    """``z`` with ``P(Z > z) = q`` for the standard normal distribution (``scipy.stats.norm.isf``)."""
+    q = np.asarray(q, dtype=float)
+    return _out(np.where((q >= 0) & (q <= 1), -special.ndtri(q), np.nan))
+
+
+def chi2_sf(x: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
+    """``P(X > x)`` of the chi-square distribution with ``df`` degrees of freedom (``scipy.stats.chi2.sf``)."""
+    x, df = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(df, dtype=float))
+    with np.errstate(invalid="ignore"):
+        out = np.where(x <= 0, 1.0, special.chdtrc(df, np.maximum(x, 0.0)))
+    return _out(np.where(_positive(df) & ~np.isnan(x), out, np.nan))
+
+
+def f_sf(x: float | np.ndarray, dfn: float | np.ndarray, dfd: float | np.ndarray) -> float | np.ndarray:
+    """``P(F > x)`` of the F distribution with ``dfn`` and ``dfd`` degrees of freedom (``scipy.stats.f.sf``)."""
+    x, dfn, dfd = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, dfn, dfd)))
+    with np.errstate(invalid="ignore"):
+        out = np.where(x <= 0, 1.0, special.fdtrc(dfn, dfd, np.maximum(x, 0.0)))
+    return _out(np.where(_positive(dfn) & _positive(dfd) & ~np.isnan(x), out, np.nan))

@@ -1,0 +1,117 @@
+"""The run's drawing processes (issue 23): forked when the run starts, they draw the figures it sends at its
+end, in the order asked, the same bytes as drawn here; a failure is raised here, a dead worker's figure is
+drawn here, and no process is left behind."""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from feeddrive.cosim.plot_workers import FigureJob, PlotWorkers, run_figure_jobs
+from feeddrive.cosim.plots import plot_run
+
+needs_fork = pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
+                                reason="no fork start method on this platform: figures are drawn in turn")
+
+
+def write_pid(path: Path) -> list[Path]:
+    """A job: the file names the process that wrote it."""
+    path.write_text(str(os.getpid()))
+    return [path]
+
+
+def fail(message: str) -> list[Path]:
+    raise ValueError(message)
+
+
+def die(path: Path, parent: int) -> list[Path]:
+    if os.getpid() != parent:
+        os.kill(os.getpid(), signal.SIGKILL)  # e.g. the OOM killer: no result through the pipe
+    return write_pid(path)
+
+
+def _children(pid: int) -> set[int]:
+    """Processes whose parent is ``pid`` (Linux /proc); empty elsewhere."""
+    out = set()
+    for entry in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = entry.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.add(int(entry.parent.name))
+    return out
+
+
+@needs_fork
+def test_workers_draw_in_order_in_other_processes_and_leave_nothing_behind(tmp_path):
+    before = _children(os.getpid())
+    with PlotWorkers(processes=2) as workers:
+        jobs = [FigureJob(__name__, "write_pid", (tmp_path / f"f{k}.txt",)) for k in range(5)]
+        here = tmp_path / "here.txt"
+        jobs.insert(2, lambda: write_pid(here))  # not a FigureJob (a user component's write_plots): drawn here
+        meanwhile = []  # the run's own work while the workers draw (report.html's template)
+        paths = workers.draw(jobs, meanwhile=lambda: meanwhile.append(os.getpid()))
+    assert meanwhile == [os.getpid()]
+    assert paths == [tmp_path / "f0.txt", tmp_path / "f1.txt", here] + [tmp_path / f"f{k}.txt" for k in range(2, 5)]
+    assert int(here.read_text()) == os.getpid()
+    pids = {int((tmp_path / f"f{k}.txt").read_text()) for k in range(5)}
+    assert os.getpid() not in pids and 1 <= len(pids) <= 2
+    assert _children(os.getpid()) == before  # the first worker was waited for, the others were its children
+
+
+@needs_fork
+def test_a_workers_error_is_raised_here_and_a_dead_workers_figure_is_drawn_here(tmp_path):
+    workers = PlotWorkers(processes=2)
+    try:
+        with pytest.raises(ValueError, match="no such signal sensors.Im3"):
+            workers.draw([FigureJob(__name__, "fail", ("plots: no such signal sensors.Im3",))])
+        paths = workers.draw([FigureJob(__name__, "die", (tmp_path / "f0.txt", os.getpid())),
+                              FigureJob(__name__, "write_pid", (tmp_path / "f1.txt",))])
+    finally:
+        workers.close()
+    assert paths == [tmp_path / "f0.txt", tmp_path / "f1.txt"]
+    assert int((tmp_path / "f0.txt").read_text()) == os.getpid()  # drawn again here
+
+
+def _draw_in_a_daemon(folder: Path) -> None:
+    with PlotWorkers(processes=2) as workers:
+        workers.draw([FigureJob(__name__, "write_pid", (folder / f"f{k}.txt",)) for k in range(3)])
+
+
+@needs_fork
+def test_a_daemonic_process_has_no_workers_and_draws_its_figures_itself(tmp_path):
+    """A campaign's Pool or Dask worker is daemonic and may not fork: its figures are drawn in turn, no error."""
+    worker = multiprocessing.get_context("fork").Process(target=_draw_in_a_daemon, args=(tmp_path,), daemon=True)
+    worker.start()
+    worker.join(120)
+    assert worker.exitcode == 0
+    assert {int((tmp_path / f"f{k}.txt").read_text()) for k in range(3)} == {worker.pid}
+
+
+@needs_fork
+def test_the_run_figures_drawn_by_a_worker_are_those_drawn_here(tmp_path):
+    """Each figure job carries only its motion's samples; a worker draws the bytes plot_run draws here."""
+    n = 30_000
+    t = np.arange(n) * 1e-4
+    rng = np.random.default_rng(5)
+    current = 10 * np.sin(2 * np.pi * t)
+    state = np.r_[np.zeros(100), np.ones(n // 2 - 200), np.zeros(200), np.ones(n // 2 - 200), np.zeros(100)]
+    signals = {"nc.state": state, "nc.motion": np.r_[np.ones(n // 2), 2 * np.ones(n // 2)],
+               "plant.current": current, "sensors.Im1": current + rng.normal(0, 0.05, n),
+               "sensors.Im2": current + rng.normal(0, 0.05, n), "plant.voltage": 50 * np.cos(2 * np.pi * t),
+               "plant.position": np.cumsum(current)}
+    jobs = run_figure_jobs(t, signals, tmp_path / "there", title="T")
+    assert all("plant.position" not in job.args[2] for job in jobs)  # not drawn: not sent
+    assert [job.args[1].size for job in jobs] == [n // 2 - 200] * 4
+    here = plot_run(t, signals, tmp_path / "here", title="T")
+    with PlotWorkers(processes=2) as workers:
+        there = workers.draw(jobs)
+    names = ["motion_1_profiles.png", "motion_1_currents.png", "motion_2_profiles.png", "motion_2_currents.png"]
+    assert [p.name for p in here] == [p.name for p in there] == names
+    for a, b in zip(here, there):
+        assert a.read_bytes() == b.read_bytes()
