@@ -329,15 +329,21 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     flags = dict(est.flags)
     if flags:
         result["flags"] = flags
-    # the paper's output-error check, simulated from the model's equations; the residue check reported beside it
+    # the paper's output-error check, simulated from the model's equations, is computed and reported but does not
+    # decide on a PMSM yet: on 100 healthy runs of examples/campaign_pmsm.yaml it rejected 10 of 300 motions at
+    # mismatch_alpha = 1 % (its dq independence tests over-reject), where the residue check keeps the campaign's
+    # false alarms at 2 %. The residue check decides, as before.
     paper, why = servo_model_check(pipe, signals, dq, best, h, est, faults)
     if paper is None:
         result["not_checked"]["model (paper, output error)"] = why
     else:
-        result["mismatch"] = paper.to_dict()  # (not trace.mismatch: Fig. 13-14's plots draw the DC residues)
-    mismatch = adequacy.mismatch if paper is None else not paper.passed
-    result["validated"] = bool(valid and not flags and not mismatch and (paper is not None
-                                                                          or adequacy.verdict == "adequate"))
+        result["output_error_check"] = paper.to_dict() | {"deciding": False}
+        outcome = "passed" if paper.passed else f"rejected by its {paper.test} test (p = {paper.p_value:.3g})"
+        result["not_checked"]["model (paper, output error)"] = (
+            f"advisory only, {outcome}: on a PMSM its independence tests over-reject healthy motions (10 of 300 "
+            f"at alpha {cfg.mismatch_alpha:g} in the healthy campaign); the residue check decides")
+    mismatch = adequacy.mismatch
+    result["validated"] = bool(valid and not flags and not mismatch and adequacy.verdict == "adequate")
     checks.note_not_validated(result, flags, valid, mismatch, adequacy.verdict)
     if result["validated"]:
         pipe.diagnose(result)

@@ -181,16 +181,20 @@ def test_known_nominal_and_bounds_take_the_drive_models_names(tmp_path):
     assert cosim_main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
 
 
-def test_the_papers_output_error_check_passes_a_healthy_motion_and_flags_a_load_torque_step(tmp_path):
-    """The paper's model check (issue 25 item 4) on the PMSM, from the model's equations (estimator/model_check.py):
-    the healthy motion passes at mismatch_alpha = 1 % with the q, d and mechanical equations tested on their second
-    sensors; a 0.5 N.m load torque stepping in at 0.8 s, inside the first tool change, is a model mismatch."""
+def test_the_papers_output_error_check_is_reported_advisory_and_the_residue_check_flags_a_load_torque_step(tmp_path):
+    """The paper's model check (issue 25 item 4) on the PMSM, from the model's equations (estimator/model_check.py),
+    is computed with the q, d and mechanical equations tested on their second sensors, and reported as advisory
+    (it over-rejects healthy PMSM motions: 10 of 300 at 1 % in the healthy campaign); the residue check decides.
+    The healthy motion passes both; a 0.5 N.m load torque stepping in at 0.8 s, inside the first tool change, is a
+    model mismatch by the residue check, and the output-error check rejects it too."""
     healthy = _run(tmp_path, copy.deepcopy(AXIS), "healthy").report["motions"][0]
-    mm = healthy["mismatch"]
-    assert mm["passed"] and healthy["validated"], mm
-    assert set(mm["checks"]) == {"i_q", "i_d", "w"} and "not tested" not in mm["rule"]
+    oe = healthy["output_error_check"]
+    assert oe["passed"] and not oe["deciding"] and healthy["validated"], oe
+    assert set(oe["checks"]) == {"i_q", "i_d", "w"} and "not tested" not in oe["rule"]
+    assert "advisory only, passed" in healthy["not_checked"]["model (paper, output error)"]
     data = copy.deepcopy(AXIS)
     data["events"] = [{"time": 0.8, "target": "plant.T0", "value": 0.5}]
     loaded = _run(tmp_path, data, "load-step").report["motions"][0]
-    assert loaded["mismatch"]["passed"] is False and not loaded["validated"], loaded["mismatch"]
+    assert loaded["output_error_check"]["passed"] is False and not loaded["validated"], loaded["output_error_check"]
+    assert loaded["adequacy"]["verdict"] == "model mismatch" and loaded["adequacy"]["p_value"] < 1e-10
     assert loaded["verdict"] == "model mismatch"
