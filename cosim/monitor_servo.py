@@ -363,6 +363,11 @@ def _units(drive: str) -> dict[str, str]:
     return model_units(drive)
 
 
+def _shown(x: float, digits: int) -> str:
+    """``x`` with ``digits`` decimals, never "-0.00" (a value that rounds to zero is shown as 0)."""
+    return f"{round(float(x), digits) + 0.0:.{digits}f}"
+
+
 def servo_line(servo: Mapping[str, Any]) -> str:
     """One console line of a motion's servo checks (report.json ``servo_checks``): each check ``ok`` or ``FAULT``
     with its number (the q current's gain against the Park transform, the dead time's per-leg loss [V], the
@@ -380,8 +385,8 @@ def servo_line(servo: Mapping[str, Any]) -> str:
         parts.append(f"i_q/Park {state('dq_current_consistency')} (gain {servo['dq_current_consistency']['gain']:.4f})")
     if "voltage_reference_check" in servo:
         parts.append(f"u_ref/u {state('voltage_reference_check')} (dead time "
-                     f"{servo['voltage_reference_check']['u_loss']:.2f} V per leg)")
+                     f"{_shown(servo['voltage_reference_check']['u_loss'], 2)} V per leg)")
     if "lost_motion" in servo:
         lost = servo["lost_motion"]
-        parts.append(f"lost motion {lost['value_mm']:.4f} mm{' DETECTED' if lost['detected'] else ''}")
+        parts.append(f"lost motion {_shown(lost['value_mm'], 4)} mm{' DETECTED' if lost['detected'] else ''}")
     return "servo checks: " + ", ".join(parts)

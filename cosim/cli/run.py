@@ -94,7 +94,7 @@ def history_line(monitor: dict) -> str | None:
     if k < n:
         return text + (f"; learning the healthy baseline: {k} of {n} motions (until then, drift is judged "
                        "against the healthy motions so far)")
-    return text + f"; healthy baseline: {n} motions"
+    return text + f"; healthy baseline: {n} motion{'' if n == 1 else 's'}"
 
 
 def _unit(name: str) -> str:
