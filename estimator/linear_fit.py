@@ -71,6 +71,13 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     def rows(x, r):  # take() with the indices: the same rows as x[r], twice as fast on (n, p) arrays
         return x if index[id(r)] is None else x.take(index[id(r)], axis=0)
 
+    def spread(x, r):  # rows x back in place of the used rows of r, zeros elsewhere: x[r] inverted
+        if index[id(r)] is None:
+            return x
+        out = np.zeros((r.size, *x.shape[1:]))
+        out[index[id(r)]] = x  # integer indices: a third of a boolean mask's time on (n, p) arrays
+        return out
+
     Xr = [rows(Phi, r) for _, Phi, _, r in parts]
     ys = [rows(y, r) for y, _, _, r in parts]
     scale = np.sqrt(sum(np.einsum("ij,ij->j", X, X) for X in Xr))
@@ -106,15 +113,10 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     stationary = []  # (instruments, errors) with the unused rows zero, for the stationary-error floor
     for (y, _, _, r), W, X, yr in zip(parts, Ws, Xs, ys):
         e = yr - X @ theta_s
-        g = np.zeros((len(y), p))
-        g[r] = W * e[:, None]
-        G += g[:n]
         res2 += e @ e
         out2 += yr @ yr
-        ef = np.zeros(len(y))
-        ef[r] = e
-        Wf = np.zeros((len(y), p))
-        Wf[r] = W
+        Wf, ef = spread(W, r), spread(e, r)
+        G += (Wf * ef[:, None])[:n]  # the scores, zero on the unused rows: W e on the used ones, bit for bit
         stationary.append((Wf, ef))
     Ai = np.linalg.inv(A)
     cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
