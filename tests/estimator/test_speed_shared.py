@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from feeddrive.estimator.identifiability import _newey_west_t
+from feeddrive.estimator.kernels import MAX_RUNS, used_pairs
 
 
 def _newey_west_by_lags(X: np.ndarray, e: np.ndarray, lags: int, theta: np.ndarray) -> float:
@@ -29,3 +30,21 @@ def test_newey_west_from_window_sums_is_the_lag_sum(n: int, lags: int) -> None:
     theta = rng.standard_normal(4)
     t = _newey_west_t(X, e, lags, theta)
     assert t == pytest.approx(_newey_west_by_lags(X, e, lags, theta), rel=1e-12)
+
+
+def test_used_pairs_from_runs_are_the_counted_pairs() -> None:
+    """The pairs of used rows at each lag, run by run: the integers counted directly (and None past MAX_RUNS)."""
+    rng = np.random.default_rng(8)
+    seen = 0
+    for _ in range(500):
+        runs = rng.random(int(rng.integers(1, 2 * MAX_RUNS))) < 0.6
+        used = np.repeat(runs, rng.integers(1, 40, runs.size))
+        n = used.size
+        lags = int(rng.integers(0, n))
+        pairs = used_pairs(used, lags)
+        if pairs is None:
+            assert np.count_nonzero(np.diff(np.r_[0, used.astype(int), 0]) == 1) > MAX_RUNS
+            continue
+        seen += 1
+        np.testing.assert_array_equal(pairs, [np.sum(used[:n - k] & used[k:]) for k in range(lags + 1)])
+    assert seen > 100
