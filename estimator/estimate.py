@@ -360,9 +360,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
         change = np.max(step / np.maximum(np.abs(cur.values), 1e-12))
         cur = new
         if change < options.iv_tolerance or it == options.iv_iterations:
-            # the last iteration's fits again, with their covariance (the same theta: the same arithmetic)
-            last = {reg.equation: _solve(reg, parts[reg.equation], halves[0].block, options, reference[reg.equation])
-                    for reg in halves[0].regressions}
+            # the last iteration's fits with their covariance (from the arrays they were solved with)
+            last = {eq: fit.complete() for eq, fit in fits.items()}
             cur = _combine("iv", halves[0], last, it, constant_sensitivities(halves[0].regressions, list(halves), last))
             break
     if not change < options.iv_tolerance:

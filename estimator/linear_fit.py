@@ -26,6 +26,9 @@ class _Fit:
     theta_dof: np.ndarray  # (p,) effective dof of each theta's variance
     #: d theta for a change dy of the outputs (one array per sample set, all samples): theta is linear in y
     lin: Callable[[list[np.ndarray]], np.ndarray] | None = None
+    #: a fit solved without its covariance (``_solve(..., covariance=False)``): the same fit with it, from the
+    #: same arrays (the IV's last iteration, without solving it again)
+    complete: Callable[[], _Fit] | None = None
 
 
 def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: float) -> np.ndarray:
@@ -104,25 +107,29 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         zscale = np.sqrt(sum(np.einsum("ij,ij->j", Z, Z) for Z in Zr)).clip(1e-300)
         Ws = [Z / zscale for Z in Zr]
         theta_s = np.linalg.solve(sum(W.T @ X for W, X in zip(Ws, Xs)), sum(W.T @ y for W, y in zip(Ws, ys)))
-    if not covariance:  # an IV iteration that is not the last: its values only (the covariance was 2/3 of IV)
-        return _Fit(theta_s / scale, np.zeros((p, p)), 1, float(cond), float("nan"), np.ones(p))
-    A = sum(W.T @ X for W, X in zip(Ws, Xs))
-    n = min(len(y) for y, *_ in parts)
-    G = np.zeros((n, p))
-    res2 = out2 = 0.0
-    stationary = []  # (instruments, errors) with the unused rows zero, for the stationary-error floor
-    for (y, _, _, r), W, X, yr in zip(parts, Ws, Xs, ys):
-        e = yr - X @ theta_s
-        res2 += e @ e
-        out2 += yr @ yr
-        Wf, ef = spread(W, r), spread(e, r)
-        G += (Wf * ef[:, None])[:n]  # the scores, zero on the unused rows: W e on the used ones, bit for bit
-        stationary.append((Wf, ef))
-    Ai = np.linalg.inv(A)
-    cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
+    def complete() -> _Fit:
+        """The fit with its covariance, from this solve's arrays."""
+        A = sum(W.T @ X for W, X in zip(Ws, Xs))
+        n = min(len(y) for y, *_ in parts)
+        G = np.zeros((n, p))
+        res2 = out2 = 0.0
+        stationary = []  # (instruments, errors) with the unused rows zero, for the stationary-error floor
+        for (y, _, _, r), W, X, yr in zip(parts, Ws, Xs, ys):
+            e = yr - X @ theta_s
+            res2 += e @ e
+            out2 += yr @ yr
+            Wf, ef = spread(W, r), spread(e, r)
+            G += (Wf * ef[:, None])[:n]  # the scores, zero on the unused rows: W e on the used ones, bit for bit
+            stationary.append((Wf, ef))
+        Ai = np.linalg.inv(A)
+        cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
 
-    def lin(dys: list[np.ndarray]) -> np.ndarray:
-        return Ai @ sum(W.T @ rows(dy, r) for W, dy, (*_, r) in zip(Ws, dys, parts)) / scale
+        def lin(dys: list[np.ndarray]) -> np.ndarray:
+            return Ai @ sum(W.T @ rows(dy, r) for W, dy, (*_, r) in zip(Ws, dys, parts)) / scale
 
-    return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
-                float(np.sqrt(res2 / out2)), dof, lin)
+        return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
+                    float(np.sqrt(res2 / out2)), dof, lin)
+
+    if not covariance:  # an IV iteration: its values, and the covariance on demand (for the last: 2/3 of IV)
+        return _Fit(theta_s / scale, np.zeros((p, p)), 1, float(cond), float("nan"), np.ones(p), complete=complete)
+    return complete()
