@@ -142,7 +142,7 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
 
 
 #: most runs of used rows whose pair counts are summed run by run (beyond: one transform pair, O(n log n))
-MAX_RUNS = 24
+MAX_RUNS = 12
 
 
 def used_pairs(used: np.ndarray, lags: int) -> np.ndarray | None:
@@ -162,6 +162,8 @@ def used_pairs(used: np.ndarray, lags: int) -> np.ndarray | None:
     -------
     ndarray of float, shape (lags + 1,), or None
     """
+    if used.all():
+        return (used.size - np.arange(lags + 1)).astype(float)
     edges = np.flatnonzero(np.diff(np.concatenate([[False], used, [False]]).view(np.int8)))
     start, stop = edges[::2], edges[1::2]  # run r is used[start[r]:stop[r]]
     if start.size > MAX_RUNS:
