@@ -49,7 +49,10 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
             proxy[name] = rms(signals[name[1:]]) / duration
         else:
             proxy[name] = rms(signals[name])
-    _, Phi = reg.evaluate({k: np.full(n, v) for k, v in proxy.items()})
+    # every sample is the same: the regression (elementwise) evaluated once, its row repeated n times in the
+    # layout evaluate() gives (columns contiguous), so that the norms are those of the n-sample evaluation
+    y1, Phi1 = reg.evaluate({k: np.full(1, v) for k, v in proxy.items()})
+    Phi = np.repeat(np.vstack([y1, Phi1.T]), n, axis=1)[1:].T
     return np.sqrt(np.einsum("ij,ij->j", Phi, Phi))
 
 
