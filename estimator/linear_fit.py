@@ -57,13 +57,18 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
 
 
 def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
-           reference: np.ndarray | None = None, note: str = "", covariance: bool = True) -> _Fit:
+           reference: np.ndarray | None = None, note: str = "", covariance: bool = True,
+           memo: dict | None = None) -> _Fit:
     """LS or basic IV on the usable rows of one or more sample sets, column-scaled.
 
     Each part is ``(y (n,), Phi (n, p), Z (n, p) or None, rows (n,) bool)``. With ``Z`` None: LS
     (``lstsq``, not the normal equations), after the excitation check. Otherwise IV: ``theta = (sum Z^T Phi)^-1 sum Z^T y``. The parts are
     sample sets of the same time span (sample k of every part near the same time), so their score
     contributions are added sample by sample before the long-run covariance.
+
+    ``memo`` (a dict the caller keeps, e.g. one per equation over the IV iterations): the usable rows, column
+    scale and singular values of the regressors are kept in it and reused while the parts' ``y``, ``Phi``, rows
+    and ``reference`` are the same objects (only the instruments change from one IV iteration to the next).
     """
     p = parts[0][1].shape[1]
     used = sum(int(r.sum()) for *_, r in parts)
@@ -72,7 +77,13 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
                                   f"motion too short: {used} usable samples in the {reg.equation} "
                                   f"equation, its {p} parameters ({', '.join(reg.names)}) need at least {20 * p}"
                                   + (f" ({note})" if note else ""))
-    index = {id(r): None if r.all() else np.flatnonzero(r) for *_, r in parts}
+    same = tuple(x for y, Phi, _, r in parts for x in (y, Phi, r)) + (reference,)
+    kept = memo.get("regressors") if memo is not None else None
+    hit = kept is not None and len(kept[0]) == len(same) and all(a is b for a, b in zip(kept[0], same))
+    if hit:
+        index, Xr, ys, scale, empty, Xs, eig, V = kept[1]
+    else:
+        index = {id(r): None if r.all() else np.flatnonzero(r) for *_, r in parts}
 
     def rows(x, r):  # take() with the indices: the same rows as x[r], twice as fast on (n, p) arrays
         return x if index[id(r)] is None else x.take(index[id(r)], axis=0)
@@ -84,16 +95,19 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         out[index[id(r)]] = x  # integer indices: a third of a boolean mask's time on (n, p) arrays
         return out
 
-    Xr = [rows(Phi, r) for _, Phi, _, r in parts]
-    ys = [rows(y, r) for y, _, _, r in parts]
-    scale = np.sqrt(sum(np.einsum("ij,ij->j", X, X) for X in Xr))
-    # a column that is rounding noise (a derivative at constant speed) is empty, however well conditioned
-    # column scaling makes it look; judged against the column's own scale (see _column_reference)
-    empty = scale <= 1e-9 * reference if reference is not None else np.zeros(p, dtype=bool)
-    scale[empty] = 1.0
-    Xs = [X / scale for X in Xr]
-    # singular values of the scaled regressor from its p x p Gram matrix (cheap; fine up to cond ~1e7)
-    eig, V = np.linalg.eigh(sum(X.T @ X for X in Xs)[np.ix_(~empty, ~empty)])
+    if not hit:
+        Xr = [rows(Phi, r) for _, Phi, _, r in parts]
+        ys = [rows(y, r) for y, _, _, r in parts]
+        scale = np.sqrt(sum(np.einsum("ij,ij->j", X, X) for X in Xr))
+        # a column that is rounding noise (a derivative at constant speed) is empty, however well conditioned
+        # column scaling makes it look; judged against the column's own scale (see _column_reference)
+        empty = scale <= 1e-9 * reference if reference is not None else np.zeros(p, dtype=bool)
+        scale[empty] = 1.0
+        Xs = [X / scale for X in Xr]
+        # singular values of the scaled regressor from its p x p Gram matrix (cheap; fine up to cond ~1e7)
+        eig, V = np.linalg.eigh(sum(X.T @ X for X in Xs)[np.ix_(~empty, ~empty)])
+        if memo is not None:  # the objects themselves kept: an id is only unique while its object lives
+            memo["regressors"] = (same, (index, Xr, ys, scale, empty, Xs, eig, V))
     sv, Vt = np.sqrt(np.clip(eig[::-1], 0, None)), V[:, ::-1].T
     cond = sv[0] / sv[-1] if sv[-1] > 0 and not empty.any() else np.inf
     if parts[0][2] is None:
