@@ -271,7 +271,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     if segment_covariance is not None:
         tests["peak"] = peak_test(np.concatenate(r_all), np.vstack(Z_all), [len(r) for r in r_all],
                                   segment_covariance)
-    Zfull = Z[:, (Z.max(axis=0) > 0) | (Z.min(axis=0) < 0)]  # max |Z| > 0 without |Z| (a NaN column dropped)
+    Zfull = Z[:, np.abs(Z).max(axis=0) > 0]
     e = residue - Zfull @ np.linalg.lstsq(Zfull, residue, rcond=None)[0]
     rms = float(np.sqrt(np.mean(e ** 2)))
     if noise_std is not None and noise_std > 0:
