@@ -217,6 +217,8 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
         if nb <= lags + 1:
             continue
         take = idx[:nb * block]
+        if take[-1] - take[0] + 1 == take.size:  # a segment's samples are consecutive: views, not copies
+            take = slice(int(take[0]), int(take[-1]) + 1)
         r_, Z_, X_ = _blocks(residue[take], block), _blocks(Z[take], block), _blocks(inputs[take], block)
         r_all.append(r_)
         Z_all.append(Z_)
