@@ -97,7 +97,7 @@ def _newey_west_t(X: np.ndarray, e: np.ndarray, lags: int, theta: np.ndarray) ->
     sums of the scores over every window of ``lags + 1`` consecutive samples (those hanging over either end
     included): a window holds both k and j in ``lags + 1 - |k - j|`` positions. The window sums come from
     one cumulative sum, O(n p^2) (a transform of length 2 n of each column, then of each product, was 60 ms of
-    a 10 kHz motion; tests/estimator/test_speed.py compares the two).
+    a 10 kHz motion; tests/estimator/test_speed_shared.py compares it with the lag-by-lag sum).
     """
     n, p = X.shape
     S = X * e[:, None]
