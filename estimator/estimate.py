@@ -344,6 +344,7 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     # the same in every iteration: computed once
     reference = {reg.equation: _column_reference(reg, _signals_for(halves[0], reg), halves[0].h)
                  for reg in halves[0].regressions}
+    memo = {reg.equation: {} for reg in halves[0].regressions}  # the measured regressors' rows and scale, kept
     for it in range(1, options.iv_iterations + 1):
         params = cur.as_dict()
         for k, half in enumerate(halves):  # outputs with parameters of other equations follow their estimates
@@ -361,15 +362,14 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
             if reg.constants:  # its output follows the other equations' estimates: its column scale too
                 reference[reg.equation] = _column_reference(reg, _signals_for(halves[0], reg), halves[0].h)
             fits[reg.equation] = _solve(reg, parts[reg.equation], halves[0].block, options, reference[reg.equation],
-                                        covariance=False)
+                                        covariance=False, memo=memo[reg.equation])
         new = _combine("iv", halves[0], fits, it, constant_sensitivities(halves[0].regressions, list(halves), fits))
         step = np.abs(new.values - cur.values)
         change = np.max(step / np.maximum(np.abs(cur.values), 1e-12))
         cur = new
         if change < options.iv_tolerance or it == options.iv_iterations:
-            # the last iteration's fits again, with their covariance (the same theta: the same arithmetic)
-            last = {reg.equation: _solve(reg, parts[reg.equation], halves[0].block, options, reference[reg.equation])
-                    for reg in halves[0].regressions}
+            # the last iteration's fits with their covariance (from the arrays they were solved with)
+            last = {eq: fit.complete() for eq, fit in fits.items()}
             cur = _combine("iv", halves[0], last, it, constant_sensitivities(halves[0].regressions, list(halves), last))
             break
     if not change < options.iv_tolerance:

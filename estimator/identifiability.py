@@ -95,14 +95,21 @@ def _newey_west_t(X: np.ndarray, e: np.ndarray, lags: int, theta: np.ndarray) ->
     """t statistic of the last coefficient with the Newey-West (Bartlett) covariance over ``lags`` lags.
 
     The filtered residue is correlated over the filter's memory, and a short record (REGBOT: 0.35 s) holds
-    too few batches for batch means. The score autocovariances come from one FFT (O(n log n), not O(n lags)).
+    too few batches for batch means. The Bartlett-weighted sum of the score autocovariances,
+    ``sum_k,j S_k S_j^T (1 - |k - j| / (lags + 1))+``, equals ``sum_m B_m B_m^T / (lags + 1)`` with ``B_m`` the
+    sums of the scores over every window of ``lags + 1`` consecutive samples (those hanging over either end
+    included): a window holds both k and j in ``lags + 1 - |k - j|`` positions. The window sums come from
+    one cumulative sum, O(n p^2) (a transform of length 2 n of each column, then of each product, was 60 ms of
+    a 10 kHz motion; tests/estimator/test_speed_shared.py compares it with the lag-by-lag sum).
     """
     n, p = X.shape
     S = X * e[:, None]
-    F = np.fft.rfft(S, 2 * n, axis=0)
-    gam = np.fft.irfft(F[:, :, None].conj() * F[:, None, :], 2 * n, axis=0)[:lags + 1]  # gam[l] = sum S_k^T S_k+l
-    w = 1.0 - np.arange(lags + 1) / (lags + 1)
-    omega = gam[0] + np.einsum("l,lab->ab", w[1:], gam[1:] + gam[1:].transpose(0, 2, 1))
+    m = lags + 1
+    C = np.zeros((n + 2 * m, p))
+    np.cumsum(S, axis=0, out=C[m + 1:n + m + 1])
+    C[n + m + 1:] = C[n + m]
+    B = C[m:] - C[:-m]  # B[j] = sum of S over [j - m, j - 1]: every window meeting the record
+    omega = B.T @ B / m
     G = np.linalg.pinv(X.T @ X)
     var = float((G @ omega @ G)[-1, -1]) * n / (n - p)
     return float(theta[-1] / np.sqrt(var)) if var > 0 else float("nan")

@@ -98,8 +98,8 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
     ``e_t e_(t+l)`` over the pairs of used rows (``e != 0``). Every transform has length >= n + lags + 1,
     so no lag up to ``lags`` wraps around, and ``W^T Gamma W = Re(sum_k conj(FW_k) G_k FW_k^T) / N`` with
     ``G`` the transform of the circular kernel: five or six transforms instead of eleven (the count of
-    used pairs is ``n - l`` without a transform when every row is used). Equal to the time-domain sum to
-    ~1e-14 of the diagonal (tests/estimator/test_speed.py).
+    used pairs comes from the runs of used rows, :func:`used_pairs`, without a transform unless they are
+    many). Equal to the time-domain sum to ~1e-14 of the diagonal (tests/estimator/test_speed.py).
 
     Parameters
     ----------
@@ -123,9 +123,8 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
     fe = rfft(e, nfft)
     num = irfft(fe * np.conj(fe), nfft)[:m + 1]
     used = e != 0
-    if used.all():
-        pairs = (n - np.arange(m + 1)).astype(float)
-    else:
+    pairs = used_pairs(used, m)
+    if pairs is None:
         fu = rfft(used.astype(float), nfft)
         pairs = np.rint(irfft(fu * np.conj(fu), nfft)[:m + 1])
     gamma = np.where(pairs > 0, num / np.maximum(pairs, 1.0), 0.0)
@@ -140,6 +139,40 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
         weight[-1] /= 2.0
     FW = rfft(np.ascontiguousarray(W.T), nfft, axis=-1)
     return ((FW.conj() * weight) @ FW.T).real / nfft
+
+
+#: most runs of used rows whose pair counts are summed run by run (beyond: one transform pair, O(n log n))
+MAX_RUNS = 12
+
+
+def used_pairs(used: np.ndarray, lags: int) -> np.ndarray | None:
+    """``sum_t used_t used_(t+l)`` for ``l = 0 .. lags``, exactly, from the runs of True; None past ``MAX_RUNS`` runs.
+
+    The rows a fit uses are a few stretches of the motion (fast samples between the zero crossings), so the
+    count of used pairs at each lag is the overlap of every two runs shifted by ``l``: ``R^2`` clipped ramps
+    instead of two transforms of length ~n (the same integers as rounding the transforms).
+
+    Parameters
+    ----------
+    used : ndarray of bool, shape (n,)
+    lags : int
+        Largest lag [samples], < n.
+
+    Returns
+    -------
+    ndarray of float, shape (lags + 1,), or None
+    """
+    if used.all():
+        return (used.size - np.arange(lags + 1)).astype(float)
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], used, [False]]).view(np.int8)))
+    start, stop = edges[::2], edges[1::2]  # run r is used[start[r]:stop[r]]
+    if start.size > MAX_RUNS:
+        return None
+    lag = np.arange(lags + 1)
+    # pairs (t, t + l) with t in run a and t + l in run b: t in [max(sa, sb - l), min(ea, eb - l))
+    lo = np.maximum(start[:, None, None], start[None, :, None] - lag)
+    hi = np.minimum(stop[:, None, None], stop[None, :, None] - lag)
+    return np.clip(hi - lo, 0, None).sum(axis=(0, 1)).astype(float)
 
 
 def bilinear_first_order(a1: float, a0: float, h: float) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,9 @@ class _Fit:
     theta_dof: np.ndarray  # (p,) effective dof of each theta's variance
     #: d theta for a change dy of the outputs (one array per sample set, all samples): theta is linear in y
     lin: Callable[[list[np.ndarray]], np.ndarray] | None = None
+    #: a fit solved without its covariance (``_solve(..., covariance=False)``): the same fit with it, from the
+    #: same arrays (the IV's last iteration, without solving it again)
+    complete: Callable[[], _Fit] | None = None
 
 
 def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: float) -> np.ndarray:
@@ -46,18 +49,26 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
             proxy[name] = rms(signals[name[1:]]) / duration
         else:
             proxy[name] = rms(signals[name])
-    _, Phi = reg.evaluate({k: np.full(n, v) for k, v in proxy.items()})
+    # every sample is the same: the regression (elementwise) evaluated once, its row repeated n times in the
+    # layout evaluate() gives (columns contiguous), so that the norms are those of the n-sample evaluation
+    y1, Phi1 = reg.evaluate({k: np.full(1, v) for k, v in proxy.items()})
+    Phi = np.repeat(np.vstack([y1, Phi1.T]), n, axis=1)[1:].T
     return np.sqrt(np.einsum("ij,ij->j", Phi, Phi))
 
 
 def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
-           reference: np.ndarray | None = None, note: str = "", covariance: bool = True) -> _Fit:
+           reference: np.ndarray | None = None, note: str = "", covariance: bool = True,
+           memo: dict | None = None) -> _Fit:
     """LS or basic IV on the usable rows of one or more sample sets, column-scaled.
 
     Each part is ``(y (n,), Phi (n, p), Z (n, p) or None, rows (n,) bool)``. With ``Z`` None: LS
     (``lstsq``, not the normal equations), after the excitation check. Otherwise IV: ``theta = (sum Z^T Phi)^-1 sum Z^T y``. The parts are
     sample sets of the same time span (sample k of every part near the same time), so their score
     contributions are added sample by sample before the long-run covariance.
+
+    ``memo`` (a dict the caller keeps, e.g. one per equation over the IV iterations): the usable rows, column
+    scale and singular values of the regressors are kept in it and reused while the parts' ``y``, ``Phi``, rows
+    and ``reference`` are the same objects (only the instruments change from one IV iteration to the next).
     """
     p = parts[0][1].shape[1]
     used = sum(int(r.sum()) for *_, r in parts)
@@ -66,21 +77,37 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
                                   f"motion too short: {used} usable samples in the {reg.equation} "
                                   f"equation, its {p} parameters ({', '.join(reg.names)}) need at least {20 * p}"
                                   + (f" ({note})" if note else ""))
-    index = {id(r): None if r.all() else np.flatnonzero(r) for *_, r in parts}
+    same = tuple(x for y, Phi, _, r in parts for x in (y, Phi, r)) + (reference,)
+    kept = memo.get("regressors") if memo is not None else None
+    hit = kept is not None and len(kept[0]) == len(same) and all(a is b for a, b in zip(kept[0], same))
+    if hit:
+        index, Xr, ys, scale, empty, Xs, eig, V = kept[1]
+    else:
+        index = {id(r): None if r.all() else np.flatnonzero(r) for *_, r in parts}
 
     def rows(x, r):  # take() with the indices: the same rows as x[r], twice as fast on (n, p) arrays
         return x if index[id(r)] is None else x.take(index[id(r)], axis=0)
 
-    Xr = [rows(Phi, r) for _, Phi, _, r in parts]
-    ys = [rows(y, r) for y, _, _, r in parts]
-    scale = np.sqrt(sum(np.einsum("ij,ij->j", X, X) for X in Xr))
-    # a column that is rounding noise (a derivative at constant speed) is empty, however well conditioned
-    # column scaling makes it look; judged against the column's own scale (see _column_reference)
-    empty = scale <= 1e-9 * reference if reference is not None else np.zeros(p, dtype=bool)
-    scale[empty] = 1.0
-    Xs = [X / scale for X in Xr]
-    # singular values of the scaled regressor from its p x p Gram matrix (cheap; fine up to cond ~1e7)
-    eig, V = np.linalg.eigh(sum(X.T @ X for X in Xs)[np.ix_(~empty, ~empty)])
+    def spread(x, r):  # rows x back in place of the used rows of r, zeros elsewhere: x[r] inverted
+        if index[id(r)] is None:
+            return x
+        out = np.zeros((r.size, *x.shape[1:]))
+        out[index[id(r)]] = x  # integer indices: a third of a boolean mask's time on (n, p) arrays
+        return out
+
+    if not hit:
+        Xr = [rows(Phi, r) for _, Phi, _, r in parts]
+        ys = [rows(y, r) for y, _, _, r in parts]
+        scale = np.sqrt(sum(np.einsum("ij,ij->j", X, X) for X in Xr))
+        # a column that is rounding noise (a derivative at constant speed) is empty, however well conditioned
+        # column scaling makes it look; judged against the column's own scale (see _column_reference)
+        empty = scale <= 1e-9 * reference if reference is not None else np.zeros(p, dtype=bool)
+        scale[empty] = 1.0
+        Xs = [X / scale for X in Xr]
+        # singular values of the scaled regressor from its p x p Gram matrix (cheap; fine up to cond ~1e7)
+        eig, V = np.linalg.eigh(sum(X.T @ X for X in Xs)[np.ix_(~empty, ~empty)])
+        if memo is not None:  # the objects themselves kept: an id is only unique while its object lives
+            memo["regressors"] = (same, (index, Xr, ys, scale, empty, Xs, eig, V))
     sv, Vt = np.sqrt(np.clip(eig[::-1], 0, None)), V[:, ::-1].T
     cond = sv[0] / sv[-1] if sv[-1] > 0 and not empty.any() else np.inf
     if parts[0][2] is None:
@@ -97,30 +124,29 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         zscale = np.sqrt(sum(np.einsum("ij,ij->j", Z, Z) for Z in Zr)).clip(1e-300)
         Ws = [Z / zscale for Z in Zr]
         theta_s = np.linalg.solve(sum(W.T @ X for W, X in zip(Ws, Xs)), sum(W.T @ y for W, y in zip(Ws, ys)))
-    if not covariance:  # an IV iteration that is not the last: its values only (the covariance was 2/3 of IV)
-        return _Fit(theta_s / scale, np.zeros((p, p)), 1, float(cond), float("nan"), np.ones(p))
-    A = sum(W.T @ X for W, X in zip(Ws, Xs))
-    n = min(len(y) for y, *_ in parts)
-    G = np.zeros((n, p))
-    res2 = out2 = 0.0
-    stationary = []  # (instruments, errors) with the unused rows zero, for the stationary-error floor
-    for (y, _, _, r), W, X, yr in zip(parts, Ws, Xs, ys):
-        e = yr - X @ theta_s
-        g = np.zeros((len(y), p))
-        g[r] = W * e[:, None]
-        G += g[:n]
-        res2 += e @ e
-        out2 += yr @ yr
-        ef = np.zeros(len(y))
-        ef[r] = e
-        Wf = np.zeros((len(y), p))
-        Wf[r] = W
-        stationary.append((Wf, ef))
-    Ai = np.linalg.inv(A)
-    cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
+    def complete() -> _Fit:
+        """The fit with its covariance, from this solve's arrays."""
+        A = sum(W.T @ X for W, X in zip(Ws, Xs))
+        n = min(len(y) for y, *_ in parts)
+        G = np.zeros((n, p))
+        res2 = out2 = 0.0
+        stationary = []  # (instruments, errors) with the unused rows zero, for the stationary-error floor
+        for (y, _, _, r), W, X, yr in zip(parts, Ws, Xs, ys):
+            e = yr - X @ theta_s
+            res2 += e @ e
+            out2 += yr @ yr
+            Wf, ef = spread(W, r), spread(e, r)
+            G += (Wf * ef[:, None])[:n]  # the scores, zero on the unused rows: W e on the used ones, bit for bit
+            stationary.append((Wf, ef))
+        Ai = np.linalg.inv(A)
+        cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
 
-    def lin(dys: list[np.ndarray]) -> np.ndarray:
-        return Ai @ sum(W.T @ rows(dy, r) for W, dy, (*_, r) in zip(Ws, dys, parts)) / scale
+        def lin(dys: list[np.ndarray]) -> np.ndarray:
+            return Ai @ sum(W.T @ rows(dy, r) for W, dy, (*_, r) in zip(Ws, dys, parts)) / scale
 
-    return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
-                float(np.sqrt(res2 / out2)), dof, lin)
+        return _Fit(theta_s / scale, cov / np.outer(scale, scale), nb - p, float(cond),
+                    float(np.sqrt(res2 / out2)), dof, lin)
+
+    if not covariance:  # an IV iteration: its values, and the covariance on demand (for the last: 2/3 of IV)
+        return _Fit(theta_s / scale, np.zeros((p, p)), 1, float(cond), float("nan"), np.ones(p), complete=complete)
+    return complete()

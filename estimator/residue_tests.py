@@ -97,16 +97,19 @@ def integrated_noise_covariance(nb: int, rho: float, ratio: float) -> np.ndarray
     return np.eye(nb) + ratio * x
 
 
-def _whiten_segments(a: np.ndarray, sizes: Sequence[int], covariance: Callable[[int], np.ndarray],
-                     skip: int) -> np.ndarray:
+def _whiten_segments(arrays: Sequence[np.ndarray], sizes: Sequence[int], covariance: Callable[[int], np.ndarray],
+                     skip: int) -> list[np.ndarray]:
     # rows of each segment times the inverse Cholesky factor of its blocks' covariance (the first
-    # ``skip`` blocks, the lags' warm-up, are not in ``a``)
-    out, start = [], 0
-    for n in sizes:
-        c = np.linalg.cholesky(covariance(n + skip)[skip:, skip:])
-        out.append(linalg.solve_triangular(c, a[start:start + n], lower=True))
-        start += n
-    return np.concatenate(out)
+    # ``skip`` blocks, the lags' warm-up, are not in the arrays); each factor formed once for all the arrays
+    factors = [np.linalg.cholesky(covariance(n + skip)[skip:, skip:]) for n in sizes]
+    out = []
+    for a in arrays:
+        parts, start = [], 0
+        for n, c in zip(sizes, factors):
+            parts.append(linalg.solve_triangular(c, a[start:start + n], lower=True))
+            start += n
+        out.append(np.concatenate(parts))
+    return out
 
 
 def _orthonormal_nuisance(N: np.ndarray) -> np.ndarray:
@@ -149,7 +152,7 @@ def peak_test(y: np.ndarray, nuisance: np.ndarray, sizes: Sequence[int],
     """
     N = _orthonormal_nuisance(nuisance)
     if segment_covariance is not None:
-        y, N = (_whiten_segments(a, sizes, segment_covariance, 0) for a in (y, N))
+        y, N = _whiten_segments((y, N), sizes, segment_covariance, 0)
     e = y - N @ np.linalg.lstsq(N, y, rcond=None)[0] if N.shape[1] else y
     d = np.abs(e - np.median(e))
     scale = 1.4826 * float(np.median(d))
@@ -215,6 +218,8 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
         if nb <= lags + 1:
             continue
         take = idx[:nb * block]
+        if take[-1] - take[0] + 1 == take.size:  # a segment's samples are consecutive: views, not copies
+            take = slice(int(take[0]), int(take[-1]) + 1)
         r_, Z_, X_ = _blocks(residue[take], block), _blocks(Z[take], block), _blocks(inputs[take], block)
         r_all.append(r_)
         Z_all.append(Z_)
@@ -233,7 +238,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     if segment_covariance is not None:
         # GLS first stage: each segment whitened by the covariance the model implies under the null
         sizes = [len(r) for r in rb]
-        y, N, T, L = (_whiten_segments(a, sizes, segment_covariance, lags) for a in (y, N, T, L))
+        y, N, T, L = _whiten_segments((y, N, T, L), sizes, segment_covariance, lags)
     design = np.column_stack([N, T])
     if ar_order is None or ar_order < 0:
         # prewhitening order chosen by an information criterion on the OLS residue: the open-loop residue

@@ -135,9 +135,9 @@ def simulate(equations: tuple[str, ...], inputs: Mapping[str, np.ndarray], param
     X = _roll(model, tuple(equations), names, m, 2 if k > 1 else 1, x, np.vstack([S[:, :m - 1], S[:, 1:m]]),
               values + [w_eps], k * h)
     X = np.hstack([x[:, None], X])
-    if m < len(idx):
-        last = _rollout(model, tuple(equations), names, 2, 2)
-        xe = np.asarray(last(X[:, -1], np.concatenate([S[:, m - 1], S[:, m]]), values + [w_eps], hk[-1]))
+    if m < len(idx):  # one step of the same RK4 (2 substeps), compiled when it could be built
+        xe = _roll(model, tuple(equations), names, 2, 2, X[:, -1], np.concatenate([S[:, m - 1], S[:, m]])[:, None],
+                   values + [w_eps], hk[-1])
         X = np.hstack([X, xe.reshape(-1, 1)])
     if not np.all(np.isfinite(X)):
         # e.g. an electrical time constant L/R far below the integration step: explicit RK4 diverges
