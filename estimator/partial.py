@@ -219,8 +219,10 @@ def _rate_rule(data: MotionData, ls: MethodResult, iv: MethodResult, options: Es
         if abs(iv.values[j] - extra) <= MAX_DISAGREEMENT * sd[j]:
             continue  # LS's noise bias explains the difference
         z = abs(iv.values[j] - ls.values[k]) / sd[j] if sd[j] > 0 else np.inf
-        refused[n] = (f"sample period {h:.3g} s: IV ({iv.values[j]:.4g}) and LS ({ls.values[k]:.4g}, extrapolated to "
-                      f"noise-free {extra:.4g}) differ by {z:.2g} of IV's standard errors (more than "
+        # without the halves' LS (too short or failed) there is no extrapolation to name
+        towards = (f", extrapolated to noise-free {extra:.4g}" if np.isfinite(extra)
+                   else ", no extrapolation: the halves' LS could not be fitted")
+        refused[n] = (f"sample period {h:.3g} s: IV ({iv.values[j]:.4g}) and LS ({ls.values[k]:.4g}{towards}) differ by {z:.2g} of IV's standard errors (more than "
                       f"{MAX_DISAGREEMENT:g}); IV's halves are sampled every {2 * h:.3g} s, where the signals above "
                       f"{0.25 / h:.3g} Hz fold onto the {fc:.3g} Hz filter's band (2 pi fc 2h = {phase:.2f} rad > "
                       f"{MAX_HALF_PHASE:g}): neither is given (sample faster, or lower the cut-off)")
