@@ -27,8 +27,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     import os
 
-    # the runs use every CPU already: each draws its figures in turn, not in forked processes of its own
+    # the runs use every CPU already: each draws its figures in turn, not in forked processes of its own (the
+    # workers inherit the environment); restored afterwards, for a caller that goes on in this process
+    before = os.environ.get("FEEDDRIVE_PLOT_PROCESSES")
     os.environ.setdefault("FEEDDRIVE_PLOT_PROCESSES", "1")
+    try:
+        return _run(args)
+    finally:
+        if before is None:
+            os.environ.pop("FEEDDRIVE_PLOT_PROCESSES", None)
+
+
+def _run(args: argparse.Namespace) -> int:
     from feeddrive.cosim.campaign import load_campaign, run_campaign
     from feeddrive.cosim.progress import enabled
 

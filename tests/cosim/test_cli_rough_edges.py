@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 import subprocess
 import sys
 import zipfile
@@ -140,6 +141,20 @@ def test_drift_script_runs_from_another_directory(tmp_path, monkeypatch, capsys)
     assert capsys.readouterr().out.startswith("1 motions (1 validated; 1 simulated now")
     assert (tmp_path / "runs" / "drift" / "history.db").is_file()
     assert not (EXAMPLES / "drift_500" / "runs").exists()
+
+
+def test_a_campaign_in_this_process_leaves_the_environment_as_it_was(tmp_path, monkeypatch):
+    """``cosim campaign`` tells its runs to draw in turn through FEEDDRIVE_PLOT_PROCESSES=1; run in-process it
+    left that set, and a later ``cosim run`` in the same process drew its figures on one process only."""
+    monkeypatch.delenv("FEEDDRIVE_PLOT_PROCESSES", raising=False)
+    campaign = tmp_path / "c.yaml"
+    campaign.write_text("name: tiny\nrepetitions: 1\nbase:\n  name: tiny\n  step: 1.0e-4\n  plant: {fmu: builtin}\n"
+                        "  nc:\n    program:\n      - rapid: {to: 0.02}\n  monitor: {db: ':memory:'}\n")
+    assert main(["campaign", str(campaign), "--no-plots", "--no-progress", "--out", str(tmp_path / "out")]) == 0
+    assert "FEEDDRIVE_PLOT_PROCESSES" not in os.environ
+    monkeypatch.setenv("FEEDDRIVE_PLOT_PROCESSES", "3")  # a value the user set is the user's
+    assert main(["campaign", str(campaign), "--no-plots", "--no-progress", "--out", str(tmp_path / "out2")]) == 0
+    assert os.environ["FEEDDRIVE_PLOT_PROCESSES"] == "3"
 
 
 @pytest.mark.slow
