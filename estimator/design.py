@@ -29,9 +29,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
+from feeddrive.estimator.compiled import compiled_step
 from feeddrive.estimator.derivative import zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.estimate import EstimationOptions, MotionData, prepare
@@ -65,6 +67,15 @@ def peaks(signals: Mapping[str, np.ndarray], model) -> tuple[float, float]:
               if k in signals and model.variables[k].unit == unit]
         out.append(float(np.max(np.sqrt(sum(x ** 2 for x in xs)))) if xs else 0.0)
     return out[0], out[1]
+
+
+@lru_cache(maxsize=8)
+def _closed_loop_step(model, substeps: int):
+    """The closed-loop plant's RK4 step and its compiled rollout (None without a C compiler): built once per
+    model, not once per simulation (CasADi's ``mapaccum`` over a 4 s motion took ~1 s to build and as long
+    to run; the compiled loop does the same operations in the same order, ``estimator.compiled``)."""
+    step = rk4_step(model.rhs_function(), substeps)
+    return step, compiled_step(step, f"{model.name}: closed loop, {substeps} RK4 substeps")
 
 
 def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float] | None = None,
@@ -103,9 +114,13 @@ def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float
     n = len(w_ref)
     U = np.zeros((len(model.inputs), n + 1))
     U[[v.name for v in model.inputs].index("w_ref")] = np.append(w_ref, w_ref[-1])
-    rollout = rk4_step(model.rhs_function(), substeps).mapaccum("rollout", n, [0], [0])
-    X = rollout(np.zeros(len(model.states)), np.vstack([U[:, :-1], U[:, 1:]]), p, h)
-    X = np.hstack([np.zeros((len(model.states), 1)), np.asarray(X)])
+    step, run = _closed_loop_step(model, substeps)
+    S = np.vstack([U[:, :-1], U[:, 1:]])
+    if run is not None:
+        X = run(np.zeros(len(model.states)), S, p, h)
+    else:
+        X = np.asarray(step.mapaccum("rollout", n, [0], [0])(np.zeros(len(model.states)), S, p, h))
+    X = np.hstack([np.zeros((len(model.states), 1)), X])
     Y = np.asarray(model.output_function().map(n + 1)(X, U, np.tile(p, (n + 1, 1)).T))
     return {v.name: Y[k] for k, v in enumerate(model.outputs)}
 
@@ -134,6 +149,28 @@ def _pipeline_responses(h: float, options: EstimationOptions) -> tuple[np.ndarra
     f = options.filter.apply({"x": x}, h)["x"]
     d, valid = zero_forcing_derivative(f, h)
     return f[valid], d
+
+
+def _toeplitz_times(acov: np.ndarray, Phi: np.ndarray) -> np.ndarray:
+    """``R Phi`` with ``R[t, s] = acov[mid + t - s]`` (zero beyond the kernel), the equation error's
+    autocovariance as a Toeplitz matrix, by FFT convolution of each column.
+
+    Parameters
+    ----------
+    acov : ndarray, shape (2 mid + 1,)
+        Symmetric autocovariance, lag 0 at ``mid``.
+    Phi : ndarray, shape (n, p)
+
+    Returns
+    -------
+    ndarray, shape (n, p)
+        So that ``Phi.T @ R Phi = acov[mid] Phi^T Phi + sum_k acov[mid + k] (C_k + C_k^T)``,
+        ``C_k = Phi[:-k]^T Phi[k:]`` (the sum over lags, in O(n log n) instead of O(mid n p^2)).
+    """
+    mid, n = len(acov) // 2, len(Phi)
+    size = 1 << int(np.ceil(np.log2(n + len(acov) - 1)))
+    full = np.fft.irfft(np.fft.rfft(Phi, size, axis=0) * np.fft.rfft(acov, size)[:, None], size, axis=0)
+    return full[mid:mid + n]
 
 
 def predicted_std(signals: Mapping[str, np.ndarray], h: float, noise: Mapping[str, float],
@@ -191,11 +228,7 @@ def predicted_std(signals: Mapping[str, np.ndarray], h: float, noise: Mapping[st
             A = A + Phi.T @ Phi
             if np.ndim(acov) == 0:  # no noise reaches this equation
                 continue
-            mid = len(acov) // 2
-            B = B + acov[mid] * Phi.T @ Phi
-            for k in range(1, min(mid, len(Phi) - 1) + 1):
-                C = Phi[:-k].T @ Phi[k:]
-                B = B + acov[mid + k] * (C + C.T)
+            B = B + Phi.T @ _toeplitz_times(acov, Phi)
         A_inv = np.linalg.pinv(A)
         cov = A_inv @ B @ A_inv
         for j, name in enumerate(reg.names):

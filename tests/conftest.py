@@ -1,6 +1,7 @@
 """Shared fixtures. FMUs are built into pytest's temporary directory, never into ~/.cache."""
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -11,8 +12,16 @@ from feeddrive.fmu_build import builtin_fmu
 
 @pytest.fixture(scope="session", autouse=True)
 def fmu_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """``$FEEDDRIVE_CACHE`` for the whole session, so code calling ``builtin_fmu()`` stays in tmp."""
-    cache = tmp_path_factory.mktemp("fmu_cache")
+    """``$FEEDDRIVE_CACHE`` for the whole session, so code calling ``builtin_fmu()`` stays in tmp.
+
+    Under pytest-xdist the workers share one cache (in the run's common temporary root): the builds are safe
+    for parallel processes (private build directory, atomic rename), and an FMU or a compiled rollout that one
+    worker built is not compiled again by the other."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        cache = tmp_path_factory.getbasetemp().parent / "fmu_cache"
+        cache.mkdir(exist_ok=True)
+    else:
+        cache = tmp_path_factory.mktemp("fmu_cache")
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("FEEDDRIVE_CACHE", str(cache))
         yield cache

@@ -82,3 +82,19 @@ def test_design_trades_inductance_against_friction():
     assert best.accel == 0.4 and by[0.4].criterion < min(by[0.3].criterion, by[0.5].criterion)
     with pytest.raises(EstimatorInputError, match="i_max"):
         design_acceleration(tool_change, [1.2, 2.0], H, NOISE)
+
+
+@pytest.mark.parametrize(("n", "mid"), [(50, 200), (3000, 300), (300, 3)])
+def test_toeplitz_product_is_the_sum_over_lags(n, mid):
+    """The FFT form of the equation error's covariance equals the lag-by-lag sum it replaced (kernels longer
+    and shorter than the record)."""
+    from feeddrive.estimator.design import _toeplitz_times
+
+    rng = np.random.default_rng(n)
+    Phi, a = rng.standard_normal((n, 3)), rng.standard_normal(mid)
+    acov = np.concatenate([a[::-1], [2.0], a])
+    direct = acov[mid] * Phi.T @ Phi
+    for k in range(1, min(mid, n - 1) + 1):
+        C = Phi[:-k].T @ Phi[k:]
+        direct = direct + acov[mid + k] * (C + C.T)
+    assert np.allclose(Phi.T @ _toeplitz_times(acov, Phi), direct, rtol=1e-12, atol=1e-12 * np.abs(direct).max())
