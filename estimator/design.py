@@ -78,6 +78,26 @@ def _closed_loop_step(model, substeps: int):
     return step, compiled_step(step, f"{model.name}: closed loop, {substeps} RK4 substeps")
 
 
+_CHUNK = 4096  # samples per call of the outputs' map: built once per model, not once per record length
+
+
+@lru_cache(maxsize=8)
+def _output_map(model):
+    return model.output_function().map(_CHUNK)
+
+
+def _outputs(model, X: np.ndarray, U: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The model outputs (ny, m) at the states X (nx, m) and inputs U (nu, m), in chunks of one cached
+    CasADi map (each column is computed as by a map over all m: the same operations)."""
+    m = X.shape[1]
+    pad = -m % _CHUNK
+    X, U = (np.pad(A, ((0, 0), (0, pad)), mode="edge") for A in (X, U))
+    P = np.tile(p, (_CHUNK, 1)).T
+    F = _output_map(model)
+    return np.hstack([np.asarray(F(X[:, j:j + _CHUNK], U[:, j:j + _CHUNK], P))
+                      for j in range(0, m + pad, _CHUNK)])[:, :m]
+
+
 def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float] | None = None,
                          substeps: int = 10, model=MODEL) -> dict[str, np.ndarray]:
     """Noise-free closed-loop plant driven by a speed reference, no load torque.
@@ -121,7 +141,7 @@ def simulate_closed_loop(w_ref: np.ndarray, h: float, params: Mapping[str, float
     else:
         X = np.asarray(step.mapaccum("rollout", n, [0], [0])(np.zeros(len(model.states)), S, p, h))
     X = np.hstack([np.zeros((len(model.states), 1)), X])
-    Y = np.asarray(model.output_function().map(n + 1)(X, U, np.tile(p, (n + 1, 1)).T))
+    Y = _outputs(model, X, U, p)
     return {v.name: Y[k] for k, v in enumerate(model.outputs)}
 
 

@@ -9,6 +9,7 @@ import csv
 import datetime as _dt
 import io
 import re
+from operator import itemgetter
 from pathlib import Path
 
 import numpy as np
@@ -125,9 +126,18 @@ class CsvSource(Source):
 
     def column(self, k: int, role: str = "") -> Signal:
         """Column ``k`` as numbers; a time column of ISO time stamps as seconds since 1970 (absolute)."""
-        values = np.empty(len(self.rows))
         origin = iso_time(self._cell(0, k)) if role == "time" and self.rows else None
         absolute = origin is not None
+        if not absolute:
+            try:  # the common case in C (float() strips blanks as _cell does); any bad cell: the loop below names it
+                cells = list(map(itemgetter(k), self.rows))
+                if self.dec == ",":
+                    cells = [c.replace(",", ".") for c in cells]
+                values = np.fromiter(map(float, cells), float, len(cells))
+                return Signal(self.header[k], values, unit_text(self.header[k]) or "", False, 0.0)
+            except (ValueError, IndexError):
+                pass
+        values = np.empty(len(self.rows))
         for r in range(len(self.rows)):
             cell = self._cell(r, k)
             try:
