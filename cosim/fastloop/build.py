@@ -60,4 +60,6 @@ def library() -> ctypes.CDLL:
     lib = ctypes.CDLL(str(target))
     lib.fine_run.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_long, ctypes.c_int]
     lib.fine_run.restype = ctypes.c_int
+    lib.fd_format_rows.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_long, ctypes.c_void_p, ctypes.c_long]
+    lib.fd_format_rows.restype = ctypes.c_long
     return lib

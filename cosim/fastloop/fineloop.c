@@ -6,8 +6,11 @@
  * is written in the same order as there, which makes the results bit-identical. Any change here must
  * keep that order (tests/cosim/test_fastloop.py compares the two paths).
  */
+#include <float.h>
 #include <math.h>
 #include <stddef.h>
+#include <stdio.h>
+#include <string.h>
 
 typedef int (*set_real_t)(void *, const unsigned int *, size_t, const double *);
 typedef int (*get_real_t)(void *, const unsigned int *, size_t, double *);
@@ -305,4 +308,81 @@ static int run(fine_t *s, long first, long count, int hold) {
     }
     s->tick = end;
     return FINE_DONE;
+}
+
+
+/* ---- signals.csv's text: "%.10g" without printf's multi-precision arithmetic ----
+ *
+ * numpy.savetxt spent ~1.3 us per value in Python's formatting, and glibc's snprintf ~0.8 us: a 4 s tool change
+ * records ~800 000 values. format_g10 gives the same characters as printf("%.10g") (and Python's "%.10g" % v):
+ * the 10 significant digits are r = round(|v| 10^(9-e)) computed in long double (64-bit mantissa) with ONE
+ * rounding (10^n is exact in long double for n <= 27), so |error| < 2^-63 r. Whenever that error could change
+ * the rounding (the fraction within 1e-6 of one half: ties and near-ties), or e is outside [-18, 36], or long
+ * double is not wider than double, it asks snprintf. tests/cosim/test_recorder_format.py compares millions of
+ * values with Python's formatting. */
+static const long double POW10L[28] = {
+    1e0L, 1e1L, 1e2L, 1e3L, 1e4L, 1e5L, 1e6L, 1e7L, 1e8L, 1e9L, 1e10L, 1e11L, 1e12L, 1e13L,
+    1e14L, 1e15L, 1e16L, 1e17L, 1e18L, 1e19L, 1e20L, 1e21L, 1e22L, 1e23L, 1e24L, 1e25L, 1e26L, 1e27L};
+
+static int format_g10(double v, char *out) {
+    if (isnan(v)) { memcpy(out, "nan", 3); return 3; }
+    if (isinf(v)) { if (v < 0) { memcpy(out, "-inf", 4); return 4; } memcpy(out, "inf", 3); return 3; }
+    int k = 0;
+    if (signbit(v)) { out[k++] = '-'; v = -v; }
+    if (v == 0.0) { out[k++] = '0'; return k; }
+#if LDBL_MANT_DIG >= 64
+    int e = (int)floor(log10(v));
+    long long r = 0;
+    for (int attempt = 0; attempt < 2; ++attempt) {
+        int n = 9 - e;
+        if (n > 27 || n < -27) goto fallback;
+        long double s = n >= 0 ? (long double)v * POW10L[n] : (long double)v / POW10L[-n];
+        long double f = s - floorl(s);
+        if (fabsl(f - 0.5L) < 1e-6L) goto fallback;  /* a tie or near one: the exact value decides */
+        r = (long long)(f < 0.5L ? floorl(s) : floorl(s) + 1.0L);
+        if (r >= 10000000000LL) { ++e; continue; }  /* log10's floor was one low, or rounding carried */
+        if (r < 1000000000LL) { --e; continue; }
+        break;
+    }
+    if (r < 1000000000LL || r >= 10000000000LL) goto fallback;
+    char d[10];
+    for (int j = 9; j >= 0; --j) { d[j] = (char)('0' + r % 10); r /= 10; }
+    int last = 9;  /* %g drops trailing zeros (and the point if nothing follows it) */
+    while (last > 0 && d[last] == '0') --last;
+    if (e >= -4 && e < 10) {
+        if (e >= 0) {
+            for (int j = 0; j <= e; ++j) out[k++] = d[j];
+            if (last > e) { out[k++] = '.'; for (int j = e + 1; j <= last; ++j) out[k++] = d[j]; }
+        } else {
+            out[k++] = '0'; out[k++] = '.';
+            for (int j = 0; j < -e - 1; ++j) out[k++] = '0';
+            for (int j = 0; j <= last; ++j) out[k++] = d[j];
+        }
+    } else {
+        out[k++] = d[0];
+        if (last > 0) { out[k++] = '.'; for (int j = 1; j <= last; ++j) out[k++] = d[j]; }
+        out[k++] = 'e'; out[k++] = e < 0 ? '-' : '+';
+        int a = e < 0 ? -e : e;
+        if (a >= 100) out[k++] = (char)('0' + a / 100);
+        out[k++] = (char)('0' + (a / 10) % 10); out[k++] = (char)('0' + a % 10);
+    }
+    return k;
+fallback:
+#endif
+    return k + snprintf(out + k, 32, "%.10g", v);
+}
+
+/* The (rows, cols) row-major table x as CSV text into buf (cap bytes): each value as "%.10g", ',' between
+ * the values, '\n' after each row (numpy.savetxt's fmt="%.10g", delimiter=","). Returns the bytes written,
+ * or -1 when buf is too small (32 bytes per value always suffice). */
+long fd_format_rows(const double *x, long rows, long cols, char *buf, long cap) {
+    long k = 0;
+    for (long r = 0; r < rows; ++r) {
+        for (long c = 0; c < cols; ++c) {
+            if (cap - k < 32) return -1;
+            k += format_g10(x[r * cols + c], buf + k);
+            buf[k++] = c + 1 < cols ? ',' : '\n';
+        }
+    }
+    return k;
 }
