@@ -73,22 +73,28 @@ def test_worn_motion_during_baseline_is_diagnosed_and_kept_out(tmp_path):
 
 
 @pytest.mark.slow
-def test_cosim_run_tool_change_then_worn_axis(tmp_path, monkeypatch, feeddrive_fmu, capsys):
+def test_cosim_run_tool_change_then_worn_axis_whatever_the_out_dir(tmp_path, monkeypatch, feeddrive_fmu, capsys):
     """The README's sequence on the default history runs/history.sqlite: the worn axis is another axis
     (worn-X), diagnosed on its own against the nominal parameters (``baseline: nominal``); axis X's
     history holds the two healthy tool changes only (the worn machine never mixes into it). Each run
     names the history, its axis and the baseline's state."""
     monkeypatch.chdir(tmp_path)
     printed = []
-    for name in ("worn_axis", "tool_change", "tool_change"):
-        assert main(["run", str(EXAMPLES / f"{name}.yaml"), "--no-progress"]) == 0
+    # the second tool change writes elsewhere (--out): the history stays runs/history.sqlite (on main, --out
+    # elsewhere/run2 silently switched to elsewhere/history.sqlite)
+    for name, out in (("worn_axis", []), ("tool_change", []), ("tool_change", ["--out", "elsewhere/run2"])):
+        assert main(["run", str(EXAMPLES / f"{name}.yaml"), "--no-progress", *out]) == 0
         printed.append(next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("  history:")))
+    assert not Path("elsewhere/history.sqlite").exists()
     assert printed[0] == ("  history: runs/history.sqlite, axis worn-X; healthy baseline: the nominal parameters "
                           "(monitor.baseline: nominal)")
     assert printed[1].startswith("  history: runs/history.sqlite, axis X; learning the healthy baseline: 1 of 3")
     assert printed[2].startswith("  history: runs/history.sqlite, axis X; learning the healthy baseline: 2 of 3")
     reports = {p.parent.name: json.loads(p.read_text())["motions"] for p in Path("runs").glob("*/report.json")}
-    healthy, again = (reports[k][0] for k in sorted(k for k in reports if k.startswith("tool-change")))
+    (healthy,) = next(m for k, m in reports.items() if k.startswith("tool-change"))
+    (again,) = json.loads(Path("elsewhere/run2/report.json").read_text())["motions"]
+    # the second motion is checked against the first one's validated parameters
+    assert [healthy["reference"], again["reference"]] == ["nominal", "last validated"]
     (worn,) = next(m for k, m in reports.items() if k.startswith("worn-axis"))
     assert healthy["validated"] and healthy["diagnosis"] == []
     assert worn["validated"] and {d["fault"] for d in worn["diagnosis"]} == WEAR
@@ -100,3 +106,10 @@ def test_cosim_run_tool_change_then_worn_axis(tmp_path, monkeypatch, feeddrive_f
         assert [m["scenario"] for m in stored] == ["tool-change", "tool-change"]
         assert [m["scenario"] for m in history.motions("worn-X")] == ["worn-axis"]
         assert [b["id"] for b in history.baseline("X", 3)] == [stored[0]["id"], stored[1]["id"]]
+    # `cosim history` finds them by default; --db puts a run's motions into another file, and only there
+    assert main(["history", "--axis", "X"]) == 0
+    assert capsys.readouterr().out.startswith("axis X: 2 motion(s)")
+    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "run3", "--db", "other.sqlite"]) == 0
+    assert "  history: other.sqlite, axis X; learning the healthy baseline: 1 of 3" in capsys.readouterr().out
+    with History("other.sqlite") as other, History("runs/history.sqlite") as default:
+        assert len(other.motions("X")) == 1 and len(default.motions("X")) == 2

@@ -10,7 +10,6 @@ import yaml
 
 from feeddrive.cosim.cli import main
 from feeddrive.cosim.scenario import load_scenario
-from feeddrive.estimator.history import History
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -107,29 +106,6 @@ def test_info_lists_variables_and_checks_a_map(tmp_path, feeddrive_fmu, capsys):
     assert err.startswith(f"cosim info: error: {EXAMPLES / 'vendor_fmu.yaml'}:") and err.count("\n") == 0
     assert "plant.map.speed_ref.var: FMU 'FeedDrive.fmu' has no variable 'n_cmd'" in err
     assert main(["info", str(tmp_path / "none.fmu")]) == 2
-
-
-@pytest.mark.slow
-def test_successive_runs_continue_one_history_whatever_the_out_dir(tmp_path, feeddrive_fmu, monkeypatch, capsys):
-    """Without monitor.db, `cosim run` keeps the history in ./runs/history.sqlite, also with --out elsewhere
-    (on main, --out elsewhere/run2 silently switched to elsewhere/history.sqlite): the 2nd run's motion is
-    checked against the 1st run's validated parameters, and `cosim history` finds both by default.
-    ``--db`` puts a run's motions into another file, and only there."""
-    monkeypatch.chdir(tmp_path)
-    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress"]) == 0
-    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "elsewhere/run2"]) == 0
-    first = next((tmp_path / "runs").glob("tool-change-*"))
-    second = tmp_path / "elsewhere" / "run2"
-    references = [json.loads((d / "report.json").read_text())["motions"][0]["reference"] for d in (first, second)]
-    assert references == ["nominal", "last validated"]
-    assert not (tmp_path / "elsewhere" / "history.sqlite").exists()
-    capsys.readouterr()
-    assert main(["history"]) == 0
-    assert capsys.readouterr().out.startswith("axis X: 2 motion(s)")
-    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "run3", "--db", "other.sqlite"]) == 0
-    assert "  history: other.sqlite, axis X; learning the healthy baseline: 1 of 3" in capsys.readouterr().out
-    with History("other.sqlite") as other, History("runs/history.sqlite") as default:
-        assert len(other.motions("X")) == 1 and len(default.motions("X")) == 2
 
 
 @pytest.mark.slow
