@@ -68,8 +68,9 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
-from scipy import ndimage, signal
+from scipy import ndimage
 
+from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.kernels import bilinear_first_order, erode
@@ -222,7 +223,7 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     for sl in ndimage.find_objects(labels):
         drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
         # transposed direct form: y[0] = b0 x[0] + z[0], so z[0] = w0 - b0 x[0] starts the output at w0
-        out[sl] = signal.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
+        out[sl] = lti.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
     return out
 
 
