@@ -281,7 +281,7 @@ def last_columns_f_test(fit, q: int) -> tuple[float, float, float, float]:  # no
 
     Parameters
     ----------
-    fit : statsmodels RegressionResults
+    fit : statsmodels RegressionResults or estimator.glsar.GLSARFit
         An OLS or GLSAR fit (``params``, ``cov_params()``, ``df_resid``).
     q : int
         Number of trailing coefficients tested, >= 1.

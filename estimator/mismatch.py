@@ -29,8 +29,8 @@ data, so that their level is their false-alarm rate:
   noise from each segment's start (a near-unit root at the block rate, seconds of ``Jt / ft``), so each
   segment is whitened by that null covariance (``integrated_noise_covariance``, from both sensors' noise
   and the estimated K, Jt, ft). Then what remains: feasible GLS with AR errors of an order chosen by BIC
-  (statsmodels ``GLSAR``), F-test of the lag coefficients. After the first stage the AR stage runs only
-  if a Ljung-Box test finds the whitened residue coloured (``WHITE_ALPHA``): on a fast motion (a few
+  (estimator.glsar: statsmodels' ``GLSAR``), F-test of the lag coefficients. After the first stage the AR
+  stage runs only if a Ljung-Box test finds the whitened residue coloured (``WHITE_ALPHA``): on a fast motion (a few
   dozen blocks) BIC overfits and the feasible GLS F-test is oversized. With the AR stage alone the
   speed test rejected 5 % of healthy motions at alpha / 4; the current residue, whose noises all pass
   the electrical time constant (shorter than a block), has the AR stage only. The estimate's own error also leaves an input-correlated residue (theta_hat -
