@@ -179,8 +179,8 @@ def bilinear_first_order(a1: float, a0: float, h: float) -> tuple[np.ndarray, np
     """``scipy.signal.cont2discrete(([1], [a1, a0]), h, method="bilinear")``'s ``b`` (raveled) and ``a``.
 
     The model checks discretise ``1 / (L s + R)`` and ``1 / (Jt s + ft)`` a dozen times per motion with the
-    same few parameter sets; scipy's general state-space route costs ~1 ms a call. The closed form of
-    estimator.lti (scipy's numbers within 1e-12), kept per (a1, a0, h).
+    same few parameter sets; scipy's general state-space route costs ~1 ms a call. Its scalar steps in
+    estimator.lti (scipy's numbers bit for bit), kept per (a1, a0, h).
     """
     b, a = _bilinear(float(a1), float(a0), float(h))
     return b.copy(), a.copy()
