@@ -346,3 +346,7 @@ def _warm_up(preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a 
     ax.legend(fontsize=7)
     fig.savefig(io.BytesIO(), dpi=20)
     plt.close(fig)
+    # matplotlib's modules and caches stay out of the figures' garbage collections too (the run's objects are
+    # frozen already): 5-7 % of the figures' time (in-process, 5 figures 3.15 -> 2.93 s, best of 3)
+    gc.collect()
+    gc.freeze()
