@@ -52,10 +52,6 @@ class MonitorPipeline:
     """
 
     def __init__(self, config: MonitorConfig, history: History, axis: str) -> None:
-        # the model check's AR prewhitening of a coloured residue needs statsmodels' GLSAR (0.3-0.9 s of imports,
-        # lazy in the estimator): loaded now, before the motions, so that no motion's processing time holds it
-        import statsmodels.regression.linear_model  # noqa: F401
-
         from feeddrive.models.drives import drive_model
 
         self.config, self.history, self.axis = config, history, axis

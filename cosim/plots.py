@@ -10,8 +10,6 @@ A figure is drawn only when its signals were recorded.
 """
 from __future__ import annotations
 
-import functools
-import multiprocessing
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -21,7 +19,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from feeddrive.cosim.plot_workers import CURRENTS, PROFILES, drawing_processes, motions  # noqa: E402, F401 - re-exported
+from feeddrive.cosim.plot_workers import (  # noqa: E402, F401 - re-exported
+    CURRENTS,
+    PROFILES,
+    PlotWorkers,
+    drawing_processes,
+    motions,
+)
 
 #: samples drawn per trace at most, as min/max pairs: twice the figures' width in pixels (9 in at 110 dpi)
 DISPLAY_BUCKETS = 1000
@@ -144,12 +148,11 @@ def currents_figure(k: int, t: np.ndarray, signals: Mapping[str, np.ndarray], pa
 def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]], processes: int | None = None) -> list[Path]:
     """Run figure-drawing ``jobs`` at the same time; returns their files, in the order of ``jobs``.
 
-    The jobs are dealt round-robin to ``processes`` groups (default: the number of CPUs). The first group
-    is drawn in this process, each other one in a forked child process, which inherits the data and the
-    imported matplotlib: nothing is pickled but the lists of files written, and the figures are the same
-    as drawn one after the other. Without ``fork`` (not POSIX) or in a daemonic process the jobs run here
-    in turn; a child that dies without a result has its jobs drawn again here. An exception of a job is
-    raised here.
+    The run's mechanism (:class:`cosim.plot_workers.PlotWorkers`), forked now that the jobs exist: the
+    workers inherit the jobs, the data and the imported matplotlib (nothing is pickled but the lists of files
+    written, and the figures are the same as drawn one after the other), and this process draws its share
+    too. Without ``fork`` (not POSIX) or in a daemonic process the jobs run here in turn; a worker that
+    dies without a result has its job drawn again here. An exception of a job is raised here.
 
     Parameters
     ----------
@@ -160,45 +163,8 @@ def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]], processes: int |
         number of CPUs; a campaign sets 1, its runs already use every CPU).
     """
     k = min(max(1, len(jobs)), drawing_processes(processes))
-    groups = [list(range(i, len(jobs), k)) for i in range(k)]
-
-    def draw(group: list[int]) -> list[list[Path]]:
-        return [list(jobs[j]()) for j in group]
-
-    ctx = multiprocessing.get_context("fork") if k > 1 else None
-    children = []
-    for group in groups[1:]:
-        receive, send = ctx.Pipe(duplex=False)
-        child = ctx.Process(target=_draw_child, args=(functools.partial(draw, group), send))
-        child.start()
-        send.close()
-        children.append((group, child, receive))
-    results: dict[int, list[Path]] = dict(zip(groups[0], draw(groups[0])))
-    for group, child, receive in children:
-        try:
-            status, value = receive.recv()
-        except EOFError:  # the child died: draw its figures here
-            status, value = "ok", draw(group)
-        finally:
-            receive.close()
-            child.join()
-        if status != "ok":
-            raise value
-        results |= dict(zip(group, value))
-    return [path for j in range(len(jobs)) for path in results[j]]
-
-
-def _draw_child(job: Callable[[], list[Path]], send) -> None:  # noqa: ANN001 - multiprocessing Connection
-    """Body of a drawing child: ``("ok", files)`` or ``("error", exception)`` into the pipe ``send``."""
-    try:
-        send.send(("ok", list(job())))
-    except Exception as exc:  # noqa: BLE001 - handed to the parent, which raises it
-        try:
-            send.send(("error", exc))
-        except Exception:  # noqa: BLE001 - an exception that cannot be pickled
-            send.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
-    finally:
-        send.close()
+    with PlotWorkers(k, jobs=jobs, here=True, warm=False) as workers:
+        return workers.draw(jobs)
 
 
 def _legend_outside(ax: plt.Axes) -> None:

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy import signal
 
+from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError
 
 
@@ -45,7 +45,7 @@ class FilterSpec:
         if self.cutoff_hz >= 0.45 * nyquist:
             raise EstimatorInputError(
                 f"filter cutoff {self.cutoff_hz} Hz must be below 0.45 x Nyquist ({0.45 * nyquist:g} Hz at h={h:g} s)")
-        return _butter_sos(int(self.order), float(self.cutoff_hz), float(h)).copy()  # scipy wants it writable
+        return _butter_sos(int(self.order), float(self.cutoff_hz), float(h)).copy()  # a writable copy: the cached one is shared
 
     def apply(self, signals: Mapping[str, np.ndarray], h: float) -> dict[str, np.ndarray]:
         """Filter every signal identically.
@@ -87,7 +87,7 @@ class FilterSpec:
                 if not todo:
                     continue
                 # row by row the same arithmetic as one call per signal (tests/estimator/test_speed.py)
-                y = signal.sosfiltfilt(sos, np.vstack([arrays[k] for k in todo]), axis=-1)
+                y = lti.sosfiltfilt(sos, np.vstack([arrays[k] for k in todo]))
                 y.setflags(write=False)  # shared by the callers that filter the same array
                 for k, row in zip(todo, y):
                     out[k] = row
@@ -98,7 +98,7 @@ class FilterSpec:
                 out[name] = None
                 continue
             x = np.asarray(x, dtype=float)
-            out[name] = signal.sosfilt(sos, x, zi=signal.sosfilt_zi(sos) * x[0])[0]
+            out[name] = lti.sosfilt(sos, x, zi=lti.sosfilt_zi(sos) * x[0])[0]
         return out
 
 
@@ -112,7 +112,7 @@ def lowpass(signals: Mapping[str, np.ndarray], h: float, cutoff_hz: float, order
 def _butter_sos(order: int, cutoff_hz: float, h: float) -> np.ndarray:
     """The Butterworth sections, designed once per (order, cut-off, rate): ``butter`` costs ~1 ms a call and
     a motion's treatment asked for the same filter ten times. Read-only: the cached array is shared."""
-    sos = signal.butter(order, cutoff_hz, fs=1.0 / h, output="sos")
+    sos = lti.butter_sos(order, cutoff_hz, 1.0 / h)
     sos.setflags(write=False)
     return sos
 

@@ -179,8 +179,8 @@ def bilinear_first_order(a1: float, a0: float, h: float) -> tuple[np.ndarray, np
     """``scipy.signal.cont2discrete(([1], [a1, a0]), h, method="bilinear")``'s ``b`` (raveled) and ``a``.
 
     The model checks discretise ``1 / (L s + R)`` and ``1 / (Jt s + ft)`` a dozen times per motion with the
-    same few parameter sets; scipy's general state-space route costs ~1 ms a call. The result is scipy's
-    own, kept per (a1, a0, h).
+    same few parameter sets; scipy's general state-space route costs ~1 ms a call. Its scalar steps in
+    estimator.lti (scipy's numbers bit for bit), kept per (a1, a0, h).
     """
     b, a = _bilinear(float(a1), float(a0), float(h))
     return b.copy(), a.copy()
@@ -188,10 +188,9 @@ def bilinear_first_order(a1: float, a0: float, h: float) -> tuple[np.ndarray, np
 
 @lru_cache(maxsize=256)
 def _bilinear(a1: float, a0: float, h: float) -> tuple[np.ndarray, np.ndarray]:
-    from scipy import signal
+    from feeddrive.estimator.lti import bilinear_first_order as tustin
 
-    b, a = signal.cont2discrete(([1.0], [a1, a0]), h, method="bilinear")[:2]
-    return np.ravel(b), np.asarray(a)
+    return tustin(a1, a0, h)
 
 
 # --- the model's symbolic facts, derived once per model ---------------------------------------------------------
@@ -282,7 +281,7 @@ def last_columns_f_test(fit, q: int) -> tuple[float, float, float, float]:  # no
 
     Parameters
     ----------
-    fit : statsmodels RegressionResults
+    fit : statsmodels RegressionResults or estimator.glsar.GLSARFit
         An OLS or GLSAR fit (``params``, ``cov_params()``, ``df_resid``).
     q : int
         Number of trailing coefficients tested, >= 1.

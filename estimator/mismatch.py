@@ -29,8 +29,8 @@ data, so that their level is their false-alarm rate:
   noise from each segment's start (a near-unit root at the block rate, seconds of ``Jt / ft``), so each
   segment is whitened by that null covariance (``integrated_noise_covariance``, from both sensors' noise
   and the estimated K, Jt, ft). Then what remains: feasible GLS with AR errors of an order chosen by BIC
-  (statsmodels ``GLSAR``), F-test of the lag coefficients. After the first stage the AR stage runs only
-  if a Ljung-Box test finds the whitened residue coloured (``WHITE_ALPHA``): on a fast motion (a few
+  (estimator.glsar: statsmodels' ``GLSAR``), F-test of the lag coefficients. After the first stage the AR
+  stage runs only if a Ljung-Box test finds the whitened residue coloured (``WHITE_ALPHA``): on a fast motion (a few
   dozen blocks) BIC overfits and the feasible GLS F-test is oversized. With the AR stage alone the
   speed test rejected 5 % of healthy motions at alpha / 4; the current residue, whose noises all pass
   the electrical time constant (shorter than a block), has the AR stage only. The estimate's own error also leaves an input-correlated residue (theta_hat -
@@ -68,8 +68,9 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
-from scipy import ndimage, signal
+from scipy import ndimage
 
+from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.kernels import bilinear_first_order, erode
@@ -222,7 +223,7 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     for sl in ndimage.find_objects(labels):
         drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
         # transposed direct form: y[0] = b0 x[0] + z[0], so z[0] = w0 - b0 x[0] starts the output at w0
-        out[sl] = signal.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
+        out[sl] = lti.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
     return out
 
 

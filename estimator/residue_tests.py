@@ -14,6 +14,7 @@ from scipy import linalg
 
 from feeddrive.estimator.distributions import chi2_sf, f_sf, norm_isf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.glsar import glsar_fit
 from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
@@ -258,10 +259,9 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
         fvalue, df, pvalue = ols_f_test(y, design, restriction)
         whiten = np.asarray
     else:
-        from statsmodels.regression.linear_model import GLSAR
-
-        fit = GLSAR(y, design, rho=max(ar_order, 1)).iterative_fit(maxiter=6)
-        whiten = fit.model.whiten
+        # statsmodels' GLSAR(y, design, rho=p).iterative_fit(maxiter=6) in numpy (estimator.glsar)
+        fit = glsar_fit(y, design, max(ar_order, 1), maxiter=6)
+        whiten = fit.whiten
         fvalue, df_num, df_denom, pvalue = last_columns_f_test(fit, T.shape[1])  # fit.f_test([0 I]), bit for bit
         df = (df_num, df_denom)
     tests = {"independence": TestResult("independence", fvalue, df, pvalue)}

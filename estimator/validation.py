@@ -48,8 +48,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import signal
 
+from feeddrive.estimator import lti
 from feeddrive.estimator.distributions import chi2_sf, t_ppf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
@@ -326,8 +326,8 @@ def model_reference(quantity: str, filtered: Mapping[str, np.ndarray], h: float,
     if quantity == "current":
         v = filtered["u"] - K * filtered["w"]
         b, a = bilinear_first_order(L, R, h)
-        zi = signal.lfilter_zi(b, a) * v[0]  # start in steady state: i = v / R
-        return signal.lfilter(b, a, v, zi=zi)[0]
+        zi = lti.lfilter_zi(b, a) * v[0]  # start in steady state: i = v / R
+        return lti.lfilter(b, a, v, zi=zi)[0]
     di = np.gradient(filtered["i"], h)
     if quantity == "voltage":
         return R * filtered["i"] + L * di + K * filtered["w"]
