@@ -48,23 +48,17 @@ from feeddrive.estimator.estimate import (
     instrumental_variables,
     ls_parts,
     prepare,
-    split_halves,
     update_constants,
 )
 from feeddrive.estimator.identifiability import lag_reason, second_lag
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
+from feeddrive.estimator.nc_rate import rate_rule, systematic
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
 
 #: Smallest spread of |w| (5th to 95th percentile, relative to the 95th) that separates ft from Cd.
 MIN_SPEED_SPREAD = 0.2
 #: Fewest sample periods in the electrical time constant L/R for L to be identifiable.
 MIN_TAU_SAMPLES = 1.0
-#: Largest phase 2 pi f_c (2 h) of the filter's cut-off at the IV halves' sample period 2 h [rad] above which the
-#: halves are checked against LS (a servo drive's 125 us trace with a 100 Hz filter: 0.16; an NC's 1-4 ms with
-#: the default 0.1 / h cut-off: 1.26)
-MAX_HALF_PHASE = 1.0
-#: IV standard errors by which IV and LS may differ at such a rate.
-MAX_DISAGREEMENT = 3.0
 #: Largest variance inflation of a friction parameter by the other, refused (its variance over its variance given
 #: that estimate; 10 is the usual collinearity threshold): above it, it is refused too (``_rule``).
 MAX_INFLATION = 10.0
@@ -186,51 +180,6 @@ def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped
         if why:
             refused[a] = why
             lumped.add(a)
-
-
-def _rate_rule(data: MotionData, ls: MethodResult, iv: MethodResult, options: EstimationOptions, fixed: dict,
-               refused: dict) -> None:
-    """Parameters refused when IV and LS disagree at a long sample period (module docstring, ``sample period``).
-
-    IV regresses each half of the record (every other sample, period 2 h) on instruments from the other. At an
-    NC's 1-4 ms the signals' content between 1 / (4 h) and 1 / (2 h) (a servo's current transients) folds onto
-    the filter's band in the halves but not in the whole record: the PMSM's R came out 3 % low by IV at 4 ms,
-    its interval +-0.9 % excluding the truth, while LS gave it within 0.3 % (+-9 %). LS may differ from IV
-    for the reason IV exists, too: the noise of the regressors biases LS in proportion to the filtered noise's
-    variance, which is twice as large in the halves (the same cut-off, half the rate), so without aliasing IV
-    is close to the extrapolation ``2 LS - LS_halves``. A parameter is refused when IV differs from LS and from
-    that extrapolation by more than ``MAX_DISAGREEMENT`` of IV's standard errors (given the fixed parameters).
-    """
-    h, fc = data.h, options.filter.cutoff_hz
-    phase = 2 * np.pi * fc * 2 * h
-    if iv.method_used != "iv" or phase <= MAX_HALF_PHASE:
-        return
-    sd = np.sqrt(np.clip(np.diag(np.asarray(iv.covariance, dtype=float)), 0, None))
-    far = {n: j for j, n in enumerate(iv.names) if n not in refused and n in ls.names
-           and not abs(iv.values[j] - ls.values[ls.names.index(n)]) <= MAX_DISAGREEMENT * sd[j]}
-    if not far:
-        return
-    halves = []
-    for half in split_halves(data):
-        try:
-            res = _fit_ls(half, replace(options, known={**options.known, **fixed}))[1]
-        except (ValueError, np.linalg.LinAlgError, ArithmeticError):  # too short, or failed: no extrapolation
-            res = None
-        halves.append(res)
-    for n, j in far.items():
-        k = ls.names.index(n)
-        lh = [r.values[r.names.index(n)] for r in halves if r is not None and n in r.names]
-        extra = 2 * ls.values[k] - float(np.mean(lh)) if lh else np.nan
-        if abs(iv.values[j] - extra) <= MAX_DISAGREEMENT * sd[j]:
-            continue  # LS's noise bias explains the difference
-        z = abs(iv.values[j] - ls.values[k]) / sd[j] if sd[j] > 0 else np.inf
-        # without the halves' LS (too short or failed) there is no extrapolation to name
-        towards = (f", extrapolated to noise-free {extra:.4g}" if np.isfinite(extra)
-                   else ", no extrapolation: the halves' LS could not be fitted")
-        refused[n] = (f"sample period {h:.3g} s: IV ({iv.values[j]:.4g}) and LS ({ls.values[k]:.4g}{towards}) differ by {z:.2g} of IV's standard errors (more than "
-                      f"{MAX_DISAGREEMENT:g}); IV's halves are sampled every {2 * h:.3g} s, where the signals above "
-                      f"{0.25 / h:.3g} Hz fold onto the {fc:.3g} Hz filter's band (2 pi fc 2h = {phase:.2f} rad > "
-                      f"{MAX_HALF_PHASE:g}): neither is given (sample faster, or lower the cut-off)")
 
 
 def _fit_ls(data: MotionData, options: EstimationOptions):
@@ -401,13 +350,15 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
         if options.method == "oe":
             oe = _oe(p, iv, options, fixed)
             final = oe
+        if options.method == "iv":  # at an NC's rate, IV's aliasing or LS's noise bias in the interval
+            iv = final = systematic(data, ls, iv, options, fixed, _fit_ls)
         unconditional = final
         final = _rule(final, options, refused, fixed)
         if options.method == "ls":
             ls = final
         elif options.method == "iv":
             iv = final
-            _rate_rule(data, ls, iv, options, fixed, refused)
+            rate_rule(data, ls, iv, options, fixed, refused, _fit_ls)
         else:
             oe = final
         given = [n for n in final.names if n not in refused and n not in lumped]
