@@ -338,6 +338,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
         result["not_checked"]["model (paper, output error)"] = why
     else:
         result["output_error_check"] = paper.to_dict() | {"deciding": False}
+        trace.mismatch = paper  # its residues in the motion's figure (paper Fig. 13, 14), said to be advisory
         outcome = "passed" if paper.passed else f"rejected by its {paper.test} test (p = {paper.p_value:.3g})"
         result["not_checked"]["model (paper, output error)"] = (
             f"advisory only, {outcome}: on a PMSM its independence tests over-reject healthy motions (10 of 300 "
