@@ -67,8 +67,8 @@ def systematic(data: MotionData, ls: MethodResult, result: MethodResult, options
     -------
     MethodResult
         ``result`` unchanged below ``MAX_HALF_PHASE``; else with ``d_j^2`` added to the variance of each
-        parameter j (its row and column scaled: the correlations are kept), ``d = IV - LS`` (IV ran) or ``d = mean(LS_halves) - LS`` (LS's noise bias, IV fell back),
-        and a note in ``message``. At 2 ms noise-free IV's L_d was -6.3 % +-6.1 % (LS -3.5 %); at 2 ms, 30 dB,
+        parameter j (its row and column scaled: the correlations are kept), ``d = IV - LS`` (IV ran) or
+        ``d = mean(LS_halves) - LS`` (LS's noise bias, IV fell back), and a note in ``message``. At 2 ms noise-free IV's L_d was -6.3 % +-6.1 % (LS -3.5 %); at 2 ms, 30 dB,
         the fall-back LS gave Jt -18 % +-17 % (the halves' LS -35 %: the bias of noisy Dw doubles).
     """
     if _phase(data, options) <= MAX_HALF_PHASE or result.method != "iv":

@@ -11,15 +11,19 @@ and names the others with the rule that refuses them and its numbers:
 * ``sample period``: an equation's time constant, its derivative parameter over its resistance read from the
   model (``time_constants``: L/R; the PMSM's L_q/R and L_d/R), has a 95 % upper bound shorter than
   ``MIN_TAU_SAMPLES`` sample periods: that parameter refused and fixed at 0, the others from the quasi-static
-  equation (DC: ``u = R i + K w``). And at an NC's rate (``MAX_HALF_PHASE``) a parameter on which IV (its halves
-  sampled every 2 h alias the signals) and LS disagree beyond what LS's noise bias explains (``_rate_rule``);
+  equation (DC: ``u = R i + K w``). And at an NC's rate (``nc_rate.MAX_HALF_PHASE``) a parameter on which IV (its
+  halves sampled every 2 h alias the signals) and LS disagree beyond what LS's noise bias explains
+  (``nc_rate.rate_rule``); below that, every interval there holds the method's systematic error
+  (``nc_rate.systematic``: IV - LS, or the fall-back LS's noise bias);
 * ``second lag``: the current follows the voltage through two time constants of comparable size (a sensor's
   low-pass on the current): L/R is one of them and the data cannot tell which (identifiability.py): L refused,
   kept in the fit as a lumped term, R and K given;
 * ``excitation``: the estimator's rules, per parameter: too few (fast) samples in its equation, a weak
   direction of the column-scaled regressor (condition number above ``max_condition``), and, for every
   parameter, a 95 % interval wider than ``+-1.96 max_relative_std`` of its value (the printed interval
-  itself, so a t quantile with few degrees of freedom counts), or fewer covariance blocks than parameters.
+  itself, so a t quantile with few degrees of freedom counts), or fewer covariance blocks than parameters;
+  a friction parameter tied to the other, refused, beyond ``MAX_INFLATION`` (its interval given the refused
+  one's estimate would hold only if that estimate were the truth).
 
 One rule decides what is given: a parameter is printed only if no rule refuses it, so no printed
 interval is wider than the one that refuses another file's parameter. A parameter refused because it is
