@@ -333,8 +333,9 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     # decide on a PMSM yet: on 100 healthy runs of examples/campaign_pmsm.yaml it rejected 10 of 300 motions at
     # mismatch_alpha = 1 % (its dq independence tests over-reject), where the residue check keeps the campaign's
     # false alarms at 2 %. Calibrated since on 200 healthy motions (benchmarks/bench_pmsm_model_check.py): the d
-    # current's test, weighted by its null std, is uniform (16 % -> 0 % below 1 %), but the speed's independence
-    # test still rejects ~6 % at 1 %, so the check's false alarms (~4 %) stay above the 2 % for it to decide.
+    # current's test, weighted by its null std, is uniform (16 % -> 1.5 % below 1 %), but the speed's independence
+    # test still rejects 7 % at 1 % (the q current's 2 %), so the check's false alarms (6 %) stay above the 2 %
+    # for it to decide.
     # The residue check decides, as before.
     paper, why = servo_model_check(pipe, signals, dq, best, h, est, faults)
     if paper is None:
