@@ -27,7 +27,8 @@ from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
 def plot_motion(trace, path: Path) -> Path:
     """One motion's validation and model check (``trace``: ``cosim.monitor.MotionTrace``) into ``path`` (PNG)."""
     v, mm = trace.validation, trace.mismatch
-    panels = 1 + (mm is not None) * 3
+    generic = mm is not None and "current" not in mm.checks  # a model's own equations (the PMSM's i_q, i_d, w)
+    panels = 1 + (mm is not None) * (len(mm.checks) if generic else 3)
     fig, axes = plt.subplots(panels, 1, figsize=(9, 2.4 * panels), sharex=True, squeeze=False)
     axes = axes[:, 0]
     t = trace.t
@@ -45,7 +46,9 @@ def plot_motion(trace, path: Path) -> Path:
     axes[0].set_ylabel("residue [A]")
     if axes[0].get_legend_handles_labels()[0]:
         _legend_outside(axes[0])
-    if mm is not None:
+    if generic:
+        _plot_equations(axes[1:], t, mm, trace.result)
+    elif mm is not None:
         cur, speed = mm.checks["current"], mm.checks["speed"]
         axes[1].plot(*envelope(t, cur.simulated + cur.residue), label="measured (filtered)")
         axes[1].plot(*envelope(t, cur.simulated), "--", label="simulated from the estimated model")
@@ -73,6 +76,30 @@ def plot_motion(trace, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _plot_equations(axes, t: np.ndarray, mm, result: dict) -> None:  # noqa: ANN001 - MismatchResult
+    """Paper Fig. 13, 14 for any model's check (``estimator.model_check``: the PMSM's q and d currents and speed):
+    per simulated state, the measured and simulated signal and, on the right axis, the residue with +- the
+    sensor noise. On a PMSM the check is advisory (report.json ``output_error_check.deciding``): said so."""
+    units = {"w": "rad/s"}
+    for ax, (name, check) in zip(axes, mm.checks.items()):
+        unit = units.get(name, "A")
+        ax.plot(*envelope(t, check.simulated + check.residue), label=f"{name} measured (filtered)")
+        ax.plot(*envelope(t, check.simulated), "--", label=f"{name} simulated from the estimated model")
+        ax.set_ylabel(f"{name} [{unit}]")
+        right = ax.twinx()
+        right.plot(*envelope(t, check.residue), color="C3", lw=0.6, label=f"{name} residue")
+        if np.isfinite(check.noise_std):
+            for y in (check.noise_std, -check.noise_std):
+                right.axhline(y, color="C3", ls=":", lw=0.8)
+        right.set_ylabel(f"residue [{unit}]", color="C3")
+        handles = ax.get_legend_handles_labels()[0] + right.get_legend_handles_labels()[0]
+        ax.legend(handles, [h.get_label() for h in handles], loc="upper left", bbox_to_anchor=(1.08, 1), fontsize=7,
+                  frameon=False)
+    deciding = (result.get("output_error_check") or {}).get("deciding", True)
+    axes[-1].set_title(decision_text(mm) + ("" if deciding else "\n(advisory: the residue check decides)"),
+                       fontsize=8, wrap=True)
 
 
 def _legend_outside(ax: plt.Axes) -> None:
@@ -107,7 +134,8 @@ def plot_correlation(trace, path: Path) -> Path:
 
     for ax, (name, check) in zip(axes[0], mm.checks.items()):
         lags = np.arange(check.correlation.shape[0])
-        for j, x in enumerate(INPUTS[name]):
+        names = INPUTS.get(name) or [f"{j + 1}" for j in range(check.correlation.shape[1])]  # a model's own check
+        for j, x in enumerate(names):
             ax.stem(lags + 0.15 * j, check.correlation[:, j], linefmt=f"C{j}-", markerfmt=f"C{j}o",
                     basefmt=" ", label=f"input {x}")
         ax.axhspan(-check.band, check.band, color="0.9", zorder=0, label=f"{100 * (1 - mm.alpha):g} % band")

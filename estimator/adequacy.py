@@ -456,11 +456,17 @@ def check_model_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estim
 
     model = options.model
     owner = owners(model)
-    regressions = []
+    regressions, ignored = [], []
     for eq in model.equations.values():
         free = [n for n in equation_parameters_of(model, eq.name)
                 if n not in options.known and (options.offset or not model.variables[n].optional)]
-        reg = derive_regression(model, eq.name, free, dict(options.known))
+        try:
+            reg = derive_regression(model, eq.name, free, dict(options.known))
+        except EstimatorInputError:  # known terms of an equation scaled by a free psi_f: as the DC check's "no K"
+            mine = [n for n in equation_parameters_of(model, eq.name) if n in options.known]
+            ignored += [f"{n} (the {eq.name} equation is scaled by {eq.normaliser}, not known)" for n in mine]
+            reg = derive_regression(model, eq.name, free + mine,
+                                    {n: v for n, v in options.known.items() if n not in mine})
         regressions.append((reg, eq.output))
 
     def terms(s: dict) -> list:
@@ -481,8 +487,9 @@ def check_model_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estim
     if data.w is None and data.position is None:
         return AdequacyResult("not checked", None, ALPHA, "needs a speed (or position)")
     try:
-        return check_adequacy(data.h, w=data.w, position=data.position, signals=data.signals, alpha=ALPHA,
-                              filter=options.filter, speed_fraction=options.speed_fraction, offset=options.offset,
-                              model_terms=terms, states=differentiated(model))
+        result = check_adequacy(data.h, w=data.w, position=data.position, signals=data.signals, alpha=ALPHA,
+                                filter=options.filter, speed_fraction=options.speed_fraction, offset=options.offset,
+                                model_terms=terms, states=differentiated(model))
     except EstimatorInputError as exc:
         return AdequacyResult("not checked", None, ALPHA, str(exc))
+    return replace(result, reason=f"{result.reason}; known {', '.join(ignored)} not used") if ignored else result

@@ -30,7 +30,7 @@ MIN_LAG_RATIO = 0.1
 
 
 def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.ndarray, h: float, block: int,
-               slope: str = "L", resistance: str = "R") -> dict | None:
+               slope: str = "L", resistance: str = "R", extra: np.ndarray | None = None) -> dict | None:
     """The electrical fit with a ``d2i/dt2`` column, and the two time constants it implies.
 
     Parameters
@@ -44,6 +44,9 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
         The filtered current's derivative [A/s] on the same rows (contiguous samples).
     slope, resistance : str
         The columns of the derivative's coefficient and of the current's (DC: L, R; the PMSM's q axis: L_q, R).
+    extra : ndarray, shape (n, k), optional
+        Nuisance columns: the lag's terms on the equation's other currents (the PMSM's q axis: ``p w Di_d``, the
+        lag of i_d in ``p w L_d i_d``, coefficient ``L_d tau_f``).
     h : float
         Sample period [s].
     block : int
@@ -58,7 +61,7 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
     """
     if not {resistance, slope} <= set(names):
         return None
-    X = np.column_stack([Phi, np.gradient(Di, h)])
+    X = np.column_stack([Phi, *([] if extra is None else [extra]), np.gradient(Di, h)])
     if len(y) <= X.shape[1] + 2 * max(1, int(block)) or not np.all(np.isfinite(X)) or not np.all(np.isfinite(y)):
         return None
     scale = np.linalg.norm(X, axis=0)

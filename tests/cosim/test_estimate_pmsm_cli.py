@@ -113,3 +113,25 @@ def test_cosim_design_on_a_pmsm_axis_scores_the_dq_parameters(capsys):
     code = main(["design", str(example), "--accel", "3", "--verify", "2", "--no-progress"])
     _, err = capsys.readouterr()
     assert code == 2 and "--verify: the campaign check compares the DC drive's estimates" in err
+
+
+def test_known_parameters_on_a_pmsm_by_ls_as_on_the_dc_drive(recording, capsys):
+    """``--known`` with any subset, as on the DC drive: a known Jt used to fail the whole run with "fixing other
+    parameters needs a known psi_f" (the residue check derived the mechanical regression with psi_f free). Now
+    the known parameter is not printed, the others are given, and the residue check says it could not use it;
+    without the voltages, what cannot be solved (the mechanical equation's scale psi_f) is said with the reason."""
+    code, out, _ = run(capsys, recording, *MAP, "--method", "ls", "--known", "Jt=0.003", "--json")
+    assert code == 0
+    (seg,) = json.loads(out)["segments"]
+    assert set(seg["parameters"]) == {"R", "L_d", "L_q", "psi_f", "ft", "Cd"}
+    for name, p in seg["parameters"].items():
+        assert p["value"] == pytest.approx(TRUTH[name], rel=0.005), name
+    assert "known Jt (the mechanical equation is scaled by psi_f, not known) not used" in seg["model_check"]["reason"]
+    currents = ["--map", "time=time", "speed=n_act", "i_q=iq", "i_d=id", "--drive", "pmsm", "--filter-cutoff", "100",
+                "--method", "ls"]
+    code, out, _ = run(capsys, recording, *currents, "--known", "psi_f=0.23", "--known", "Jt=0.003", "--json")
+    assert code == 0
+    (seg,) = json.loads(out)["segments"]
+    assert {n: round(p["value"] / TRUTH[n], 3) for n, p in seg["parameters"].items()} == {"ft": 1.0, "Cd": 1.0}
+    code, _, err = run(capsys, recording, *currents, "--known", "Jt=0.003")
+    assert code != 0 and "scaled by psi_f, which is refused (no voltage signal)" in err and "Traceback" not in err

@@ -30,8 +30,10 @@ def check(d: dict, seed: int, kind: str = "pmsm", instruments: bool = True):
 
 def test_healthy_pmsm_motions_pass_at_alpha():
     """Ten noise draws of the healthy drive: every one passes at 1 % (Bonferroni over the three equations' seven
-    tests, the speed's peak test among them). Without the second sensors as instruments the i_q independence test rejects (p ~ 6e-6): the
-    simulated current carries the voltage's noise, which the measured voltage regressor carries too."""
+    tests, the speed's peak test among them). The currents' independence tests run on the residue weighted by its
+    null standard deviation, which follows the operating point (the d axis's by a factor above 5 here): unweighted,
+    the d current's rejected 16 % of healthy motions at 1 % (benchmarks/bench_pmsm_model_check.py), and the q
+    current's without the second sensors as instruments rejected this motion (p ~ 6e-6); weighted, it does not."""
     d = closed_loop()
     for seed in range(10):
         r = check(d, seed)
@@ -39,7 +41,7 @@ def test_healthy_pmsm_motions_pass_at_alpha():
         assert set(r.checks) == {"i_q", "i_d", "w"}
         assert all(set(c.tests) == {"independence", "size"} for n, c in r.checks.items() if n != "w")
         assert set(r.checks["w"].tests) == {"independence", "size", "peak"}  # the speed's null colour is known
-    assert not check(d, 0, instruments=False).passed
+    assert check(d, 0, instruments=False).checks["i_q"].tests["independence"].p_value > 0.05
 
 
 def test_an_unmodelled_load_torque_and_unmodelled_saliency_are_flagged():

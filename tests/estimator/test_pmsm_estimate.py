@@ -152,8 +152,7 @@ def test_a_measured_torque_replaces_its_definition_in_the_mechanical_equation():
 def test_a_lagged_current_measurement_refuses_l_q_by_the_second_lag_rule():
     """The phase currents measured through a 3 ms first-order lag (a sensor's filter) next to L_q/R = 11 ms: the
     q-axis fit with a d2i_q/dt2 column finds the two time constants, L_q is refused with both candidates and kept as
-    a lumped term. (No field weakening: with i_d ~ -17 A the lagged p w L_d i_d term biases R enough that the
-    smaller time constant falls below a tenth of the larger, and the rule does not fire: reported.)"""
+    a lumped term. (No field weakening here; with it, the next test.)"""
     from scipy import signal
 
     d = closed_loop("pmsm", (("fw", 0.0),))
@@ -167,3 +166,24 @@ def test_a_lagged_current_measurement_refuses_l_q_by_the_second_lag_rule():
     assert "L_q" in est.lumped
     small = float(why.split(" ms and ")[1].split(" ms")[0])
     assert small == pytest.approx(3.0, rel=0.3)  # the sensor's lag, within 30 %
+
+
+def test_under_field_weakening_the_second_lag_rule_fires_and_the_biased_r_is_refused():
+    """Field weakening (i_d ~ -17 A above 150 rad/s), the same 3 ms lag on the measured currents. The lag of i_d
+    adds p w L_d tau_f di_d/dt to the q axis, which the d2i_q/dt2 column cannot take: it biased R to half its value
+    and the smaller time constant below a tenth of the larger, so the rule did not fire and R was given at
+    0.36 Ohm (truth 0.70, interval +-0.2 Ohm). With that term as a nuisance column the rule fires (3 ms found), the candidates use the augmented
+    fit's R (8.2 mH among them), and the first-order R (0.36 Ohm) is refused with the augmented 0.70."""
+    from scipy import signal
+
+    d = closed_loop()
+    assert d["i_d"].min() < -15
+    a = math.exp(-H / 3e-3)
+    lagged = dict(d) | {k: signal.lfilter([1 - a], [1, -a], d[k], zi=[a * d[k][0]])[0] for k in ("i_q", "i_d")}
+    est = estimate_parameters(motion(lagged), EstimationOptions(model="pmsm", filter=FILTER))
+    why = est.refused["L_q"]
+    assert why.startswith("the current lags the voltage through two time constants"), why
+    assert float(why.split(" ms and ")[1].split(" ms")[0]) == pytest.approx(3.0, rel=0.1)
+    candidates = [float(x) for x in why.split("L_q is either ")[1].split(" H")[0].split(" or ")]
+    assert min(abs(c / TRUTH["L_q"] - 1) for c in candidates) < 0.05, candidates
+    assert est.refused["R"].startswith("the first-order fit's R = 0.36") and "0.69" in est.refused["R"]

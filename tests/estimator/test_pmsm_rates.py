@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import math
 import re
+from functools import lru_cache
 
 import numpy as np
 import pytest
-from pmsm_data import H
+from pmsm_data import H, add_noise
 
 from feeddrive.estimator import EstimationOptions, FilterSpec, MotionData
 from feeddrive.estimator.design import simulate_closed_loop
@@ -35,6 +36,7 @@ def tool_change(t: np.ndarray) -> np.ndarray:
     return np.interp(t, tc, wc)
 
 
+@lru_cache(maxsize=2)
 def simulated(params: tuple = ()) -> dict[str, np.ndarray]:
     t = np.arange(int(1.7 / H)) * H
     out = simulate_closed_loop(tool_change(t), H, dict(params), substeps=4, model=drive_model("pmsm"))
@@ -48,15 +50,16 @@ def estimate(d: dict, k: int):
     return estimate_parameters(m, EstimationOptions(model="pmsm", filter=FilterSpec(min(100.0, 0.1 / h))))
 
 
-def check(est, truth: dict, rate: str) -> None:
+def check(est, truth: dict, rate: str, tolerance: bool = True) -> None:
+    """Every parameter given is covered by its interval (and within ``TOL`` if ``tolerance``: noise-free), every
+    refusal gives its reason with numbers."""
     for n, why in est.refused.items():
         assert re.search(r"\d", why), (rate, n, why)  # a reason with its numbers
     for n, p in est.parameters.items():
         err = p.value / truth[n] - 1
-        assert abs(err) < TOL[n], (rate, n, err)
-        if n != "L_d":  # L_d's interval at 2 ms misses by 0.2 % of the value (reported, not fixed)
-            lo, hi = p.ci95
-            assert lo - FLOOR * abs(p.value) <= truth[n] <= hi + FLOOR * abs(p.value), (rate, n, err, p.ci95)
+        assert not tolerance or abs(err) < TOL[n], (rate, n, err)
+        lo, hi = p.ci95
+        assert lo - FLOOR * abs(p.value) <= truth[n] <= hi + FLOOR * abs(p.value), (rate, n, err, p.ci95)
 
 
 @pytest.mark.parametrize("k", RATES)
@@ -82,3 +85,33 @@ def test_an_inductance_below_the_sample_period_is_refused_and_the_others_come_fr
     truth = TRUTH | small
     for n in ("R", "psi_f", "Jt"):
         assert est.parameters[n].value == pytest.approx(truth[n], rel=TOL[n]), n
+
+
+@pytest.mark.parametrize("k", (16, 32))
+@pytest.mark.parametrize("snr", (40.0, 30.0))
+def test_at_an_nc_rate_with_noise_every_interval_given_covers_the_truth(k, snr):
+    """2 and 4 ms, 40 and 30 dB, two noise draws: every parameter given is covered, the others refused with
+    their numbers. (Over 10 draws each, benchmarks/bench_pmsm_rates.py: 5 of 224 intervals given missed, 2 %.)"""
+    for seed in (0, 1):
+        est = estimate(add_noise(simulated(), snr, seed), k)
+        check(est, TRUTH, f"{k * H * 1e3:g} ms, {snr:g} dB, seed {seed}", tolerance=False)
+        assert {"psi_f", "L_q"} & set(est.parameters)  # the back-EMF and q inductance are given at every rate
+
+
+def test_dry_friction_tied_to_a_refused_viscous_friction_is_refused_not_given_on_its_estimate():
+    """2 ms, 40 dB: ft refused (+-132 %); Cd used to be given +26 % with an interval of +-12 % that held only
+    if ft's estimate were the truth (ft and Cd -0.98 correlated): refused with the correlation."""
+    est = estimate(add_noise(simulated(), 40.0, 0), 16)
+    assert est.refused["ft"].startswith("95 % interval")
+    why = est.refused["Cd"]
+    assert why.startswith("determined only together with ft (refused; correlation -0.9"), why
+    assert float(why.split("variance is ")[1].split(" times")[0]) > 10
+
+
+def test_ls_standing_in_for_iv_at_an_nc_rate_holds_its_noise_bias_in_its_interval():
+    """2 ms, 30 dB: IV cannot run (its iterates diverge), LS stands in; the noise of the speed's derivative biases
+    LS's Jt by -16 % (the halves' LS, twice the filtered noise: -35 %), the interval used to miss the truth."""
+    est = estimate(add_noise(simulated(), 30.0, 0), 16)
+    assert est.iv.ran == "ls" and "the halves' LS - LS (LS's noise bias" in est.iv.message
+    assert est.parameters["Jt"].value / TRUTH["Jt"] - 1 < -0.1
+    check(est, TRUTH, "2 ms, 30 dB", tolerance=False)

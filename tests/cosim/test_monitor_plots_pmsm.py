@@ -1,0 +1,42 @@
+"""Paper Fig. 13, 14 on a PMSM (issue 25): the monitor's motion figure draws the q and d currents' and the speed's
+measured, simulated and residue traces of the output-error check (estimator/model_check.py), said advisory."""
+from __future__ import annotations
+
+import numpy as np
+
+import feeddrive.cosim.monitor_plots as mp
+from feeddrive.cosim.monitor_pipeline import MotionTrace
+from feeddrive.estimator.mismatch import MismatchResult, ResidueCheck
+from feeddrive.estimator.residue_tests import TestResult
+
+
+def test_the_motion_figure_draws_each_pmsm_residue_against_its_noise(tmp_path, monkeypatch):
+    """A check of the PMSM's three equations (what check_model_equations returns, built here: the figure is under
+    test): each state's panel holds its measured and simulated traces and, on its right axis, its residue with
+    +- its sensor noise; the decision is titled advisory; the correlation figure has one panel per residue."""
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) * 1.25e-4
+    noise = {"i_q": 0.06, "i_d": 0.05, "w": 0.3}
+    checks = {}
+    for j, (name, sd) in enumerate(noise.items()):
+        residue = sd * rng.standard_normal(t.size)
+        residue[:50] = np.nan  # the filter's transients are not tested
+        test = TestResult("independence", 1.0, (30.0, 80.0), 0.4 + 0.1 * j)
+        checks[name] = ResidueCheck(name, {"independence": test}, sd, sd, 10 * np.sin(40 * t + j), residue,
+                                    rng.standard_normal((11, 3)) * 0.05, 0.2)
+    mm = MismatchResult("i_q independence", 1.0, 1.0, 0.01, True, "Bonferroni over 3 tests", checks)
+    trace = MotionTrace(1, t, {}, None, mm, {"output_error_check": {"deciding": False}, "verdict": "healthy"})
+    figures = []
+    monkeypatch.setattr(mp.plt, "close", figures.append)  # keep the figures to read what they draw
+    assert mp.plot_motion(trace, tmp_path / "m.png").stat().st_size > 0
+    assert mp.plot_correlation(trace, tmp_path / "c.png").stat().st_size > 0
+    fig = figures[0]
+    assert {"i_q [A]", "i_d [A]", "w [rad/s]", "residue [A]", "residue [rad/s]"} <= {a.get_ylabel() for a in fig.axes}
+    assert "(advisory: the residue check decides)" in fig.axes[3].get_title()
+    for name, check in checks.items():
+        ax = next(a for a in fig.axes if any(line.get_label() == f"{name} residue" for line in a.get_lines()))
+        line = next(line for line in ax.get_lines() if line.get_label() == f"{name} residue")
+        assert np.nanmax(line.get_ydata()) == np.nanmax(check.residue)  # the envelope keeps the extremes
+        bands = sorted(line.get_ydata()[0] for line in ax.get_lines() if line.get_linestyle() == ":")
+        assert bands == [-noise[name], noise[name]]
+    assert len(figures[1].axes) == 3  # one correlation panel per residue
