@@ -159,6 +159,10 @@ class EstimationOptions:
         The drive's model, or a kind of ``models.drives.DRIVES`` (``"dc"``, ``"pmsm"``, ``"pmsm-spm"``);
         default the DC feed drive. Known design parameters in ``known`` (the PMSM's pole pairs ``p``)
         replace the model's nominal values (``models.drives.with_design``) and leave ``known``.
+    decimation : int or "auto"
+        Every how many filtered samples the regressions use (``filtering.decimation_factor``): "auto"
+        (default) the largest factor the filter's cut-off allows at the record's rate (7 at 10 kHz and
+        50 Hz, 1 at an NC's 1-4 ms), 1 every sample, or a factor >= 1.
     """
 
     method: str = "iv"
@@ -177,6 +181,7 @@ class EstimationOptions:
     block_seconds: float | None = None
     oe_rate_hz: float = 1000.0
     model: Model | str = MODEL
+    decimation: int | str = "auto"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -201,6 +206,9 @@ class EstimationOptions:
             raise EstimatorInputError(f"speed_threshold must be >= 0 {self.speed_unit}, got {self.speed_threshold}")
         if not 0 <= self.speed_fraction < 1:
             raise EstimatorInputError(f"speed_fraction must be in [0, 1), got {self.speed_fraction}")
+        if self.decimation != "auto" and not (isinstance(self.decimation, int | np.integer)
+                                              and not isinstance(self.decimation, bool) and self.decimation >= 1):
+            raise EstimatorInputError(f"decimation must be 'auto' or an integer >= 1, got {self.decimation!r}")
 
     @property
     def physical(self) -> list:
@@ -304,6 +312,9 @@ class MotionEstimate:
     #: the given parameters with their covariance before a refused one was fixed at its estimate (the
     #: intervals not conditional on it): what several motions or files are pooled and compared with
     joint: MethodResult | None = None
+    #: sampling rate of the samples the regressions used [Hz]: the record's, or its decimated rate
+    #: (``EstimationOptions.decimation``); None when not stated
+    rate_hz: float | None = None
 
     @property
     def method_used(self) -> str:
@@ -354,6 +365,8 @@ class MotionEstimate:
             out["flags"] = dict(self.flags)
         if self.bounded:
             out["bounded"] = {n: {"value": float(v), "bounded": True} for n, v in self.bounded.items()}
+        if self.rate_hz is not None:
+            out["rate_hz"] = float(self.rate_hz)
         return out
 
 
@@ -386,6 +399,8 @@ class Prepared:
     #: equation -> the regression of an equation that estimates nothing of its own (the PMSM's d axis: R, L_d, L_q
     #: are the q axis's), fitted jointly with it as a second sample set of the same parameters
     partners: dict[str, Regression] = field(default_factory=dict)
+    #: every how many filtered samples of the record ``signals`` keeps (``h`` is the record's period times it)
+    decimation: int = 1
 
 
 def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags: int) -> np.ndarray:
