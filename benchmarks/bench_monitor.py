@@ -71,9 +71,10 @@ def main() -> int:
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
     signals, h = tool_change(), 1e-4
     config = MonitorConfig()
-    # the baseline: one lstsq of the electrical regression of this motion, as the estimator forms it
+    # the baseline: one lstsq of the electrical regression of this motion on every sample (not decimated, so
+    # that the ratios compare with the figures before the estimator decimated)
     reg = prepare(MotionData(h, u=0.5 * (signals["u"] + signals["u_ref"]), i=0.5 * (signals["Im1"] + signals["Im2"]),
-                             w=signals["w_tach"]), EstimationOptions(filter=config.filter))
+                             w=signals["w_tach"]), EstimationOptions(filter=config.filter, decimation=1))
     elec = next(r for r in reg.regressions if r.equation == "electrical")
     y, Phi = elec.evaluate(reg.signals)
     lstsq = []

@@ -205,7 +205,8 @@ class MonitorPipeline:
         adequacy = None
         try:  # before the estimation: a mismatch explains a refusal (gravity hides Jt on a robot axis)
             adequacy = check_adequacy(h, u=u, i=i, w=w, torque=torque, alpha=cfg.mismatch_alpha, filter=cfg.filter,
-                                      speed_fraction=cfg.speed_fraction, known=known, offset=offset)
+                                      speed_fraction=cfg.speed_fraction, known=known, offset=offset,
+                                      decimation=self.estimation_options.decimation)
             result["adequacy"] = adequacy.to_dict()
         except EstimatorInputError as exc:
             result["not_checked"]["model (own residue)"] = f"not checked: {exc}"

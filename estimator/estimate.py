@@ -335,16 +335,18 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     instruments are uncorrelated with the equation error even for the derivative of the current,
     whose only noise-free information is in the (noisy) voltage; instruments simulated from the
     same samples would bias L (about +15 % at 30 dB SNR here). Noise correlated from one sample to
-    the next (not white) brings part of that bias back. The halves are sampled every 2 h, so the
-    filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h). The equations in
+    the next (not white) brings part of that bias back. The halves are sampled every 2 h (2 h D when
+    the record is decimated by D: ``EstimationOptions.decimation``), so the filter cut-off must stay below
+    0.45 of their Nyquist frequency (0.1125 / h before decimation). The equations in
     ``skip`` are not simulated (a derivative coefficient fixed at 0): their own state is its instrument.
     Raises NumericalFailure when the iterates have not settled (relative change below ``iv_tolerance``)
     after ``iv_iterations``: the callers fall back to LS with that reason.
     """
     odd, even = split_halves(data)
-    # both halves stepped over alike (their lengths may differ by one sample), so that sample k of either is
-    # at the same place of its half and the instruments are read half a record sample (1 / (2 D) of theirs) off
-    every = decimation_factor(options.filter.cutoff_hz, odd.h, min(odd.n, even.n), options.decimation)
+    # the halves stepped over by the record's own factor (decimation_factor's rule is about the halves: every
+    # 2 h D), both alike so that sample k of either is at the same place of its half; the instruments are then
+    # read one record sample, 1 / (2 D) of theirs, off
+    every = decimation_factor(options.filter.cutoff_hz, data.h, data.n, options.decimation)
     half_options = replace(options, decimation=every)
     halves = (prepare(odd, half_options, strict=check), prepare(even, half_options, strict=check))
     if [r.equation for r in halves[0].regressions] != [r.equation for r in halves[1].regressions]:
