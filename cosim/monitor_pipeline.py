@@ -226,7 +226,8 @@ class MonitorPipeline:
         units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
                                 for k, p in params.items()}
-        result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
+        result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error),
+                   "estimation_rate_hz": est.rate_hz}  # the record's rate, or its decimated one
         result["refused"] = dict(est.refused)
         if est.result.message:  # a fallback (IV -> LS) is stated with its reason
             result["notes"].append(est.result.message)

@@ -346,7 +346,8 @@ class MotionEstimate:
         return self.result.fit_error
 
     def to_dict(self) -> dict:
-        """``{"start","end","method","parameters": {name: {"value","ci95"}},"condition_number","fit_error"}``."""
+        """``{"start","end","method","parameters": {name: {"value","ci95"}},"condition_number","fit_error"}``, and
+        ``rate_hz`` (the rate the regressions used, ``EstimationOptions.decimation``) when known."""
         out = {
             "start": self.start, "end": self.end, "method": self.method_used,
             "parameters": {n: {"value": p.value, "ci95": list(p.ci95)} for n, p in self.parameters.items()},
