@@ -256,7 +256,8 @@ class MonitorPipeline:
                                                   cfg.mismatch_alpha, covariance=est.covariance, names=est.names,
                                                   noise=noise, noise_dof=len(v.i), instruments=instruments,
                                                   speed_threshold=cfg.speed_threshold,
-                                                  speed_fraction=cfg.speed_fraction)
+                                                  speed_fraction=cfg.speed_fraction,
+                                                  decimation=self.estimation_options.decimation)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # NumericalFailure: it diverged
                 # the check could not be run; the estimates stand, the residue check decides
                 result["not_checked"]["model (paper, output error)"] = (

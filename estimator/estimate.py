@@ -23,7 +23,13 @@ import numpy as np
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
 from feeddrive.estimator.filtering import decimation_factor
-from feeddrive.estimator.kernels import equation_parameters_of, erode, measured_signals, residual_symbols
+from feeddrive.estimator.kernels import (
+    equation_parameters_of,
+    erode,
+    measured_signals,
+    parameter_defined_of,
+    residual_symbols,
+)
 from feeddrive.estimator.linear_fit import _column_reference, _Fit, _solve
 from feeddrive.estimator.model_terms import (
     constant_sensitivities,
@@ -49,7 +55,7 @@ from feeddrive.estimator.motion import (
 )
 from feeddrive.estimator.regression import derive_regression
 from feeddrive.estimator.simulation import MODEL, simulate
-from feeddrive.models.drives import differentiated, measured, parameter_defined
+from feeddrive.models.drives import differentiated, measured
 
 _signals_for = signals_for  # its former private name, still imported by partial and physical
 
@@ -77,7 +83,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     known_signals = measured_signals(model)
     unknown = sorted(set(raw) - set(FIELDS) - set(known_signals))
     # a torque signal: the normaliser times the output (DC: K i), or the model's own torque signal (PMSM)
-    defined = parameter_defined(model)
+    defined = parameter_defined_of(model)
     if unknown or (model is not MODEL and (("torque" in raw and "torque" not in defined)
                                            or set(raw) & {"u", "i"} - set(known_signals))):
         bad = (unknown or sorted({"torque", "u", "i"} & set(raw)))[0]
