@@ -111,6 +111,12 @@ MAX_DECIMATED_PHASE = 0.5
 MIN_DECIMATED_SAMPLES = 2000
 
 
+def check_decimation(value: object) -> None:
+    """``EstimationOptions.decimation``: "auto" or an integer >= 1, else one line naming it."""
+    if value != "auto" and not (isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1):
+        raise EstimatorInputError(f"decimation must be 'auto' or an integer >= 1, got {value!r}")
+
+
 def decimation_factor(cutoff_hz: float, h: float, n: int, requested: int | str = "auto") -> int:
     """How many samples of a low-passed record the estimator steps over: every D-th filtered sample is kept.
 

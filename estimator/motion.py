@@ -12,7 +12,7 @@ import numpy as np
 
 from feeddrive.estimator.distributions import t_ppf
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
-from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.filtering import FilterSpec, check_decimation
 from feeddrive.estimator.regression import Regression
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.models import Model
@@ -160,9 +160,8 @@ class EstimationOptions:
         default the DC feed drive. Known design parameters in ``known`` (the PMSM's pole pairs ``p``)
         replace the model's nominal values (``models.drives.with_design``) and leave ``known``.
     decimation : int or "auto"
-        Every how many filtered samples the regressions use (``filtering.decimation_factor``): "auto"
-        (default) the largest factor the filter's cut-off allows at the record's rate (7 at 10 kHz and
-        50 Hz, 1 at an NC's 1-4 ms), 1 every sample, or a factor >= 1.
+        Every how many filtered samples the regressions use: "auto" (default) the largest factor the
+        cut-off allows at the record's rate (``filtering.decimation_factor``), or a factor (1: every one).
     """
 
     method: str = "iv"
@@ -206,9 +205,7 @@ class EstimationOptions:
             raise EstimatorInputError(f"speed_threshold must be >= 0 {self.speed_unit}, got {self.speed_threshold}")
         if not 0 <= self.speed_fraction < 1:
             raise EstimatorInputError(f"speed_fraction must be in [0, 1), got {self.speed_fraction}")
-        if self.decimation != "auto" and not (isinstance(self.decimation, int | np.integer)
-                                              and not isinstance(self.decimation, bool) and self.decimation >= 1):
-            raise EstimatorInputError(f"decimation must be 'auto' or an integer >= 1, got {self.decimation!r}")
+        check_decimation(self.decimation)
 
     @property
     def physical(self) -> list:
@@ -312,8 +309,7 @@ class MotionEstimate:
     #: the given parameters with their covariance before a refused one was fixed at its estimate (the
     #: intervals not conditional on it): what several motions or files are pooled and compared with
     joint: MethodResult | None = None
-    #: sampling rate of the samples the regressions used [Hz]: the record's, or its decimated rate
-    #: (``EstimationOptions.decimation``); None when not stated
+    #: rate of the samples the regressions used [Hz] (the record's or, ``EstimationOptions.decimation``, less)
     rate_hz: float | None = None
 
     @property
@@ -346,8 +342,7 @@ class MotionEstimate:
         return self.result.fit_error
 
     def to_dict(self) -> dict:
-        """``{"start","end","method","parameters": {name: {"value","ci95"}},"condition_number","fit_error"}``, and
-        ``rate_hz`` (the rate the regressions used, ``EstimationOptions.decimation``) when known."""
+        """``{"start","end","method","parameters": {name: {"value","ci95"}},"condition_number","fit_error","rate_hz"}``."""
         out = {
             "start": self.start, "end": self.end, "method": self.method_used,
             "parameters": {n: {"value": p.value, "ci95": list(p.ci95)} for n, p in self.parameters.items()},
@@ -400,8 +395,7 @@ class Prepared:
     #: equation -> the regression of an equation that estimates nothing of its own (the PMSM's d axis: R, L_d, L_q
     #: are the q axis's), fitted jointly with it as a second sample set of the same parameters
     partners: dict[str, Regression] = field(default_factory=dict)
-    #: every how many filtered samples of the record ``signals`` keeps (``h`` is the record's period times it)
-    decimation: int = 1
+    decimation: int = 1  # every how many filtered samples ``signals`` keeps (``h``: the record's period times it)
 
 
 def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags: int) -> np.ndarray:
