@@ -67,7 +67,8 @@ class MonitorPipeline:
         self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
                                                     speed_threshold=config.speed_threshold,
                                                     speed_fraction=config.speed_fraction,
-                                                    known=dict(config.known) | design, model=config.drive)
+                                                    known=dict(config.known) | design, model=config.drive,
+                                                    decimation=config.decimation)
         self.diagnosis_options = DiagnosisOptions(config.alpha, config.min_relative_drift)
         self.table = TABLES[config.drive]  # Table I of the axis's drive kind
         last = history.last_validated(axis)
