@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationInfo, field_validator, model_validator
 
@@ -137,9 +137,17 @@ class MonitorConfig(BaseModel):
     second_sensor_on: Literal["U", "V", "W"] | None = "U"
     dead_time_loss_v: float = Field(0.0, ge=0)
     lost_motion_allowed_mm: float = Field(0.005, ge=0)
-    decimation: Literal["auto"] | Annotated[int, Field(ge=1, strict=True)] = "auto"
+    decimation: Literal["auto"] | int = "auto"
     #: the stated baseline FILE's values, name -> (value, std), read once by the validator
     _stated: dict[str, tuple[float, float]] | None = PrivateAttr(None)
+
+    @field_validator("decimation", mode="before")
+    @classmethod
+    def _decimation(cls, value: object) -> object:
+        if value == "auto" or (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+            return value
+        raise ValueError(f"expected 'auto' or an integer >= 1 (every how many filtered samples are estimated on), "
+                         f"got {value!r}")
 
     @field_validator("baseline")
     @classmethod
