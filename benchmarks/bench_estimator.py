@@ -11,7 +11,10 @@ tachometer and encoder) followed by LS. Targets at 10 kHz (issue 26): LS with va
 IV <= 30 ms, OE <= 1 s. Times are CPU times (``time.process_time``), each call on signals not filtered
 before; the machine's load is printed first.
 
-    python benchmarks/bench_estimator.py [--repeat 5]
+    python benchmarks/bench_estimator.py [--repeat 5] [--decimation auto|D]
+
+``--decimation``: ``EstimationOptions.decimation`` (default ``auto``; ``1``: every filtered sample, as before
+issue 26's decimation).
 
 The estimator's matrix products are (n x 4)^T (n x 4): on a machine whose cores are busy, OpenBLAS
 threads only wait for each other (IV measured 5x slower here under a load of 3.5 on 2 cores); run
@@ -65,18 +68,22 @@ def motion(h: float, seed: int = 0) -> tuple[MotionData, dict[str, np.ndarray]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--decimation", default="auto", help="auto (default) or a factor >= 1 (1: every sample)")
     args = parser.parse_args()
+    decimation = args.decimation if args.decimation == "auto" else int(args.decimation)
+    print(f"decimation {decimation}")
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
     print(f"{'rate':>7} {'method':>6} {'CPU ms':>10} {'x lstsq':>9} {'target ms':>10}")
     for h in (1e-3, 1e-4):
         data, redundant = motion(h)
-        reg = prepare(data, EstimationOptions())
+        reg = prepare(data, EstimationOptions(decimation=1))  # the baseline on every sample
         elec = next(r for r in reg.regressions if r.equation == "electrical")
         y, Phi = elec.evaluate(reg.signals)
         base = best(lambda: np.linalg.lstsq(Phi, y, rcond=None), 5 * args.repeat)
         print(f"{1 / h:7.0f} {'lstsq':>6} {1e3 * base:10.3f} {1.0:9.1f} {'':>10}   (baseline, {len(y)} x 3)")
-        runs = {method: (lambda o=EstimationOptions(method=method): estimate_motion(data, o))  # noqa: B008
+        runs = {method: (lambda o=EstimationOptions(method=method, decimation=decimation):  # noqa: B008
+                         estimate_motion(data, o))
                 for method in ("ls", "iv", "oe")}
         spec = EstimationOptions().filter
         runs["ls+val"] = lambda: (validate_measurements(redundant, h, None, spec), runs["ls"]())

@@ -8,7 +8,10 @@ machine disturbs least) and wall time are printed, with each stage's share (the 
 wrapped with timers in the same runs) and the ratio against one ``numpy.linalg.lstsq`` of the
 electrical regression (n x 3) measured in the same run. Target (issue 26): <= 50 ms per motion.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_monitor.py [--repeat 10] [--profile]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_monitor.py [--repeat 10] [--profile] [--decimation auto|D]
+
+``--decimation`` sets ``EstimationOptions.decimation`` of the estimation and both model checks (default
+``auto``; ``1``: every filtered sample, as before issue 26's decimation), so both are timed in the same hour.
 
 ``--profile`` adds the functions that take the time (cProfile, by own time). The machine's load is
 printed first: absolute figures on a shared machine are only comparable at the same load.
@@ -23,6 +26,7 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -66,14 +70,17 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=10)
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--decimation", default="auto", help="auto (default) or a factor >= 1 (1: every sample)")
     args = parser.parse_args()
+    decimation = args.decimation if args.decimation == "auto" else int(args.decimation)
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
     signals, h = tool_change(), 1e-4
     config = MonitorConfig()
-    # the baseline: one lstsq of the electrical regression of this motion, as the estimator forms it
+    # the baseline: one lstsq of the electrical regression of this motion on every sample (not decimated, so
+    # that the ratios compare with the figures before the estimator decimated)
     reg = prepare(MotionData(h, u=0.5 * (signals["u"] + signals["u_ref"]), i=0.5 * (signals["Im1"] + signals["Im2"]),
-                             w=signals["w_tach"]), EstimationOptions(filter=config.filter))
+                             w=signals["w_tach"]), EstimationOptions(filter=config.filter, decimation=1))
     elec = next(r for r in reg.regressions if r.equation == "electrical")
     y, Phi = elec.evaluate(reg.signals)
     lstsq = []
@@ -86,7 +93,9 @@ def main() -> int:
     def run() -> dict:
         clear_filter_memo()  # a new motion's signals: nothing filtered yet
         with History(":memory:") as history:
-            return MonitorPipeline(config, history, "X").process(signals, h, 0.0, 1, 0.0).result
+            pipeline = MonitorPipeline(config, history, "X")
+            pipeline.estimation_options = replace(pipeline.estimation_options, decimation=decimation)
+            return pipeline.process(signals, h, 0.0, 1, 0.0).result
 
     result = run()  # warm: the compiled rollouts loaded, CasADi functions built
     best, wall, stages = np.inf, np.inf, {}
@@ -105,7 +114,8 @@ def main() -> int:
     finally:
         for s in STAGES:
             setattr(monitor, s, originals[s])
-    print(f"motion: {len(signals['u'])} samples at {1 / h:.0f} Hz, verdict {result['verdict']!r}")
+    print(f"motion: {len(signals['u'])} samples at {1 / h:.0f} Hz, verdict {result['verdict']!r}, decimation "
+          f"{decimation}: estimated at {result['estimation_rate_hz']:.0f} Hz")
     print(f"one lstsq ({len(y)} x {Phi.shape[1]}): {1e3 * base:.2f} ms CPU")
     print(f"monitor per motion: {1e3 * best:.1f} ms CPU ({best / base:.0f} x lstsq), best wall {1e3 * wall:.1f} ms; "
           f"target {TARGET_MS:.0f} ms")

@@ -92,6 +92,10 @@ class MonitorConfig(BaseModel):
     lost_motion_allowed_mm : float
         A PMSM axis's acceptance value of the lost motion between the motor encoder and the linear scale [mm]:
         the one-sided test's null (an elastic drive chain has some um without play: 1.2 um on the vendor FMU).
+    decimation : "auto" or int
+        Every how many filtered samples the estimation and both model checks use
+        (``EstimationOptions.decimation``): "auto" (default) from the filter's cut-off and the rate (3 at
+        10 kHz with the 100 Hz filter), 1 every sample; each motion's ``estimation_rate_hz`` says the rate.
     sampling : mapping of {"voltage", "current", "speed"} to {"instant", "mean"}
         What a sample of each quantity is: ``mean``, the mean over the sampling interval before its
         time stamp, which the estimator aligns to the interval's middle (h/2 earlier); default
@@ -133,8 +137,17 @@ class MonitorConfig(BaseModel):
     second_sensor_on: Literal["U", "V", "W"] | None = "U"
     dead_time_loss_v: float = Field(0.0, ge=0)
     lost_motion_allowed_mm: float = Field(0.005, ge=0)
+    decimation: Literal["auto"] | int = "auto"
     #: the stated baseline FILE's values, name -> (value, std), read once by the validator
     _stated: dict[str, tuple[float, float]] | None = PrivateAttr(None)
+
+    @field_validator("decimation", mode="before")
+    @classmethod
+    def _decimation(cls, value: object) -> object:
+        if value == "auto" or (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+            return value
+        raise ValueError(f"expected 'auto' or an integer >= 1 (every how many filtered samples are estimated on), "
+                         f"got {value!r}")
 
     @field_validator("baseline")
     @classmethod

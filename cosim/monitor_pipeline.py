@@ -63,7 +63,8 @@ class MonitorPipeline:
         self.estimation_options = EstimationOptions(method=config.method, filter=config.filter,
                                                     speed_threshold=config.speed_threshold,
                                                     speed_fraction=config.speed_fraction,
-                                                    known=dict(config.known) | design, model=config.drive)
+                                                    known=dict(config.known) | design, model=config.drive,
+                                                    decimation=config.decimation)
         self.diagnosis_options = DiagnosisOptions(config.alpha, config.min_relative_drift)
         self.table = TABLES[config.drive]  # Table I of the axis's drive kind
         last = history.last_validated(axis)
@@ -201,7 +202,8 @@ class MonitorPipeline:
         adequacy = None
         try:  # before the estimation: a mismatch explains a refusal (gravity hides Jt on a robot axis)
             adequacy = check_adequacy(h, u=u, i=i, w=w, torque=torque, alpha=cfg.mismatch_alpha, filter=cfg.filter,
-                                      speed_fraction=cfg.speed_fraction, known=known, offset=offset)
+                                      speed_fraction=cfg.speed_fraction, known=known, offset=offset,
+                                      decimation=self.estimation_options.decimation)
             result["adequacy"] = adequacy.to_dict()
         except EstimatorInputError as exc:
             result["not_checked"]["model (own residue)"] = f"not checked: {exc}"
@@ -221,7 +223,8 @@ class MonitorPipeline:
         units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
         result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
                                 for k, p in params.items()}
-        result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error)}
+        result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error),
+                   "estimation_rate_hz": est.rate_hz}  # the record's rate, or its decimated one
         result["refused"] = dict(est.refused)
         if est.result.message:  # a fallback (IV -> LS) is stated with its reason
             result["notes"].append(est.result.message)
@@ -250,7 +253,8 @@ class MonitorPipeline:
                                                   cfg.mismatch_alpha, covariance=est.covariance, names=est.names,
                                                   noise=noise, noise_dof=len(v.i), instruments=instruments,
                                                   speed_threshold=cfg.speed_threshold,
-                                                  speed_fraction=cfg.speed_fraction)
+                                                  speed_fraction=cfg.speed_fraction,
+                                                  decimation=self.estimation_options.decimation)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # NumericalFailure: it diverged
                 # the check could not be run; the estimates stand, the residue check decides
                 result["not_checked"]["model (paper, output error)"] = (

@@ -323,7 +323,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     result["parameters"] = {k: {"value": q.value, "std": q.std, "ci95": list(q.ci95), "unit": units.get(k, "")}
                             for k, q in est.parameters.items()}
     result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error),
-               "refused": dict(est.refused)}
+               "refused": dict(est.refused), "estimation_rate_hz": est.rate_hz}
     if est.result.message:
         result["notes"].append(est.result.message)
     flags = dict(est.flags)

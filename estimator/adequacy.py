@@ -46,7 +46,7 @@ from numpy.polynomial import legendre
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.distributions import f_sf
 from feeddrive.estimator.errors import EstimatorInputError
-from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.filtering import FilterSpec, decimation_factor
 from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
@@ -234,7 +234,7 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
                    speed_fraction: float = 0.03, blocks: int = 30, max_relative_std: float = 0.3,
                    known: Mapping[str, float] | None = None, offset: bool = False,
                    signals: Mapping[str, np.ndarray] | None = None, model_terms=None,  # noqa: ANN001
-                   states: tuple[str, ...] = ("i", "w")) -> AdequacyResult:
+                   states: tuple[str, ...] = ("i", "w"), decimation: int | str = "auto") -> AdequacyResult:
     """Is the DC model adequate for this recording? (lack-of-fit test, see the module docstring)
 
     Parameters
@@ -267,6 +267,9 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         differentiate, and ``model_terms(s) -> [(equation, output, y, {parameter: regressor}, friction)]`` in
         place of the DC equations; each is tested against ``output^2`` and ``output x |speed|`` (and the
         position polynomials when ``friction``: the equation holding sign(w)).
+    decimation : int or "auto"
+        Every how many filtered samples are tested (``EstimationOptions.decimation``, the estimator's rule:
+        ``filtering.decimation_factor``); the blocks, guards and lags stay the same in seconds.
 
     Returns
     -------
@@ -297,6 +300,11 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         return AdequacyResult("not enough excitation", None, alpha, f"too short to filter ({exc})")
     if "position" not in f:  # the integral of the speed: a position-dependent load needs no gear ratio
         f["position"] = np.concatenate([[0.0], np.cumsum(0.5 * (f["w"][1:] + f["w"][:-1])) * h])
+    # the filtered signals carry the model on every D-th sample (as the estimator's regressions)
+    step = decimation_factor(filter.cutoff_hz, h, n, decimation)
+    if step > 1:
+        f = {k: np.ascontiguousarray(v[::step]) for k, v in f.items()}
+        h, n = h * step, f["w"].size
     sl = slice(PAST, n - FUTURE)
     d = {"D" + k: zero_forcing_derivative(f[k], h)[0] for k in states if k in f}
     s = {k: matched_average(v)[sl] for k, v in f.items()} | d
@@ -442,7 +450,7 @@ def check_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estimator.M
         return AdequacyResult("not checked", None, ALPHA, "needs a speed (or position) and a current or torque")
     return check_adequacy(data.h, u=data.u, i=data.i, w=data.w, torque=data.torque, position=data.position,
                           alpha=ALPHA, filter=options.filter, speed_fraction=options.speed_fraction,
-                          known=options.known, offset=options.offset)
+                          known=options.known, offset=options.offset, decimation=options.decimation)
 
 
 def check_model_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estimator.MotionData, EstimationOptions
@@ -489,7 +497,7 @@ def check_model_motion(data, options) -> AdequacyResult:  # noqa: ANN001 - estim
     try:
         result = check_adequacy(data.h, w=data.w, position=data.position, signals=data.signals, alpha=ALPHA,
                                 filter=options.filter, speed_fraction=options.speed_fraction, offset=options.offset,
-                                model_terms=terms, states=differentiated(model))
+                                model_terms=terms, states=differentiated(model), decimation=options.decimation)
     except EstimatorInputError as exc:
         return AdequacyResult("not checked", None, ALPHA, str(exc))
     return replace(result, reason=f"{result.reason}; known {', '.join(ignored)} not used") if ignored else result

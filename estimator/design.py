@@ -28,7 +28,7 @@ it with a small campaign.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -228,7 +228,8 @@ def predicted_std(signals: Mapping[str, np.ndarray], h: float, noise: Mapping[st
     """
     model = options.model
     truth = model.nominal() | dict(params or {})
-    prep = prepare(motion_data(signals, h, model), options)
+    # on every sample: the noise's responses below are at the rate h (the decimated fit's spread is the same)
+    prep = prepare(motion_data(signals, h, model), replace(options, decimation=1))
     g_f, g_d = _pipeline_responses(h, options)
     rel_var: dict[str, float] = {}
     for reg in prep.regressions:

@@ -22,7 +22,14 @@ import numpy as np
 
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation, NumericalFailure
-from feeddrive.estimator.kernels import equation_parameters_of, erode, measured_signals, residual_symbols
+from feeddrive.estimator.filtering import decimation_factor
+from feeddrive.estimator.kernels import (
+    equation_parameters_of,
+    erode,
+    measured_signals,
+    parameter_defined_of,
+    residual_symbols,
+)
 from feeddrive.estimator.linear_fit import _column_reference, _Fit, _solve
 from feeddrive.estimator.model_terms import (
     constant_sensitivities,
@@ -48,7 +55,7 @@ from feeddrive.estimator.motion import (
 )
 from feeddrive.estimator.regression import derive_regression
 from feeddrive.estimator.simulation import MODEL, simulate
-from feeddrive.models.drives import differentiated, measured, parameter_defined
+from feeddrive.models.drives import differentiated, measured
 
 _signals_for = signals_for  # its former private name, still imported by partial and physical
 
@@ -76,7 +83,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     known_signals = measured_signals(model)
     unknown = sorted(set(raw) - set(FIELDS) - set(known_signals))
     # a torque signal: the normaliser times the output (DC: K i), or the model's own torque signal (PMSM)
-    defined = parameter_defined(model)
+    defined = parameter_defined_of(model)
     if unknown or (model is not MODEL and (("torque" in raw and "torque" not in defined)
                                            or set(raw) & {"u", "i"} - set(known_signals))):
         bad = (unknown or sorted({"torque", "u", "i"} & set(raw)))[0]
@@ -91,6 +98,13 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
             x = f[name]
             k = np.arange(x.size, dtype=float)
             f[name] = np.interp(k + delay / h, k, x)  # the filtered signal is smooth on the sample scale
+    # the filtered signals hold nothing near the Nyquist frequency: every D-th sample carries the model
+    # (filtering.decimation_factor); the derivatives, guards and blocks below are at the period h D
+    step = decimation_factor(options.filter.cutoff_hz, h, data.n, options.decimation)
+    if step > 1:
+        f = {k: np.ascontiguousarray(v[::step]) for k, v in f.items()}
+        h = h * step
+        edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
     from_position = "position" in f
     if from_position:
         w, valid = zero_forcing_derivative(f.pop("position"), h)
@@ -172,7 +186,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     constants = {v.name: float(options.known.get(v.name, v.nominal or 0.0)) for v in options.physical}
     partners = find_partners(model, regressions, free, options.known, sig, rows, overrides)
     return Prepared(h, sig, regressions, rows, overrides, dict(options.known), block, refused, notes, constants,
-                    tuple(v.name for v in options.physical), partners)
+                    tuple(v.name for v in options.physical), partners, step)
 
 
 def _combine(method: str, p: Prepared, fits: dict[str, _Fit], iterations: int = 1,
@@ -327,14 +341,20 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     instruments are uncorrelated with the equation error even for the derivative of the current,
     whose only noise-free information is in the (noisy) voltage; instruments simulated from the
     same samples would bias L (about +15 % at 30 dB SNR here). Noise correlated from one sample to
-    the next (not white) brings part of that bias back. The halves are sampled every 2 h, so the
-    filter cut-off must stay below 0.45 of their Nyquist frequency (0.1125 / h). The equations in
+    the next (not white) brings part of that bias back. The halves are sampled every 2 h (2 h D when
+    the record is decimated by D: ``EstimationOptions.decimation``), so the filter cut-off must stay below
+    0.45 of their Nyquist frequency (0.1125 / h before decimation). The equations in
     ``skip`` are not simulated (a derivative coefficient fixed at 0): their own state is its instrument.
     Raises NumericalFailure when the iterates have not settled (relative change below ``iv_tolerance``)
     after ``iv_iterations``: the callers fall back to LS with that reason.
     """
     odd, even = split_halves(data)
-    halves = (prepare(odd, options, strict=check), prepare(even, options, strict=check))
+    # the halves stepped over by the record's own factor (decimation_factor's rule is about the halves: every
+    # 2 h D), both alike so that sample k of either is at the same place of its half; the instruments are then
+    # read one record sample, 1 / (2 D) of theirs, off
+    every = decimation_factor(options.filter.cutoff_hz, data.h, data.n, options.decimation)
+    half_options = replace(options, decimation=every)
+    halves = (prepare(odd, half_options, strict=check), prepare(even, half_options, strict=check))
     if [r.equation for r in halves[0].regressions] != [r.equation for r in halves[1].regressions]:
         raise NotEnoughExcitation(sorted(set(halves[0].refused) | set(halves[1].refused)),
                                   "the odd and even samples do not allow the same equations")
@@ -351,8 +371,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
             half.constants.update({n: v for n, v in params.items() if n in half.constants})
             measured.update({(reg.equation, k): reg.evaluate(_signals_for(half, reg))
                              for reg in half.regressions if reg.constants})
-        z = (instruments(halves[1], params, options, +0.5, len(halves[0].signals["w"]), skip),
-             instruments(halves[0], params, options, -0.5, len(halves[1].signals["w"]), skip))
+        z = (instruments(halves[1], params, options, +0.5 / every, len(halves[0].signals["w"]), skip),
+             instruments(halves[0], params, options, -0.5 / every, len(halves[1].signals["w"]), skip))
         fits, parts = {}, {}
         for reg in halves[0].regressions:
             parts[reg.equation] = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
@@ -432,5 +452,6 @@ def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOpt
         from feeddrive.estimator.oe import output_error
 
         oe = output_error(p, iv, options)
-    out = MotionEstimate(options.method, float(data.t0), float(data.t0 + (data.n - 1) * data.h), ls, iv, oe)
+    out = MotionEstimate(options.method, float(data.t0), float(data.t0 + (data.n - 1) * data.h), ls, iv, oe,
+                         rate_hz=1.0 / p.h)
     return replace(out, derived=derived_estimates(out.result, options.model))

@@ -207,6 +207,15 @@ def measured_signals(model) -> tuple[str, ...]:  # noqa: ANN001 - models.Model
     return measured(model)
 
 
+@lru_cache(maxsize=32)
+def parameter_defined_of(model) -> tuple[str, ...]:  # noqa: ANN001 - models.Model
+    """``models.drives.parameter_defined(model)``, derived once per model object (CasADi's depends_on over every
+    residual: 2 ms, asked by every ``prepare`` of a motion, its halves and re-fits)."""
+    from feeddrive.models.drives import parameter_defined
+
+    return parameter_defined(model)
+
+
 @lru_cache(maxsize=64)
 def equation_parameters_of(model, equation: str) -> tuple[str, ...]:  # noqa: ANN001
     """``regression.equation_parameters(model, equation)``, derived once per (model, equation)."""

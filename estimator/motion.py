@@ -12,7 +12,7 @@ import numpy as np
 
 from feeddrive.estimator.distributions import t_ppf
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
-from feeddrive.estimator.filtering import FilterSpec
+from feeddrive.estimator.filtering import FilterSpec, check_decimation
 from feeddrive.estimator.regression import Regression
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.models import Model
@@ -159,6 +159,9 @@ class EstimationOptions:
         The drive's model, or a kind of ``models.drives.DRIVES`` (``"dc"``, ``"pmsm"``, ``"pmsm-spm"``);
         default the DC feed drive. Known design parameters in ``known`` (the PMSM's pole pairs ``p``)
         replace the model's nominal values (``models.drives.with_design``) and leave ``known``.
+    decimation : int or "auto"
+        Every how many filtered samples the regressions use: "auto" (default) the largest factor the
+        cut-off allows at the record's rate (``filtering.decimation_factor``), or a factor (1: every one).
     """
 
     method: str = "iv"
@@ -177,6 +180,7 @@ class EstimationOptions:
     block_seconds: float | None = None
     oe_rate_hz: float = 1000.0
     model: Model | str = MODEL
+    decimation: int | str = "auto"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -201,6 +205,7 @@ class EstimationOptions:
             raise EstimatorInputError(f"speed_threshold must be >= 0 {self.speed_unit}, got {self.speed_threshold}")
         if not 0 <= self.speed_fraction < 1:
             raise EstimatorInputError(f"speed_fraction must be in [0, 1), got {self.speed_fraction}")
+        check_decimation(self.decimation)
 
     @property
     def physical(self) -> list:
@@ -304,6 +309,8 @@ class MotionEstimate:
     #: the given parameters with their covariance before a refused one was fixed at its estimate (the
     #: intervals not conditional on it): what several motions or files are pooled and compared with
     joint: MethodResult | None = None
+    #: rate of the samples the regressions used [Hz] (the record's or, ``EstimationOptions.decimation``, less)
+    rate_hz: float | None = None
 
     @property
     def method_used(self) -> str:
@@ -335,7 +342,7 @@ class MotionEstimate:
         return self.result.fit_error
 
     def to_dict(self) -> dict:
-        """``{"start","end","method","parameters": {name: {"value","ci95"}},"condition_number","fit_error"}``."""
+        """``{"start","end","method","parameters": {name: {"value","ci95"}},"condition_number","fit_error","rate_hz"}``."""
         out = {
             "start": self.start, "end": self.end, "method": self.method_used,
             "parameters": {n: {"value": p.value, "ci95": list(p.ci95)} for n, p in self.parameters.items()},
@@ -354,6 +361,8 @@ class MotionEstimate:
             out["flags"] = dict(self.flags)
         if self.bounded:
             out["bounded"] = {n: {"value": float(v), "bounded": True} for n, v in self.bounded.items()}
+        if self.rate_hz is not None:
+            out["rate_hz"] = float(self.rate_hz)
         return out
 
 
@@ -386,6 +395,7 @@ class Prepared:
     #: equation -> the regression of an equation that estimates nothing of its own (the PMSM's d axis: R, L_d, L_q
     #: are the q axis's), fitted jointly with it as a second sample set of the same parameters
     partners: dict[str, Regression] = field(default_factory=dict)
+    decimation: int = 1  # every how many filtered samples ``signals`` keeps (``h``: the record's period times it)
 
 
 def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags: int) -> np.ndarray:

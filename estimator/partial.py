@@ -241,7 +241,7 @@ def _fit_ls(data: MotionData, options: EstimationOptions):
                        f"{reg.equation} equation; its {len(reg.names)} parameters need at least {len(reg.names)}")
                 refused.update({n: why for n in reg.names})
                 continue
-            if _tau_rule(fit, reg, p.h, fixed, refused, opts.model):
+            if _tau_rule(fit, reg, data.h, fixed, refused, opts.model):  # the record's period, decimated or not
                 again = True
                 continue
             _lag_rule(p, reg, y, Phi, fit, refused, lumped, opts.model)
@@ -399,7 +399,7 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
                           flags=flags, bounded=bounded, fixed={n: v for n, v in fixed.items() if n in refused},
                           lumped={n: float(final.values[final.names.index(n)]) for n in lumped if n in final.names},
                           joint=_subset(unconditional, list(shown.names)),
-                          derived=derived_estimates(shown, options.model))
+                          derived=derived_estimates(shown, options.model), rate_hz=1.0 / p.h)
 
 
 def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float],

@@ -39,7 +39,8 @@ def test_json_holds_every_parameter_within_half_a_percent(recording, capsys):
     code, out, _ = run(capsys, recording, *MAP, "--json")
     assert code == 0
     (seg,) = json.loads(out)["segments"]
-    assert set(seg) == {"start", "end", "method", "parameters", "condition_number", "fit_error", "model_check"}
+    assert set(seg) == {"start", "end", "method", "parameters", "condition_number", "fit_error", "model_check",
+                        "rate_hz"}
     assert seg["method"] == "iv" and seg["condition_number"] < 100
     assert seg["model_check"]["verdict"] == "adequate"  # the residue check (estimator/adequacy.py)
     for name, p in seg["parameters"].items():

@@ -72,6 +72,8 @@ def test_healthy_then_sensor_offset(tmp_path):
     assert mm["passed"] is True and mm["p_value"] >= mm["alpha"] == 0.01 and "Bonferroni" in mm["rule"]
     assert first["gain_ratio"] == pytest.approx(1.0, abs=2e-3)
     assert first["processing_s"] > 0 and first["diagnosis"] == []
+    # estimated on every 3rd filtered sample: 2 pi 100 Hz (2 h D) <= 0.5 rad at 10 kHz (the decimation's rule)
+    assert H == 1e-4 and first["estimation_rate_hz"] == pytest.approx(1e4 / 3)
     # motion 2: Im1 offset isolated against the model with motion 1's validated R, L, K; Im2 trusted
     assert second["reference"] == "last validated" and second["validated"]
     (fault,) = second["sensor_faults"]
@@ -165,6 +167,8 @@ def test_config_errors_name_the_key():
         Monitor("monitor", {"filter_cutof_hz": 50})
     with pytest.raises(ScenarioError, match=r"^monitor.alpha: .*less than 0.5 \(got 0.9\)"):
         Monitor("monitor", {"alpha": 0.9})
+    with pytest.raises(ScenarioError, match=r"^monitor.decimation: expected 'auto' or an integer >= 1 .*got 0"):
+        Monitor("monitor", {"decimation": 0})
 
 
 def test_unusable_motion_is_recorded_not_fatal():

@@ -114,7 +114,9 @@ def test_oe_without_voltage_falls_back_to_iv_with_the_reason(plant):
 
 def test_to_dict_has_the_documented_shape(plant):
     d = estimate_motion(motion(plant, t0=2.0), EstimationOptions(method="ls")).to_dict()
-    assert set(d) == {"start", "end", "method", "parameters", "condition_number", "fit_error"}
+    assert set(d) == {"start", "end", "method", "parameters", "condition_number", "fit_error", "rate_hz"}
+    # the rate the regressions used: 10 kHz decimated by the largest D with 2 pi 50 Hz (2 h D) <= 0.5 rad (D = 7)
+    assert d["rate_hz"] == pytest.approx(1 / (7 * H))
     assert d["start"] == 2.0 and d["end"] == pytest.approx(2.0 + (len(plant["u"]) - 1) * H)
     assert set(d["parameters"]) == set(SIX)
     lo, hi = d["parameters"]["R"]["ci95"]
