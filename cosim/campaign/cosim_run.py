@@ -170,13 +170,26 @@ def _prepare() -> None:
     a 1.4 s run) were paid again by every run of a spawned pool worker or Dask worker, which made 2 workers
     slower than 1 (issue 26). ``execute`` also resolves each run's scenario in the worker
     (``run_cosim.validate``, which imports the report page when the run keeps its files).
+
+    The modules a run imports lazily are imported here too (``RUN_IMPORTS``): statsmodels' GLSAR, which the
+    monitor loads when it starts (pandas, pyarrow, formulaic: 537 modules), was imported again by every
+    run's child, 0.85 s of its 1.35 s CPU (``PYTHONDONTWRITEBYTECODE`` also recompiles the feeddrive modules
+    each time); with them here a run's child takes 0.5 s (issue 26; bench_campaign checks that a run
+    imports nothing more).
     """
-    import feeddrive.cosim.monitor
-    import feeddrive.cosim.run
-    import feeddrive.estimator.estimate  # noqa: F401
+    import importlib
+
     from feeddrive.cosim.unit_map import _registry
 
+    for name in RUN_IMPORTS:
+        importlib.import_module(name)
     _registry()
 
+
+#: modules every co-simulation run with a monitor imports (some lazily, in the run): imported by ``prepare``
+RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.estimator.estimate",
+               "statsmodels.regression.linear_model", "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
+               "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
+               "multiprocessing.synchronize")
 
 run_cosim.prepare = _prepare
