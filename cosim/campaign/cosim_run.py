@@ -1,10 +1,12 @@
 """The campaign's default run function: one co-simulation, its monitor and its estimates per motion."""
 from __future__ import annotations
 
+import copy
 import json
 import math
 import tempfile
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -71,13 +73,57 @@ def _estimates(signals: Mapping[str, np.ndarray], rows: slice, h: float, faulty:
 
 
 def _scenario(spec: RunSpec) -> Any:
+    """The run's resolved scenario: a copy of the one ``validate`` resolved in this process (or in the process
+    it was forked from) when its FMU files are unchanged, else resolved now (see ``_RESOLVED``)."""
+    key = _key(spec)
+    hit = _RESOLVED.get(key)
+    if hit is not None and _fmu_stats(hit[0]) == hit[1]:
+        return copy.deepcopy(hit[0])  # ~1 ms; the run may change its scenario, never the cached one
+    return copy.deepcopy(_resolve(spec, key))
+
+
+def _resolve(spec: RunSpec, key: str) -> Any:
     from feeddrive.cosim.errors import ScenarioError
     from feeddrive.cosim.scenario import scenario_from_dict
 
     try:
-        return scenario_from_dict(spec.scenario, source="scenario", base_dir=spec.base_dir)
+        scenario = scenario_from_dict(spec.scenario, source="scenario", base_dir=spec.base_dir)
     except ScenarioError as exc:
         raise ScenarioError(f"campaign run {spec.id} {json.dumps(spec.overrides)}: {exc}") from None
+    _RESOLVED.pop(key, None)
+    _RESOLVED[key] = (scenario, _fmu_stats(scenario))
+    while len(_RESOLVED) > RESOLVED_MAX:  # the oldest first (dicts keep their insertion order)
+        _RESOLVED.pop(next(iter(_RESOLVED)))
+    return scenario
+
+
+#: scenarios resolved in this process, by ``_key``: (scenario, ``_fmu_stats``). A run's scenario was resolved
+#: three times (``run_campaign``'s check of every run, ``execute``'s in the worker, the run's own in its forked
+#: child), reading and hashing its FMU each time (~20 ms each, most of it the model description): now once by
+#: ``run_campaign``, whose pool workers are forked after it, and once per Dask worker (issue 26)
+_RESOLVED: dict[str, tuple[Any, tuple]] = {}
+#: at most this many kept (a resolved scenario is ~5 kB)
+RESOLVED_MAX = 4096
+
+
+def _key(spec: RunSpec) -> str:
+    return json.dumps([spec.scenario, spec.base_dir], sort_keys=True, default=str)
+
+
+def _fmu_stats(scenario: Any) -> tuple:
+    """(path, size, mtime) of the scenario's FMU files: a file rebuilt since the resolution is resolved again
+    (a long-lived Dask worker keeps its cache from one campaign to the next)."""
+    base = Path(getattr(scenario, "base_dir", None) or ".")
+    paths = [scenario.plant.fmu] + [c.fmu for c in scenario.components if getattr(c, "fmu", None)]
+    stats = []
+    for path in paths:
+        try:
+            st = (base / Path(path).expanduser()).stat()
+        except (OSError, TypeError):
+            stats.append((str(path), None))
+        else:
+            stats.append((str(path), st.st_size, st.st_mtime_ns))
+    return tuple(stats)
 
 
 def run_cosim(spec: RunSpec) -> dict[str, Any]:
@@ -154,7 +200,10 @@ def _methods(spec: RunSpec) -> list[str]:
 
 def _validate(spec: RunSpec) -> None:
     _methods(spec)
-    _scenario(spec)
+    key = _key(spec)
+    hit = _RESOLVED.get(key)
+    if hit is None or _fmu_stats(hit[0]) != hit[1]:  # checked already here or in the process this one forked from
+        _resolve(spec, key)
     if spec.out_dir is not None:  # its report.html: matplotlib and jinja2 imported once per worker
         import feeddrive.cosim.report.page  # noqa: F401
 
