@@ -294,3 +294,21 @@ def test_resolved_scenario_is_reused_as_a_copy_until_its_fmu_changes(tmp_path, f
         z.writestr("documentation/note.txt", "rebuilt")
     again = cosim_run._scenario(spec)
     assert again.plant.sha256 == hashlib.sha256(fmu.read_bytes()).hexdigest() != first.plant.sha256
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("FEEDDRIVE_DASK_PROCESSES"), reason="spawns a Dask worker process (~5 s); "
+                    "FEEDDRIVE_DASK_PROCESSES=1 runs it")
+def test_preloaded_spawned_worker_has_the_runs_imports_before_its_first_task():
+    """``--preload feeddrive.cosim.campaign.preload``: a spawned worker has every module of ``RUN_IMPORTS``
+    before it runs anything (without the preload, statsmodels and the run's modules come with the first run)."""
+    import sys
+
+    from distributed import Client, LocalCluster
+
+    from feeddrive.cosim.campaign.cosim_run import RUN_IMPORTS
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                      preload=["feeddrive.cosim.campaign.preload"]) as cluster, Client(cluster) as client:
+        (missing,) = client.run(lambda: [m for m in RUN_IMPORTS if m not in sys.modules]).values()
+    assert missing == []
