@@ -49,6 +49,24 @@ def _cpu() -> tuple[float, float]:
     return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
 
 
+def _late_imports(run, spec) -> list[str]:
+    """The top-level names of the modules a run imports in a forked child after ``prepare``, as a campaign's runs."""
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: one run, then the modules it had to import
+        os.close(read)
+        before = set(sys.modules)
+        run(spec)
+        os.write(write, "\n".join(sorted({m.split(".")[0] if not m.startswith("feeddrive") else m
+                                          for m in set(sys.modules) - before})).encode())
+        os._exit(0)
+    os.close(write)
+    with os.fdopen(read) as f:
+        text = f.read()
+    os.waitpid(pid, 0)
+    return text.split()
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=8, help="runs in the campaign")
@@ -70,7 +88,11 @@ def main() -> int:
                         sweep={"plant.parameters.Cd": [1.3]}, run_options={"methods": ["ls", "iv"]})
     # the first resolution's one-time costs (~0.13 s) outside the timings too, on another campaign's run: the
     # serial run, measured first, would otherwise pay them for every mode and flatter the speed-ups
-    run_cosim.validate(expand(campaign.model_copy(update={"seed": 2}))[0])
+    warm = expand(campaign.model_copy(update={"seed": 2}))[0]
+    run_cosim.validate(warm)
+    late = _late_imports(run_cosim, warm)
+    if late:  # a run's child would import them again every run (cosim_run.RUN_IMPORTS)
+        print(f"a run imports {len(late)} modules that run_cosim.prepare does not: {', '.join(late[:8])}", file=sys.stderr)
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
     times, aggregates, cpu, start = {}, {}, {}, {}

@@ -223,8 +223,8 @@ def _prepare() -> None:
     The modules a run imports lazily are imported here too (``RUN_IMPORTS``): statsmodels' GLSAR, which the
     monitor loads when it starts (pandas, pyarrow, formulaic: 537 modules), was imported again by every
     run's child, 0.85 s of its 1.35 s CPU (``PYTHONDONTWRITEBYTECODE`` also recompiles the feeddrive modules
-    each time); with them here a run's child takes 0.5 s (issue 26; bench_campaign checks that a run
-    imports nothing more).
+    each time); with them here a run's child takes 0.5 s (issue 26). bench_campaign warns when a run
+    imports a module that is not here.
     """
     import importlib
 
