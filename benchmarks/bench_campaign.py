@@ -31,7 +31,7 @@ import time
 import warnings
 from pathlib import Path
 
-from feeddrive.cosim.campaign import Campaign, run_campaign
+from feeddrive.cosim.campaign import Campaign, expand, run_campaign
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = {"name": "bench", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "builtin"},
@@ -41,12 +41,35 @@ BASE = {"name": "bench", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "built
 
 
 MODES = ("serial", "pool", "dask", "dask spawned", "dask warm")
+#: wait before reading the CPU times [s]: a run's child is reaped in the background once its result is read
+#: (cosim/supervise.py), and the last one's CPU was not counted yet (the serial campaign's CPU came out one
+#: run short). The children a pool worker had not reaped when it exited are never counted (the pool's CPU
+#: may come out a little short)
+SETTLE_S = 0.5
 
 
 def _cpu() -> tuple[float, float]:
     """CPU seconds (user + system) of this process, and of the child processes it has waited for."""
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
+
+
+def _late_imports(run, spec) -> list[str]:
+    """The top-level names of the modules a run imports in a forked child after ``prepare``, as a campaign's runs."""
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: one run, then the modules it had to import
+        os.close(read)
+        before = set(sys.modules)
+        run(spec)
+        os.write(write, "\n".join(sorted({m.split(".")[0] if not m.startswith("feeddrive") else m
+                                          for m in set(sys.modules) - before})).encode())
+        os._exit(0)
+    os.close(write)
+    with os.fdopen(read) as f:
+        text = f.read()
+    os.waitpid(pid, 0)
+    return text.split()
 
 
 def main() -> int:
@@ -62,12 +85,19 @@ def main() -> int:
     from feeddrive.fmu_build import builtin_fmu
 
     builtin_fmu()  # build outside the timings
-    from feeddrive.cosim.campaign import local_cluster
+    from feeddrive.cosim.campaign import cosim_run, local_cluster
     from feeddrive.cosim.campaign.cosim_run import run_cosim
 
     run_cosim.prepare()  # this process's imports too: every mode starts from a process that has them
     campaign = Campaign(name="bench", base=BASE, seed=1, repetitions=args.runs,
                         sweep={"plant.parameters.Cd": [1.3]}, run_options={"methods": ["ls", "iv"]})
+    # the first resolution's one-time costs (~0.13 s) outside the timings too, on another campaign's run: the
+    # serial run, measured first, would otherwise pay them for every mode and flatter the speed-ups
+    warm = expand(campaign.model_copy(update={"seed": 2}))[0]
+    run_cosim.validate(warm)
+    late = _late_imports(run_cosim, warm)
+    if late:  # a run's child would import them again every run (cosim_run.RUN_IMPORTS)
+        print(f"a run imports {len(late)} modules that run_cosim.prepare does not: {', '.join(late[:8])}", file=sys.stderr)
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
     times, aggregates, cpu, start = {}, {}, {}, {}
@@ -75,6 +105,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for mode in modes:
             out = Path(tmp, mode.replace(" ", "-"))
+            # every mode resolves its runs' scenarios itself: none inherits those an earlier mode resolved here
+            cosim_run._RESOLVED.clear()
             own, children = _cpu()
             if mode.startswith("dask"):
                 t = time.perf_counter()
@@ -82,18 +114,21 @@ def main() -> int:
                     n_workers=args.workers, threads_per_worker=1, dashboard_address=None)
                 start[mode] = time.perf_counter() - t
                 with cluster, Client(cluster) as client:
-                    if mode == "dask warm":  # a long-lived cluster: its workers ran a campaign before
-                        run_campaign(campaign, Path(tmp, "warm-up"), scheduler=cluster.scheduler_address, plots=False)
+                    if mode == "dask warm":  # a long-lived cluster: its workers ran a campaign before (another one)
+                        run_campaign(campaign.model_copy(update={"seed": 2}), Path(tmp, "warm-up"),
+                                     scheduler=cluster.scheduler_address, plots=False)
                     # the cluster's start-up is not the campaign's; the workers' CPU is read in the workers
                     own, workers = _cpu()[0], sum(map(sum, client.run(_cpu).values()))
                     t = time.perf_counter()
                     res = run_campaign(campaign, out, scheduler=cluster.scheduler_address, plots=False)
                     times[mode] = time.perf_counter() - t
+                    time.sleep(SETTLE_S)
                     own, children = _cpu()[0] - own, sum(map(sum, client.run(_cpu).values())) - workers
             else:
                 t = time.perf_counter()
                 res = run_campaign(campaign, out, workers=1 if mode == "serial" else args.workers, plots=False)
                 times[mode] = time.perf_counter() - t
+                time.sleep(SETTLE_S)
                 own, children = (a - b for a, b in zip(_cpu(), (own, children)))
             cpu[mode] = (own, children)
             aggregates[mode] = res.aggregates

@@ -60,4 +60,28 @@ def local_cluster(workers: int, run: str | Callable | None = None, **options: An
     method = "fork" if "fork" in get_all_start_methods() else "spawn"
     with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
         return LocalCluster(**({"n_workers": workers, "threads_per_worker": 1, "processes": True,
-                                "dashboard_address": None} | options))
+                                "dashboard_address": None, "worker_class": _nanny(method)} | options))
+
+
+_NANNIES: dict[str, type] = {}
+
+
+def _nanny(method: str) -> type:
+    """A ``distributed.Nanny`` that starts its worker process with ``method`` every time.
+
+    The nanny reads ``distributed.worker.multiprocessing-method`` when it starts a worker, and again when it
+    restarts one that died (a run killed it, or the OOM killer): by then the setting in force was the
+    default, so the new worker was spawned and imported the whole stack (~15 s under load) before its
+    first run.
+    """
+    if method not in _NANNIES:
+        import dask
+        from distributed import Nanny
+
+        class CampaignNanny(Nanny):
+            async def instantiate(self) -> Any:
+                with dask.config.set({"distributed.worker.multiprocessing-method": method}):
+                    return await super().instantiate()
+
+        _NANNIES[method] = CampaignNanny
+    return _NANNIES[method]

@@ -1,10 +1,12 @@
 """The campaign's default run function: one co-simulation, its monitor and its estimates per motion."""
 from __future__ import annotations
 
+import copy
 import json
 import math
 import tempfile
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -71,13 +73,57 @@ def _estimates(signals: Mapping[str, np.ndarray], rows: slice, h: float, faulty:
 
 
 def _scenario(spec: RunSpec) -> Any:
+    """The run's resolved scenario: a copy of the one ``validate`` resolved in this process (or in the process
+    it was forked from) when its FMU files are unchanged, else resolved now (see ``_RESOLVED``)."""
+    key = _key(spec)
+    hit = _RESOLVED.get(key)
+    if hit is not None and _fmu_stats(hit[0]) == hit[1]:
+        return copy.deepcopy(hit[0])  # ~1 ms; the run may change its scenario, never the cached one
+    return copy.deepcopy(_resolve(spec, key))
+
+
+def _resolve(spec: RunSpec, key: str) -> Any:
     from feeddrive.cosim.errors import ScenarioError
     from feeddrive.cosim.scenario import scenario_from_dict
 
     try:
-        return scenario_from_dict(spec.scenario, source="scenario", base_dir=spec.base_dir)
+        scenario = scenario_from_dict(spec.scenario, source="scenario", base_dir=spec.base_dir)
     except ScenarioError as exc:
         raise ScenarioError(f"campaign run {spec.id} {json.dumps(spec.overrides)}: {exc}") from None
+    _RESOLVED.pop(key, None)
+    _RESOLVED[key] = (scenario, _fmu_stats(scenario))
+    while len(_RESOLVED) > RESOLVED_MAX:  # the oldest first (dicts keep their insertion order)
+        _RESOLVED.pop(next(iter(_RESOLVED)))
+    return scenario
+
+
+#: scenarios resolved in this process, by ``_key``: (scenario, ``_fmu_stats``). A run's scenario was resolved
+#: three times (``run_campaign``'s check of every run, ``execute``'s in the worker, the run's own in its forked
+#: child), reading and hashing its FMU each time (~20 ms each, most of it the model description): now once by
+#: ``run_campaign``, whose pool workers are forked after it, and once per Dask worker (issue 26)
+_RESOLVED: dict[str, tuple[Any, tuple]] = {}
+#: at most this many kept (a resolved scenario is ~5 kB)
+RESOLVED_MAX = 4096
+
+
+def _key(spec: RunSpec) -> str:
+    return json.dumps([spec.scenario, spec.base_dir], sort_keys=True, default=str)
+
+
+def _fmu_stats(scenario: Any) -> tuple:
+    """(path, size, mtime) of the scenario's FMU files: a file rebuilt since the resolution is resolved again
+    (a long-lived Dask worker keeps its cache from one campaign to the next)."""
+    base = Path(getattr(scenario, "base_dir", None) or ".")
+    paths = [scenario.plant.fmu] + [c.fmu for c in scenario.components if getattr(c, "fmu", None)]
+    stats = []
+    for path in paths:
+        try:
+            st = (base / Path(path).expanduser()).stat()
+        except (OSError, TypeError):
+            stats.append((str(path), None))
+        else:
+            stats.append((str(path), st.st_size, st.st_mtime_ns))
+    return tuple(stats)
 
 
 def run_cosim(spec: RunSpec) -> dict[str, Any]:
@@ -154,7 +200,10 @@ def _methods(spec: RunSpec) -> list[str]:
 
 def _validate(spec: RunSpec) -> None:
     _methods(spec)
-    _scenario(spec)
+    key = _key(spec)
+    hit = _RESOLVED.get(key)
+    if hit is None or _fmu_stats(hit[0]) != hit[1]:  # checked already here or in the process this one forked from
+        _resolve(spec, key)
     if spec.out_dir is not None:  # its report.html: matplotlib and jinja2 imported once per worker
         import feeddrive.cosim.report.page  # noqa: F401
 
@@ -170,13 +219,26 @@ def _prepare() -> None:
     a 1.4 s run) were paid again by every run of a spawned pool worker or Dask worker, which made 2 workers
     slower than 1 (issue 26). ``execute`` also resolves each run's scenario in the worker
     (``run_cosim.validate``, which imports the report page when the run keeps its files).
+
+    The modules a run imports lazily are imported here too (``RUN_IMPORTS``): statsmodels' GLSAR, which the
+    monitor loads when it starts (pandas, pyarrow, formulaic: 537 modules), was imported again by every
+    run's child, 0.85 s of its 1.35 s CPU (``PYTHONDONTWRITEBYTECODE`` also recompiles the feeddrive modules
+    each time); with them here a run's child takes 0.5 s (issue 26). bench_campaign warns when a run
+    imports a module that is not here.
     """
-    import feeddrive.cosim.monitor
-    import feeddrive.cosim.run
-    import feeddrive.estimator.estimate  # noqa: F401
+    import importlib
+
     from feeddrive.cosim.unit_map import _registry
 
+    for name in RUN_IMPORTS:
+        importlib.import_module(name)
     _registry()
 
+
+#: modules every co-simulation run with a monitor imports (some lazily, in the run): imported by ``prepare``
+RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.estimator.estimate",
+               "statsmodels.regression.linear_model", "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
+               "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
+               "multiprocessing.synchronize")
 
 run_cosim.prepare = _prepare

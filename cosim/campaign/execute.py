@@ -206,21 +206,46 @@ def _prepare_worker(run: str | Callable) -> None:
 
 
 def _dask(run, specs, client, on_done, timeout=None) -> None:
+    """Run ``specs`` on the cluster of ``client``, at most one per worker thread at a time.
+
+    The next run is submitted when one ends, not all at once: with them all submitted, the scheduler gave each
+    worker a second run behind the one it ran (``worker-saturation``), so at the campaign's end one worker
+    could still have two runs while the other idled (no work stealing: cluster.QUIET), and a run that killed
+    its worker took the run queued behind it down too (the scheduler blames every task on a dead worker).
+    """
     from distributed import as_completed as dask_completed
     from distributed.scheduler import KilledWorker
 
-    futures = []
+    queue, by_key, running = list(reversed(specs)), {}, set()
+
+    def submit() -> Any:
+        spec = queue.pop()
+        future = client.submit(execute, run, spec, timeout, key=f"campaign-{spec.id}", pure=False)
+        by_key[future.key] = spec
+        running.add(future)
+        return future
+
     try:
-        futures = [client.submit(execute, run, spec, timeout, key=f"campaign-{spec.id}", pure=False)
-                   for spec in specs]
-        by_key = {f.key: spec for f, spec in zip(futures, specs)}
-        for future in dask_completed(futures):
+        pending = dask_completed([submit() for _ in range(min(len(queue), _threads(client)))])
+        for future in pending:
+            running.discard(future)
             try:
                 on_done(future.result())
             except KilledWorker as exc:  # the scheduler gave up after its allowed-failures: no endless retry
                 on_done(_lost(by_key[future.key], f"crashed: Dask workers died running it ({exc})"))
+            free = _threads(client) - len(running) if queue else 0  # workers may have come or gone
+            for _ in range(min(len(queue), max(free, 0 if running else 1))):
+                pending.add(submit())
     finally:
-        client.cancel(futures)
+        client.cancel(list(running))
+
+
+def _threads(client: Any) -> int:
+    """The cluster's worker threads now (at least 1: runs wait for a worker to come)."""
+    try:
+        return max(1, sum(client.nthreads().values()))
+    except Exception:  # noqa: BLE001 - the scheduler briefly unreachable: one run at a time meanwhile
+        return 1
 
 
 @dataclass

@@ -268,3 +268,47 @@ def test_detection_curves_do_not_pool_the_other_swept_fault(tmp_path):
             sweep_unit("plant.parameters.backlash"), sweep_unit("sensors.voltage.noise")) == ("A", "1", "rad", "V")
     (png,) = [p for p in plot_campaign(records, aggregate(records), tmp_path / "plots") if p.name == "detection_rate.png"]
     assert png.stat().st_size > 0
+
+
+def test_resolved_scenario_is_reused_as_a_copy_until_its_fmu_changes(tmp_path, feeddrive_fmu):
+    """``run_cosim``'s check resolves a run's scenario once per process; the run gets a copy of it (changing the
+    copy leaves the next run's alone), and an FMU file rewritten since is resolved again (its new sha256)."""
+    import hashlib
+    import shutil
+    import zipfile
+
+    from feeddrive.cosim.campaign import cosim_run
+    from feeddrive.cosim.scenario_plant import BUILTIN_MAP
+
+    fmu = tmp_path / "plant.fmu"
+    shutil.copy(feeddrive_fmu, fmu)
+    base = {"name": "s", "step": 1e-3, "stop_time": 0.5, "nc": {"program": [{"dwell": {"time": 0.1}}]},
+            "plant": {"fmu": "plant.fmu", "map": {r: {"var": v} for r, v in BUILTIN_MAP.items()}}}
+    (spec,) = expand(Campaign(name="c", base=base, root=str(tmp_path), sweep={"plant.parameters.Cd": [1.5]}))
+    cosim_run.run_cosim.validate(spec)
+    first = cosim_run._scenario(spec)
+    assert first.plant.sha256 == hashlib.sha256(fmu.read_bytes()).hexdigest() and first.plant.parameters["Cd"] == 1.5
+    first.plant.parameters["Cd"] = 9.0
+    assert cosim_run._scenario(spec).plant.parameters["Cd"] == 1.5
+    with zipfile.ZipFile(fmu, "a") as z:  # still the same model, another archive
+        z.writestr("documentation/note.txt", "rebuilt")
+    again = cosim_run._scenario(spec)
+    assert again.plant.sha256 == hashlib.sha256(fmu.read_bytes()).hexdigest() != first.plant.sha256
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("FEEDDRIVE_DASK_PROCESSES"), reason="spawns a Dask worker process (~5 s); "
+                    "FEEDDRIVE_DASK_PROCESSES=1 runs it")
+def test_preloaded_spawned_worker_has_the_runs_imports_before_its_first_task():
+    """``--preload feeddrive.cosim.campaign.preload``: a spawned worker has every module of ``RUN_IMPORTS``
+    before it runs anything (without the preload, statsmodels and the run's modules come with the first run)."""
+    import sys
+
+    from distributed import Client, LocalCluster
+
+    from feeddrive.cosim.campaign.cosim_run import RUN_IMPORTS
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                      preload=["feeddrive.cosim.campaign.preload"]) as cluster, Client(cluster) as client:
+        (missing,) = client.run(lambda: [m for m in RUN_IMPORTS if m not in sys.modules]).values()
+    assert missing == []
