@@ -77,7 +77,7 @@ class RunResult:
 
 def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: bool = False,
                  overwrite: bool = False, plots: bool = True, default_history: str | Path | None = None,
-                 page: bool = True) -> RunResult:
+                 page: bool = True, signals: bool = True) -> RunResult:
     """Run a scenario and write its output directory.
 
     Parameters
@@ -97,6 +97,9 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         history in memory (nothing persists). ``cosim run`` passes ``runs/history.sqlite``.
     page : bool
         Write report.html (False: a campaign run whose files are discarded; the page took a third of it).
+    signals : bool
+        Write signals.csv and signals.meta.json (False: a campaign run whose files are discarded; formatting
+        the rows was a third of such a run). The signals are in the result either way.
 
     Returns
     -------
@@ -117,6 +120,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         old.unlink(missing_ok=True)
     paths: dict[str, Any] = {"signals": out_dir / "signals.csv", "resolved": out_dir / "scenario.resolved.yaml",
                              "report": out_dir / "report.json", "page": out_dir / "report.html", "plots": []}
+    if not signals:
+        del paths["signals"]
     report = report_header(scenario) | {
         "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "status": "running", "versions": _versions()}
@@ -136,9 +141,10 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
                                          "connections": master.connections}
         paths["resolved"].write_text(yaml.safe_dump(resolved, sort_keys=False), encoding="utf-8")
         report |= {"step_s": master.h, "stop_time_s": master.stop_time, "steps": master.n_steps}
-        master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
-        write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names))
-        recorder = master.run(progress=progress, signals_path=paths["signals"])
+        if signals:
+            master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
+            write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names))
+        recorder = master.run(progress=progress, signals_path=paths["signals"] if signals else None)
         report["loop"] = master.loop  # compiled fine loop or Python loop, and why (cosim/fastloop)
         report["components"] = master.reports()
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)

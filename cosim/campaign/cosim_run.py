@@ -148,7 +148,7 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
     scenario = _scenario(spec)
     with tempfile.TemporaryDirectory(prefix="campaign-run-") as tmp:
         keep = spec.out_dir is not None  # else the files go with the temporary directory: no figures, no page
-        res = run_scenario(scenario, spec.out_dir or tmp, overwrite=True, plots=keep, page=keep)
+        res = run_scenario(scenario, spec.out_dir or tmp, overwrite=True, plots=keep, page=keep, signals=keep)
     config = scenario.monitor.config if isinstance(getattr(scenario.monitor, "config", None), MonitorConfig) \
         else MonitorConfig()
     if config.drive == "dc":

@@ -312,3 +312,21 @@ def test_preloaded_spawned_worker_has_the_runs_imports_before_its_first_task():
                       preload=["feeddrive.cosim.campaign.preload"]) as cluster, Client(cluster) as client:
         (missing,) = client.run(lambda: [m for m in RUN_IMPORTS if m not in sys.modules]).values()
     assert missing == []
+
+
+def test_a_discarded_campaign_run_writes_no_signals_and_gives_the_same_results(tmp_path, feeddrive_fmu):
+    """run_scenario(signals=False), as a campaign run whose files are discarded: no signals.csv nor its sidecar
+    (formatting them was a third of such a run), the same signals in memory and the same motions."""
+    from feeddrive.cosim.run import run_scenario
+
+    short = Path(__file__).parents[1] / "export" / "sensor_fault_short.yaml"
+    full = run_scenario(short, tmp_path / "full", plots=False, page=False)
+    lean = run_scenario(short, tmp_path / "lean", plots=False, page=False, signals=False)
+    assert (tmp_path / "full" / "signals.csv").is_file()
+    assert sorted(p.name for p in (tmp_path / "lean").iterdir()) == ["report.json", "scenario.resolved.yaml"]
+    assert "signals" not in lean.report["files"] and lean.signals.keys() == full.signals.keys()
+    for name, values in full.signals.items():
+        assert np.array_equal(lean.signals[name], values, equal_nan=True), name
+    strip = ("processing_s", "processing_cpu_s", "time", "wall_time_s")
+    assert [{k: v for k, v in m.items() if k not in strip} for m in lean.report["motions"]] == \
+           [{k: v for k, v in m.items() if k not in strip} for m in full.report["motions"]]
