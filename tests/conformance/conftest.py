@@ -1,6 +1,8 @@
 """The Modelica Reference-FMUs, built once per session from ../shared/third_party/Reference-FMUs with cmake."""
 from __future__ import annotations
 
+import fcntl
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -17,7 +19,22 @@ def reference_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]:
     cmake = shutil.which("cmake")
     if cmake is None:
         pytest.skip("cmake not found on PATH (needed to build the Reference-FMUs)")
-    root = tmp_path_factory.mktemp("reference_fmus")
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return _build(cmake, tmp_path_factory.mktemp("reference_fmus"))
+    # pytest-xdist: the first worker to get here builds into the run's common temporary root, the other waits
+    # for it (a lock file) and uses the same FMUs instead of building them a second time
+    root = tmp_path_factory.getbasetemp().parent / "reference_fmus"
+    root.mkdir(exist_ok=True)
+    with open(root / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if (root / ".built").is_file():
+            return {version: root / f"fmi{version}" / "fmus" for version in MODELS}
+        out = _build(cmake, root)
+        (root / ".built").touch()
+        return out
+
+
+def _build(cmake: str, root: Path) -> dict[int, Path]:
     out = {}
     for version, models in MODELS.items():
         build = root / f"fmi{version}"
