@@ -184,7 +184,7 @@ def test_known_nominal_and_bounds_take_the_drive_models_names(tmp_path):
 def test_the_papers_output_error_check_is_reported_advisory_and_the_residue_check_flags_a_load_torque_step(tmp_path):
     """The paper's model check (issue 25 item 4) on the PMSM, from the model's equations (estimator/model_check.py),
     is computed with the q, d and mechanical equations tested on their second sensors, and reported as advisory
-    (it over-rejects healthy PMSM motions: 10 of 300 at 1 % in the healthy campaign); the residue check decides.
+    (its speed test over-rejects healthy PMSM motions: the check 6 % of 200 at 1 %); the residue check decides.
     The healthy motion passes both; a 0.5 N.m load torque stepping in at 0.8 s, inside the first tool change, is a
     model mismatch by the residue check, and the output-error check rejects it too."""
     healthy = _run(tmp_path, copy.deepcopy(AXIS), "healthy").report["motions"][0]
