@@ -11,7 +11,7 @@ in kg, ft in N.s/m, Cd in N); ``--pitch``/``--ratio`` convert table-side data to
 The recording is cut into high-speed motions (``--segment``), each estimated on its own; the output is
 a table per motion with 95 % confidence intervals, or with ``--json``::
 
-    {"side": "motor"|"table", "segments": [{"start": s, "end": s, "method": m,
+    {"side": "motor"|"table", "segments": [{"start": s, "end": s, "method": m, "rate_hz": r,
       "parameters": {"R": {"value": v, "ci95": [lo, hi], "unit": u}, ...}, "condition_number": c, "fit_error": e}]}
 
 holding only the parameters the data determine; the others are listed in ``"refused"`` with the rule
@@ -19,7 +19,8 @@ that refuses them and its numbers (``estimator.partial``), and ``"fixed"`` says 
 re-fit of the others (L = 0: the quasi-static electrical equation). A given parameter outside its physical
 range or the ``--bounds`` is listed in ``"flags"`` (never to be validated), with the bounded estimate
 (``"bounded"``). ``"method"`` is the method that ran; ``"method_requested"`` and ``"fallback"`` appear when
-it is not the one asked for. When there are several motions, one of which nothing can be estimated is
+it is not the one asked for; ``"rate_hz"`` is the rate the fits ran at (the signals low-passed, then every
+D-th sample kept: ``EstimationOptions.decimation``). When there are several motions, one of which nothing can be estimated is
 reported on stderr and left out; if no motion is left, the exit status is 2.
 
 Several recordings (``cosim estimate A.csv B.csv`` or a quoted glob ``'run*.csv'``) of one machine: a row
@@ -77,7 +78,8 @@ class NothingEstimated(InputError):
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser, ROLES, EstimationOptions().filter.cutoff_hz, several=True)
     parser.add_argument("--known", action="append", default=[], metavar="NAME=VALUE",
-                        help="a parameter known in advance, e.g. K=1.05 (mechanical equation only)")
+                        help="a parameter known in advance, fixed in the fit of the others, e.g. R=0.6 (repeat "
+                             "for several; a known Jt, ft or Cd needs K known too, or a torque signal)")
     parser.add_argument("--offset", action="store_true", help="also estimate a constant torque offset T0")
     parser.add_argument("--drive", choices=sorted(DRIVE_ROLES), default="dc",
                         help="the motor's model: dc (roles voltage, current; default), pmsm (roles u_q, u_d, i_q, "
