@@ -12,6 +12,7 @@ import io
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +92,18 @@ class Recorder:
         return path
 
 
+@lru_cache(maxsize=1)
+def _formatter():
+    """The compiled library, or None when it cannot be built here: asked once per process, not once per block
+    of rows (a compiler that fails would otherwise be run again for every block)."""
+    from feeddrive.cosim.fastloop.build import BuildFailed, library
+
+    try:
+        return library()
+    except BuildFailed:
+        return None
+
+
 def format_rows(table: np.ndarray) -> str:
     """The rows of ``table`` (shape (rows, columns)) as CSV text, each value as ``"%.10g"``, one line per row:
     what ``numpy.savetxt(fmt="%.10g", delimiter=",")`` writes, character for character.
@@ -100,12 +113,7 @@ def format_rows(table: np.ndarray) -> str:
     """
     table = np.ascontiguousarray(table, dtype=float)
     if table.ndim == 2 and table.size:
-        from feeddrive.cosim.fastloop.build import BuildFailed, library
-
-        try:
-            lib = library()
-        except BuildFailed:
-            lib = None
+        lib = _formatter()
         if lib is not None:
             buf = np.empty(32 * table.size, dtype=np.uint8)
             n = lib.fd_format_rows(table.ctypes.data, table.shape[0], table.shape[1], buf.ctypes.data, buf.size)
