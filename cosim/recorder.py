@@ -87,9 +87,16 @@ class Recorder:
             self._stream.close()  # already written block by block
             self._stream = None
             return path
-        text = self._header() + "\n" + format_rows(np.column_stack([self.time, self.data[:self.n]]))
-        path.write_text(text, encoding="utf-8")
+        with open(path, "w", encoding="utf-8") as out:
+            out.write(self._header() + "\n")
+            for a in range(0, self.n, ROWS_PER_WRITE):  # in blocks: the text of a long run at once would be GBs
+                b = min(a + ROWS_PER_WRITE, self.n)
+                out.write(format_rows(np.column_stack([self.t0 + self.h * np.arange(a, b), self.data[a:b]])))
         return path
+
+
+#: rows formatted and written at a time by ``Recorder.write_csv``
+ROWS_PER_WRITE = 20_000
 
 
 @lru_cache(maxsize=1)
