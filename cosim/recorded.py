@@ -34,7 +34,7 @@ from feeddrive.cosim.recorded_options import (  # noqa: F401 - the shared option
     sampling_modes,
 )
 
-__all__ = ["TIME_JITTER", "Recording", "load_recording", "si_factor", "split_scale"]
+__all__ = ["TIME_JITTER", "Recording", "load_recording", "si_factor", "split_map", "split_scale"]
 
 #: Fewest samples a recording must have.
 MIN_SAMPLES = 10
@@ -71,6 +71,9 @@ class Recording:
         time stamps.
     pieces : tuple of (int, float)
         ``(first sample, its time [s])`` of each record after ``--split-gaps`` (empty: one record).
+    notes : tuple of str
+        Units assumed, one line each (a position, speed or torque column with no unit in its header or the
+        map): printed on stderr and kept in the JSON (``unit_assumptions``).
     """
 
     path: Path
@@ -82,6 +85,7 @@ class Recording:
     timing: dict = field(default_factory=dict)
     clock: float | None = None
     pieces: tuple[tuple[int, float], ...] = ()
+    notes: tuple[str, ...] = ()
 
     @property
     def n(self) -> int:
@@ -174,18 +178,85 @@ def si_factor(unit: str, role: str, where: str) -> tuple[float, str]:
                     f"{' or '.join(targets)})")
 
 
+#: a scale within this relative distance of the header unit's own factor to SI agrees with it (rounded constants)
+SCALE_AGREES = 1e-3
+_STATED = re.compile(r"^(?P<column>.*\S)\s+\[(?P<unit>[^\[\]]*)\]\s*$")
+_SCALED = re.compile(r"^(?P<column>.*\S)\s*\*\s*(?P<scale>[^\s*\[\]]+)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
+
+
 def split_scale(column: str) -> tuple[str, float | None]:
-    """``"x*0.001"`` -> ``("x", 0.001)``: an explicit scale (overrides the header's unit); else ``(column, None)``."""
-    name, sep, factor = column.rpartition("*")
-    if sep and name.strip():
+    """``"x*0.001"`` -> ``("x", 0.001)``: an explicit scale; else ``(column, None)`` (see :func:`split_map`)."""
+    name, scale, _ = split_map(column)
+    return name, scale
+
+
+def split_map(column: str) -> tuple[str, float | None, str | None]:
+    """A role map's entry: ``COLUMN``, ``COLUMN [UNIT]``, ``COLUMN*SCALE`` or ``COLUMN*SCALE [UNIT]``.
+
+    Returns ``(column, scale or None, stated unit or None)``: the column's values times the scale are in
+    the stated unit (``"Wheel velocity*325.9 [rad/s]"``: a wheel speed in m/s times gear/radius is the
+    motor's speed in rad/s; a gear or a pitch changes the unit, so the header's unit no longer says it).
+    """
+    m = _SCALED.match(column)
+    if m is None:
+        m = _STATED.match(column)  # a unit stated without a scale: after a space (data[:,3] is an index)
+        if m is None:
+            return column, None, None
+        unit = m["unit"].strip()
+        if not unit:
+            raise InputError(f"--map {column!r}: empty unit in [ ]; expected e.g. [rad/s]")
+        return m["column"].strip(), None, unit
+    try:
+        value = float(m["scale"])
+    except ValueError:
+        return column, None, None
+    if not np.isfinite(value) or value == 0:
+        raise InputError(f"--map {column!r}: the scale must be a finite non-zero number")
+    unit = m["unit"].strip() if m["unit"] is not None else None
+    if unit == "":
+        raise InputError(f"--map {column!r}: empty unit in [ ]; expected e.g. [rad/s]")
+    return m["column"].strip(), value, unit
+
+
+def _stated_factor(stated: str, header: str, role: str, where: str) -> tuple[float, str]:
+    """``(factor to SI, SI unit)`` of ``COLUMN [UNIT]``: the unit a column's header lacks, or its own again; one that
+    contradicts the header's is refused (a scale converts: ``COLUMN*SCALE [UNIT]``)."""
+    factor, si = si_factor(stated, role, f"{where}: stated unit [{stated}]")
+    if header:
+        head_factor, head_si = si_factor(header, role, where)
+        if head_si != si or abs(factor / head_factor - 1.0) > 1e-12:
+            raise DataError(f"{where}: the header says [{header}], the map states [{stated}]; expected one unit (a "
+                            f"scale converts between them: --map '{role}=COLUMN*SCALE [{stated}]')")
+    return factor, si
+
+
+def _scaled_factor(spec: str, scale: float, stated: str | None, header: str, role: str, where: str
+                   ) -> tuple[float, str]:
+    """``(factor to SI, SI unit or "")`` of ``COLUMN*SCALE [UNIT]`` (``stated``) on a column whose header states
+    ``header``.
+
+    A stated unit decides (the values times the scale are in it). Without one, a scale that agrees with the
+    header's own factor to SI (within :data:`SCALE_AGREES`) keeps the header's unit; one that contradicts it is
+    refused (it changes the unit: a gear, a pitch, a wheel radius), naming the fix. With no unit anywhere the
+    unit stays unknown (``""``): :func:`read_recording` says what it is taken as.
+    """
+    if stated is not None:
+        factor, si = si_factor(stated, role, f"{where}: stated unit [{stated}]")
+        return scale * factor, si
+    head_factor, head_si = 1.0, ""
+    if header:
         try:
-            value = float(factor)
-        except ValueError:
-            return column, None
-        if not np.isfinite(value) or value == 0:
-            raise InputError(f"--map {column!r}: the scale must be a finite non-zero number")
-        return name.strip(), value
-    return column, None
+            head_factor, head_si = si_factor(header, role, where)
+        except DataError:
+            head_si = ""
+    if not head_si:
+        return scale, ""
+    if abs(scale / head_factor - 1.0) <= SCALE_AGREES:
+        return scale, head_si
+    why = " (a gear, a pitch or a radius changes it)" if role in MECHANICAL else ""
+    raise DataError(f"{where}: the header says [{header}] ({head_factor:.6g} x to {head_si}) but the map's scale is "
+                    f"{scale:.6g}, so the scaled values are in another unit{why}; state it: --map "
+                    f"'{role}={spec} [UNIT]', e.g. [{SI_UNITS[role][0]}]")
 
 
 def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: float | None = None,
@@ -236,15 +307,15 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     path, what = source.path, "column" if not hasattr(source, "tree") else "variable"
     columns, signals, units, lengths, time_sig = {}, {}, {}, {}, None
     for role, spec in role_map.items():
-        column, scale = split_scale(spec)
+        column, scale, stated = split_map(spec)
         sig = source.resolve(column, role)
         where = f"{path}: {what} {sig.label!r} (role {role})"
-        factor, si = si_factor(sig.unit, role, where) if scale is None else (scale, "")
-        if scale is not None and sig.unit:
-            try:  # the header still says which side the data are on
-                si = si_factor(sig.unit, role, where)[1]
-            except DataError:
-                si = ""
+        if scale is None and stated is not None:
+            factor, si = _stated_factor(stated, sig.unit, role, where)
+        elif scale is None:
+            factor, si = si_factor(sig.unit, role, where)
+        else:
+            factor, si = _scaled_factor(spec.strip(), scale, stated, sig.unit, role, where)
         with np.errstate(over="ignore", invalid="ignore"):
             values = sig.values * factor
         bad = np.flatnonzero(~(np.abs(values) <= MAX_ABS))  # NaN fails the comparison too
@@ -358,12 +429,26 @@ def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: 
     rec = load_recording(_data_path(args, path), role_map, sample_time, args.delimiter, args.decimal,
                          resample=getattr(args, "resample", None), split_gaps=getattr(args, "split_gaps", False))
     rec = to_motor_side(rec, args)
+    rec = replace(rec, notes=assumed_units(rec))  # said by the commands with their results (never silently)
     t = rec.timing
     if t.get("action", "none") != "none":  # never resampled or split silently (the JSON has it too)
         print(f"cosim: {rec.path}: time from {t['source']}: {t['samples']} samples, median step "
               f"{t['median_step_s']:.6g} s, jitter {jitter_text(t['jitter'])}, {t['gaps']} gaps; {t['action']}",
               file=sys.stderr)
     return rec
+
+
+def assumed_units(rec: Recording) -> tuple[str, ...]:
+    """One line per position, speed or torque signal whose unit nothing states (header, map or ``--pitch``):
+    what it is taken as, on the side the other columns state (the motor's when none does), and how to state it."""
+    side = rec.side or "motor"
+    out = []
+    for role in MECHANICAL:
+        if role in rec.signals and not rec.units.get(role):
+            unit = dict(zip(("motor", "table"), SI_UNITS[role]))[side]
+            out.append(f"{role}: {rec.columns[role]!r} states no unit (not in the header, not in the map): taken as "
+                       f"{unit} ({side} side); state it: --map '{role}={rec.columns[role]}*SCALE [UNIT]'")
+    return tuple(out)
 
 
 def motions(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None,
@@ -403,6 +488,8 @@ def start_clock(rec: Recording, start_time: str | None = None) -> tuple[float, s
 def recording_json(rec: Recording, clock_source: str | None = None) -> dict:
     """The recording's keys for ``--json`` and report.json: ``timing`` (and ``time_source``)."""
     out = {"timing": rec.timing}
+    if rec.notes:
+        out["unit_assumptions"] = list(rec.notes)
     if clock_source is not None:
         out["time_source"] = clock_source
     return out

@@ -59,7 +59,8 @@ def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str
     parser.add_argument("--map", action="extend", nargs="+", default=[], metavar="ROLE=COLUMN",
                         help=f"column or variable of a role ({', '.join(roles)}): a header, or in a MATLAB file "
                              "NAME.FIELD[ROWS,COLS] (0-based, e.g. rec.act_torque_abs_nm[:,0]); optionally "
-                             "COLUMN*SCALE to SI (overrides a [unit] in the header); several per --map, or repeat --map")
+                             "COLUMN*SCALE (a header's [unit] must agree with it) or COLUMN*SCALE [UNIT] (the scaled values' unit, e.g. "
+                             "'speed=wheel*325.9 [rad/s]': a gear or radius changes the unit); several per --map, or repeat --map")
     timing = parser.add_mutually_exclusive_group()
     timing.add_argument("--sample-time", "--dt", dest="sample_time", type=float, default=None, metavar="H",
                         help="sampling period [s] (needed without a time column)")

@@ -186,6 +186,9 @@ def main(args: argparse.Namespace) -> int:
                          f"units that agree")
     side = sides.pop()
     units = model_units(getattr(args, "drive", "dc")) | parameter_units(side, "linear" if side == "table" else "rotary")
+    for path, _, _, rec_keys, _ in per_file:  # a unit assumed is said (after any error: that stays one line)
+        for note in rec_keys.get("unit_assumptions", ()):
+            print(f"cosim estimate: {path}: {note}", file=sys.stderr)
     if len(per_file) == 1:
         results, rec_keys, checks = per_file[0][2:]
         if args.json:

@@ -133,7 +133,8 @@ def main(args: argparse.Namespace) -> int:
         motions = history.motions(args.axis)
         thresholds = pipeline.thresholds()
     results = [t.result for t in traces]
-    units = unit_notes(rec.columns, rec.units)  # the conversions a reader must know (an rms current)
+    # the conversions a reader must know (an rms current) and the units assumed (no unit in the header or the map)
+    units = unit_notes(rec.columns, rec.units) + list(rec.notes)
     if plots is not None:
         from feeddrive.cosim.monitor_plots import plot_monitor
 

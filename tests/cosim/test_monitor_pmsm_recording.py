@@ -178,7 +178,7 @@ def test_the_vendor_pmsm_trace_in_its_own_units(vendor_pmsm_fmu, tmp_path, capsy
     currents at the drive's phi_el within 0.5 %); the dead time's loss is measured (4.8 V per leg within 1 %); the
     two encoders see the lost motion (0.02 mm within 0.002 mm). The estimate from these instantaneous samples:
     R within 5 %, L_q 1 %, psi_f 0.5 % of the FMU's values. Mapped without its factor (``I_q_rms*1``: the values
-    taken as SI), the rms current is caught by the Park check: gain 1/sqrt 2. Measured: Park gain 0.9984, loss
+    taken as SI, ``I_q_rms*1 [A]``: a scale contradicting the header needs its unit stated), the rms current is caught by the Park check: gain 1/sqrt 2. Measured: Park gain 0.9984, loss
     4.771 V, lost motion 0.01999 mm, R -2.97 %, L_q -0.01 %, psi_f +0.01 %; without the factor gain 0.7059."""
     csv = vendor_trace(vendor_pmsm_fmu, tmp_path / "vendor.csv", 0.02)
     loss = INVERTER["t_dead"] * INVERTER["f_pwm"] * INVERTER["u_dc"]
@@ -199,7 +199,12 @@ def test_the_vendor_pmsm_trace_in_its_own_units(vendor_pmsm_fmu, tmp_path, capsy
     p = {k: v["value"] for k, v in m["parameters"].items()}
     for name, tol in (("R", 0.05), ("L_q", 0.01), ("psi_f", 0.005)):
         assert p[name] == pytest.approx(TRUTH[name], rel=tol), name
-    assert main(["monitor", str(csv), "--map", *roles, "i_q=I_q_rms*1", *common, "--db", str(tmp_path / "b.db")]) == 0
+    # a scale that contradicts the header's [A rms] is refused at the map, naming the column; stated, it is taken
+    assert main(["monitor", str(csv), "--map", *roles, "i_q=I_q_rms*1", *common, "--db", str(tmp_path / "b.db")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "(role i_q): the header says [A rms]" in err
+    assert main(["monitor", str(csv), "--map", *roles, "i_q=I_q_rms*1 [A]", *common, "--db",
+                 str(tmp_path / "b.db")]) == 0
     (m,) = json.loads(capsys.readouterr().out.splitlines()[-1])["motions"]
     dq = m["servo_checks"]["dq_current_consistency"]
     assert not dq["valid"] and dq["gain"] == pytest.approx(1 / math.sqrt(2), abs=0.005)

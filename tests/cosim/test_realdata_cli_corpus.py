@@ -28,26 +28,26 @@ CORPUS = {
                 ["time=data[:,0]", "voltage=data[:,1]", "current=data[:,3]", "speed=data[:,9]"],
                 ["time=data[:,0]", "voltage=data[:,1]", "current1=data[:,3]", "speed=data[:,9]"], []),
     "kuka-1": (["kuka_kr300/rec_A.mat"],
-               ["time=rec.time_cont", f"speed=rec.act_vel_mot_deg_per_s[:,0]*{DEG * KUKA_GEAR_1!r}",
+               ["time=rec.time_cont", f"speed=rec.act_vel_mot_deg_per_s[:,0]*{DEG * KUKA_GEAR_1!r} [rad/s]",
                 "torque=rec.act_torque_abs_nm[:,0]"],
-               ["time=rec.time_cont", f"speed=rec.act_vel_mot_deg_per_s[:,0]*{DEG * KUKA_GEAR_1!r}",
+               ["time=rec.time_cont", f"speed=rec.act_vel_mot_deg_per_s[:,0]*{DEG * KUKA_GEAR_1!r} [rad/s]",
                 "torque=rec.act_torque_abs_nm[:,0]"], []),
     "kuka-2": (["kuka_kr300/rec_A.mat"],
-               ["time=rec.time_cont", f"speed=rec.act_vel_mot_deg_per_s[:,1]*{DEG!r}",
+               ["time=rec.time_cont", f"speed=rec.act_vel_mot_deg_per_s[:,1]*{DEG!r} [rad/s]",
                 "torque=rec.act_torque_abs_nm[:,1]"],
-               ["time=rec.time_cont", f"speed=rec.act_vel_mot_deg_per_s[:,1]*{DEG!r}",
+               ["time=rec.time_cont", f"speed=rec.act_vel_mot_deg_per_s[:,1]*{DEG!r} [rad/s]",
                 "torque=rec.act_torque_abs_nm[:,1]"], []),
     "hsm150": ([f"hsm150/idf_pos_0.06_{k}.mat" for k in (1, 2, 3)],
                ["time=data[:,0]", "speed=data[:,3]", "torque=data[:,5]"],
                ["time=data[:,0]", "speed=data[:,3]", "torque=data[:,5]"], ["--segment", "none"]),
     "regbot": (["regbot/regbot_karla_10_f.txt", "regbot/regbot_karla_10_mf.txt"],
                ["time=time", "voltage=Motor voltage left", "current=Motor current left",
-                "speed=Wheel velocity left*325.9"],
+                "speed=Wheel velocity left*325.9 [rad/s]"],
                ["time=time", "voltage=Motor voltage left", "current1=Motor current left",
-                "speed=Wheel velocity left*325.9"], ["--segment", "none"]),
+                "speed=Wheel velocity left*325.9 [rad/s]"], ["--segment", "none"]),
     "umich": (["umich_cnc/experiment_01.csv"],
-              ["current=X1_CurrentFeedback", "speed=X1_ActualVelocity*0.001"],
-              ["current1=X1_CurrentFeedback", "speed=X1_ActualVelocity*0.001"], ["--rate", "10"]),
+              ["current=X1_CurrentFeedback", "speed=X1_ActualVelocity*0.001 [m/s]"],
+              ["current1=X1_CurrentFeedback", "speed=X1_ActualVelocity*0.001 [m/s]"], ["--rate", "10"]),
 }
 POSITIVE = ("R", "L", "K", "Jt")
 NON_NEGATIVE = ("ft", "Cd")
@@ -135,7 +135,7 @@ def test_kuka_gravity_axes_are_a_mismatch_not_a_lack_of_excitation(capsys: pytes
     """Axes 2 and 3 carry gravity, which the model lacks: the model check must say so."""
     for axis in (1, 2):
         argv = ["estimate", str(REALDATA / "kuka_kr300/rec_A.mat"), "--map", "time=rec.time_cont",
-                f"speed=rec.act_vel_mot_deg_per_s[:,{axis}]*{DEG!r}", f"torque=rec.act_torque_abs_nm[:,{axis}]",
+                f"speed=rec.act_vel_mot_deg_per_s[:,{axis}]*{DEG!r} [rad/s]", f"torque=rec.act_torque_abs_nm[:,{axis}]",
                 "--segment", "none", "--json"]
         code, out, err = run(capsys, argv)
         check_outcome(code, out, err, f"kuka axis {axis + 1}")
@@ -167,3 +167,22 @@ def test_hsm150_repeats_consistent_and_friction_given_where_inertia_is_refused(
             assert {"ft", "Cd"} <= given, (f["file"], seg.get("refused"))
             if "Jt" not in given:
                 assert "Jt" in seg["refused"]
+
+
+def test_regbot_wheel_speed_scaled_to_the_motor_needs_its_unit_and_then_gives_k_in_motor_units(
+        capsys: pytest.CaptureFixture) -> None:
+    """REGBOT logs the wheel's speed in m/s; times gear/radius (9.68 / 0.0297 m = 325.9) it is the motor's in
+    rad/s. Taking the header's m/s on trust made it a linear axis: K printed in N/A. The scale without the unit
+    it gives is refused naming the column; stated, K is the motor's (course value 0.0105 V.s/rad)."""
+    path = str(REALDATA / "regbot/regbot_karla_10_f.txt")
+    base = ["estimate", path, "--segment", "none", "--json", "--map", "time=time", "voltage=Motor voltage left",
+            "current=Motor current left"]
+    code, out, err = run(capsys, [*base, "speed=Wheel velocity left*325.9"])
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "'Wheel velocity left' (role speed): the header says [m/s]" in err and "[UNIT]" in err
+    code, out, err = run(capsys, [*base, "speed=Wheel velocity left*325.9 [rad/s]"])
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["side"] == "motor" and "unit_assumptions" not in doc
+    k = segments_of(doc)[0]["parameters"]["K"]
+    assert k["unit"] == "N.m/A" and k["ci95"][0] < 0.0105 < k["ci95"][1]

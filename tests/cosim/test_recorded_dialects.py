@@ -14,8 +14,14 @@ import pytest
 
 from feeddrive.cosim.cli import main
 from feeddrive.cosim.cli.estimate import ROLES
-from feeddrive.cosim.errors import DataError
-from feeddrive.cosim.recorded import add_recording_arguments, load_recording, mapped_roles, to_motor_side
+from feeddrive.cosim.errors import DataError, InputError
+from feeddrive.cosim.recorded import (
+    add_recording_arguments,
+    assumed_units,
+    load_recording,
+    mapped_roles,
+    to_motor_side,
+)
 
 N = 20
 T = np.arange(N) * 1e-3
@@ -66,11 +72,49 @@ def test_header_units_are_converted_to_si(tmp_path, unit, role, factor, si):
     assert rec.units[role] == si
 
 
-def test_explicit_scale_overrides_the_header_unit(tmp_path):
+def test_a_scale_that_agrees_with_the_header_unit_keeps_it(tmp_path):
     path = write(tmp_path / "d.csv", ["t [s]", "x [mm]"])
-    rec = load_recording(path, {"time": "t", "position": "x*0.002"})
-    np.testing.assert_allclose(rec.signals["position"], U * 0.002, rtol=1e-15)
-    assert rec.side == "table"  # the header still says the data are lengths
+    rec = load_recording(path, {"time": "t", "position": "x*0.0010002"})  # a rounded constant: within 1e-3
+    np.testing.assert_allclose(rec.signals["position"], U * 0.0010002, rtol=1e-15)
+    assert rec.units["position"] == "m" and rec.side == "table"
+
+
+def test_a_scale_that_contradicts_the_header_unit_is_refused_naming_the_fix(tmp_path):
+    """REGBOT's wheel speed [m/s] times gear/radius (325.9) is the motor's speed in rad/s: the header's unit no
+    longer says it, and taking it on trust printed K in N/A (a linear axis) for a rotary motor."""
+    path = write(tmp_path / "d.csv", ["t [s]", "v [m/s]"])
+    with pytest.raises(DataError, match=r"column 'v \[m/s\]' \(role speed\): the header says \[m/s\] \(1 x to m/s\) "
+                                        r"but the map's scale is 325\.9, .*state it: --map 'speed=v\*325\.9 \[UNIT\]'"):
+        load_recording(path, {"time": "t", "speed": "v*325.9"})
+
+
+@pytest.mark.parametrize("stated, side, factor", [("rad/s", "motor", 325.9), ("rpm", "motor", 325.9 * np.pi / 30),
+                                                  ("mm/s", "table", 325.9e-3)])
+def test_a_stated_unit_decides_the_scaled_values_unit_and_side(tmp_path, stated, side, factor):
+    path = write(tmp_path / "d.csv", ["t [s]", "v [m/s]"])
+    rec = load_recording(path, {"time": "t", "speed": f"v * 325.9 [{stated}]"})
+    np.testing.assert_allclose(rec.signals["speed"], U * factor, rtol=1e-14)
+    assert rec.side == side and rec.columns["speed"] == "v [m/s]"
+
+
+def test_a_stated_unit_of_the_wrong_kind_or_empty_is_refused(tmp_path):
+    path = write(tmp_path / "d.csv", ["t [s]", "v [m/s]"])
+    with pytest.raises(DataError, match=r"stated unit \[A\]: unit 'A' is not a unit of role speed"):
+        load_recording(path, {"time": "t", "speed": "v*2 [A]"})
+    with pytest.raises(InputError, match=r"empty unit in \[ \]"):
+        load_recording(path, {"time": "t", "speed": "v*2 []"})
+
+
+def test_a_mechanical_column_with_no_unit_anywhere_is_said_taken_as_the_sides_unit(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("t [s],v,x [mm]\n" + "".join(f"{t},{u},{u}\n" for t, u in zip(T, U)), encoding="utf-8")
+    alone = load_recording(path, {"time": "t", "speed": "v*0.001"})
+    assert assumed_units(alone) == ("speed: 'v' states no unit (not in the header, not in the map): taken as rad/s "
+                                    "(motor side); state it: --map 'speed=v*SCALE [UNIT]'",)
+    beside = load_recording(path, {"time": "t", "speed": "v", "position": "x"})  # the position says: table side
+    assert assumed_units(beside) == ("speed: 'v' states no unit (not in the header, not in the map): taken as m/s "
+                                     "(table side); state it: --map 'speed=v*SCALE [UNIT]'",)
+    assert assumed_units(load_recording(path, {"time": "t", "speed": "v*1 [rad/s]"})) == ()
 
 
 def test_a_unit_of_the_wrong_kind_is_refused(tmp_path):
@@ -129,3 +173,17 @@ def test_monitor_refuses_a_table_side_position_without_a_pitch(tmp_path, capsys)
     motor = to_motor_side(rec, args)
     np.testing.assert_allclose(motor.signals["position"], T * 0.1 * 2 * math.pi * 2 / 0.01, rtol=1e-12)
     assert motor.side == "motor"
+
+
+def test_a_unit_stated_without_a_scale_converts_a_bare_column_and_must_agree_with_a_header(tmp_path):
+    """``w [rpm]`` on a column headed ``w`` used to find the column and drop the unit (values taken as rad/s)."""
+    bare = tmp_path / "bare.csv"
+    bare.write_text("t [s],w\n" + "".join(f"{t},{u}\n" for t, u in zip(T, U)), encoding="utf-8")
+    rec = load_recording(bare, {"time": "t", "speed": "w [rpm]"})
+    np.testing.assert_allclose(rec.signals["speed"], U * np.pi / 30, rtol=1e-14)
+    assert rec.units["speed"] == "rad/s" and assumed_units(rec) == ()
+    headed = write(tmp_path / "headed.csv", ["t [s]", "w [rpm]"])
+    np.testing.assert_allclose(load_recording(headed, {"time": "t", "speed": "w [rpm]"}).signals["speed"],
+                               U * np.pi / 30, rtol=1e-14)
+    with pytest.raises(DataError, match=r"the header says \[rpm\], the map states \[rad/s\]; expected one unit"):
+        load_recording(headed, {"time": "t", "speed": "w [rad/s]"})
