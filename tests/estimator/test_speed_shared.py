@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from feeddrive.estimator.identifiability import _newey_west_t
+from feeddrive.estimator.identifiability import _newey_west_t, lag_terms
 from feeddrive.estimator.kernels import MAX_RUNS, used_pairs
 
 
@@ -91,3 +91,22 @@ def test_kept_regressors_give_the_fits_of_a_fresh_solve() -> None:
     np.testing.assert_array_equal(other.theta, _solve(reg, doubled, p.block, options).theta)
     np.testing.assert_allclose(other.theta, 2.0 * _solve(reg, [(y, Phi, instruments[0], rows)], p.block, options).theta,
                                rtol=1e-12)
+
+
+def test_lag_terms_recover_the_lag_free_fit_and_test_the_lag():
+    """An output that holds a lag term ``-tau Di`` (a measured current low-passed by tau): lag_terms gives the
+    coefficients of the other columns without it (exactly, noise-free) and rejects the lag's term; without the
+    term the Wald test does not reject it (p > 0.05 on this seed), and the coefficients are those of the plain fit."""
+    rng = np.random.default_rng(3)
+    n = 3000
+    t = np.arange(n) * 1e-3
+    Phi = np.column_stack([np.sin(2 * np.pi * t), np.cos(2 * np.pi * 3 * t), np.sign(np.sin(2 * np.pi * t))])
+    Di = np.gradient(np.sin(2 * np.pi * 5 * t) + 0.3 * np.cos(2 * np.pi * 2 * t), 1e-3)
+    theta = np.array([0.5, -0.2, 0.05])
+    e = np.convolve(rng.standard_normal(n + 20), np.ones(20) / 20, "valid")[:n] * 1e-2
+    lagged = lag_terms(Phi @ theta - 0.01 * Di + e, Phi, Di[:, None], 20)
+    assert lagged["p_value"] < 1e-10
+    np.testing.assert_allclose(lagged["theta"], theta, atol=3e-3)
+    plain = lag_terms(Phi @ theta + e, Phi, Di[:, None], 20)
+    assert plain["p_value"] > 0.05
+    np.testing.assert_allclose(plain["theta"], np.linalg.lstsq(Phi, Phi @ theta + e, rcond=None)[0], atol=1e-3)
