@@ -62,15 +62,11 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
     """
     if not {resistance, slope} <= set(names):
         return None
-    X = np.column_stack([Phi, *([] if extra is None else [extra]), np.gradient(Di, h)])
-    if len(y) <= X.shape[1] + 2 * max(1, int(block)) or not np.all(np.isfinite(X)) or not np.all(np.isfinite(y)):
+    fit = _augmented(y, np.column_stack([Phi, *([] if extra is None else [extra]), np.gradient(Di, h)]), block)
+    if fit is None:
         return None
-    scale = np.linalg.norm(X, axis=0)
-    scale[scale == 0] = 1.0
-    Xs = X / scale
-    theta, *_ = np.linalg.lstsq(Xs, y, rcond=None)
-    t = _newey_west_t(Xs, y - Xs @ theta, max(1, int(block)), theta)
-    theta = theta / scale
+    theta, cov = fit
+    t = float(theta[-1] / np.sqrt(cov[-1, -1])) if cov[-1, -1] > 0 else float("nan")
     R, L, M = theta[names.index(resistance)], theta[names.index(slope)], theta[-1]
     if not (R > 0 and np.isfinite(M) and np.isfinite(t)):
         return None
@@ -121,15 +117,11 @@ def lag_terms(y: np.ndarray, Phi: np.ndarray, extra: np.ndarray, block: int) -> 
         ``{"theta": the augmented fit's first p coefficients, "p_value": the Newey-West Wald test that the lag's
         terms are zero}``; None when the fit cannot be made (too few samples, non-finite values).
     """
-    X = np.column_stack([Phi, extra])
     k = extra.shape[1] if extra.ndim == 2 else 1
-    if len(y) <= X.shape[1] + 2 * max(1, int(block)) or not np.all(np.isfinite(X)) or not np.all(np.isfinite(y)):
+    fit = _augmented(y, np.column_stack([Phi, extra]), block)
+    if fit is None:
         return None
-    scale = np.linalg.norm(X, axis=0)
-    scale[scale == 0] = 1.0
-    Xs = X / scale
-    theta, *_ = np.linalg.lstsq(Xs, y, rcond=None)
-    cov = _newey_west_cov(Xs, y - Xs @ theta, max(1, int(block)))
+    theta, cov = fit
     b, C = theta[-k:], cov[-k:, -k:]
     try:
         wald = float(b @ np.linalg.solve(C, b))
@@ -137,7 +129,21 @@ def lag_terms(y: np.ndarray, Phi: np.ndarray, extra: np.ndarray, block: int) -> 
         return None
     if not np.isfinite(wald):
         return None
-    return {"theta": (theta / scale)[:Phi.shape[1]], "p_value": float(chi2_sf(wald, k))}
+    return {"theta": theta[:Phi.shape[1]], "p_value": float(chi2_sf(wald, k))}
+
+
+def _augmented(y: np.ndarray, X: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Least squares of ``y`` on ``X`` (columns scaled to unit norm for the solve) with the Newey-West covariance
+    over ``block`` lags: ``(theta (p,), covariance (p, p))`` in ``X``'s units; None with too few samples for the
+    covariance or non-finite values."""
+    if len(y) <= X.shape[1] + 2 * max(1, int(block)) or not np.all(np.isfinite(X)) or not np.all(np.isfinite(y)):
+        return None
+    scale = np.linalg.norm(X, axis=0)
+    scale[scale == 0] = 1.0
+    Xs = X / scale
+    theta, *_ = np.linalg.lstsq(Xs, y, rcond=None)
+    cov = _newey_west_cov(Xs, y - Xs @ theta, max(1, int(block)))
+    return theta / scale, cov / np.outer(scale, scale)
 
 
 def _newey_west_cov(X: np.ndarray, e: np.ndarray, lags: int) -> np.ndarray:
