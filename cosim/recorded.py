@@ -445,7 +445,7 @@ def assumed_units(rec: Recording) -> tuple[str, ...]:
     out = []
     for role in MECHANICAL:
         if role in rec.signals and not rec.units.get(role):
-            unit = dict(zip(("motor", "table"), SI_UNITS[role]))[side]
+            unit = dict(zip(("motor", "table"), SI_UNITS[role]))[side].replace("*", ".")  # N.m, as printed elsewhere
             out.append(f"{role}: {rec.columns[role]!r} states no unit (not in the header, not in the map): taken as "
                        f"{unit} ({side} side); state it: --map '{role}={rec.columns[role]}*SCALE [UNIT]'")
     return tuple(out)

@@ -253,7 +253,10 @@ def report_header(scenario: Scenario) -> dict[str, Any]:
     return {"scenario": scenario.name, "axis": scenario.axis.name, "drive_chain": scenario.axis.model_dump(),
             "parameter_units": parameter_units("motor", scenario.axis.kind), "source": scenario.source,
             "plant": {"fmu": scenario.plant.fmu, "sha256": scenario.plant.sha256,
-                      "interface": scenario.plant.interface} if scenario.nc is not None else None}
+                      "interface": scenario.plant.interface} if scenario.nc is not None else None,
+            # a unit the plant's map took on trust (not declared by the FMU) stays with the results, not only on
+            # the console
+            "unit_notes": [f"plant.map: {note}" for note in scenario.unit_notes]}
 
 
 def with_history(scenario: Scenario, db: Path, replace: bool = False) -> Scenario | None:

@@ -7,6 +7,7 @@ contradicts the declared units, is one line naming the variable and both units (
 """
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -200,3 +201,8 @@ def test_a_variable_without_unit_is_a_stated_assumption(tmp_path, capsys):
                      "plant.map: current <- I: unit not declared: scale 2 offset 0 as given",
                      "plant.map: speed <- w: unit not declared: taken as rad/s",
                      "plant.map: position <- x: unit not declared: taken as m"], run.stdout
+    # and they stay with the results: report.json and the page's summary, not only the console
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert report["unit_notes"] == notes
+    page = (tmp_path / "o" / "report.html").read_text()
+    assert "<th>units</th>" in page and "position &lt;- x: unit not declared: taken as m" in page
