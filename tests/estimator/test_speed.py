@@ -212,6 +212,20 @@ def test_noise_std_is_scipy_mad() -> None:
         x = np.cumsum(rng.standard_normal(n)) * 1e-3 + rng.standard_normal(n)
         assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
     assert np.isnan(noise_std(np.array([0.0, np.nan, 1.0, 2.0])))
+    x = np.round(rng.standard_normal(2000), 1)  # many equal differences: the two middle ranks tied or not
+    assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
+
+
+@pytest.mark.parametrize("step", [1, 2, 3])
+def test_model_check_upsampling_is_np_interp(step: int) -> None:
+    from feeddrive.estimator.mismatch import _upsample
+
+    rng = np.random.default_rng(step)
+    for n in (7, 8, 1001):
+        y = rng.standard_normal(len(range(0, n, step)))
+        y[1] = np.nan  # the residue is NaN where it is not tested
+        ref = np.interp(np.arange(n), np.arange(0, n, step), y)
+        np.testing.assert_array_equal(_upsample(y, step, n), ref)
 
 
 def test_last_columns_f_test_is_statsmodels_f_test() -> None:
