@@ -273,3 +273,15 @@ def test_adequacy_rows_read_lagged_terms_as_np_roll(lag: int) -> None:
     lo, hi = position[rows].min(), position[rows].max()
     full = np.polynomial.legendre.legval(2 * (position - lo) / (hi - lo) - 1, [0, 0, 1])  # P2 over the rows' range
     np.testing.assert_array_equal(_legendre(np.cumsum(w).take(take - lag), range(2, 3))[:, 0], full[rows])
+
+
+def test_simulation_spline_is_scipy_cubic_spline() -> None:
+    from scipy.interpolate import CubicSpline
+
+    rng = np.random.default_rng(3)
+    for n in (4, 5, 9, 1450, 1451):
+        x = np.arange(n) * 4.0
+        x[-1] -= 1.0  # a shorter last step, as the simulation's last sample
+        Y = np.cumsum(rng.standard_normal((2, n)), axis=1) * 1e3
+        for at in (np.arange(x[-1] + 1) + 1 / 6, np.arange(x[-1] + 1) - 0.25, np.arange(x[-1] + 1)):
+            np.testing.assert_array_equal(simulation._spline(x, Y, at), CubicSpline(x, Y, axis=1)(at))
