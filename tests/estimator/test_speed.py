@@ -285,3 +285,11 @@ def test_simulation_spline_is_scipy_cubic_spline() -> None:
         Y = np.cumsum(rng.standard_normal((2, n)), axis=1) * 1e3
         for at in (np.arange(x[-1] + 1) + 1 / 6, np.arange(x[-1] + 1) - 0.25, np.arange(x[-1] + 1)):
             np.testing.assert_array_equal(simulation._spline(x, Y, at), CubicSpline(x, Y, axis=1)(at))
+
+
+def test_sosfilt_zi_kept_per_filter_is_not_shared() -> None:
+    sos = FilterSpec(100.0).sos(1e-4)
+    first = lti.sosfilt_zi(sos)
+    np.testing.assert_array_equal(first, signal.sosfilt_zi(sos))
+    first[:] = 0.0  # a caller's array of its own: the kept design is unchanged
+    np.testing.assert_array_equal(lti.sosfilt_zi(sos), signal.sosfilt_zi(sos))
