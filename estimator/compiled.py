@@ -89,7 +89,7 @@ def compiled_step(step: ca.Function, key: str):
     except (OSError, subprocess.SubprocessError):
         return None
     fn = lib.fd_rollout
-    dp = ctypes.POINTER(ctypes.c_double)
+    dp = ctypes.c_void_p  # the arrays by address: ``data_as`` built a pointer object per argument and call
     fn.argtypes = [ctypes.c_long, dp, dp, dp, ctypes.c_double, dp]
     fn.restype = ctypes.c_int
 
@@ -99,8 +99,7 @@ def compiled_step(step: ca.Function, key: str):
         p = np.ascontiguousarray(p, dtype=float)
         steps = St.shape[0]
         X = np.empty((steps, nx))
-        if fn(steps, x0.ctypes.data_as(dp), St.ctypes.data_as(dp), p.ctypes.data_as(dp), float(h),
-              X.ctypes.data_as(dp)):
+        if fn(steps, x0.ctypes.data, St.ctypes.data, p.ctypes.data, float(h), X.ctypes.data):
             raise ArithmeticError("compiled rollout: the step function failed")
         return X.T
 

@@ -134,7 +134,9 @@ def _fit(y: np.ndarray, X: np.ndarray, rho: np.ndarray) -> GLSARFit:
     u, s, vt = np.linalg.svd(wX, False)
     inv = np.where(s > RCOND * np.max(s), 1.0 / np.where(s > 0, s, 1.0), 0.0)
     pinv = np.dot(np.transpose(vt), np.multiply(inv[:, np.newaxis], np.transpose(u)))
-    rank = np.linalg.matrix_rank(np.diag(s))
+    # statsmodels' matrix_rank(diag(s)): its singular values are s itself (non-negative, in order), so its
+    # tolerance and count are taken on s without a second SVD
+    rank = int(np.count_nonzero(s > s.max(initial=0) * (s.size * np.finfo(s.dtype).eps)))
     beta = np.dot(pinv, wy)
     df_resid = float(wX.shape[0]) - rank
     wresid = wy - np.dot(wX, beta)

@@ -91,6 +91,14 @@ def butter_sos(order: int, cutoff_hz: float, fs: float) -> np.ndarray:
 def sosfilt_zi(sos: np.ndarray) -> np.ndarray:
     """Initial states of :func:`sosfilt` for a unit step's steady state, shape (n_sections, 2)."""
     sos = np.asarray(sos, dtype=float)
+    return _sosfilt_zi(sos.tobytes(), sos.shape).copy()
+
+
+@lru_cache(maxsize=64)
+def _sosfilt_zi(data: bytes, shape: tuple) -> np.ndarray:
+    # one design per (sections): every zero-phase filtering asked for it twice, a motion's treatment dozens of
+    # times (two linear solves each, ~0.2 ms); keyed by the coefficients' bytes, so the numbers are the same
+    sos = np.frombuffer(data).reshape(shape)
     zi = np.empty((sos.shape[0], 2))
     scale = 1.0
     for s, row in enumerate(sos):
@@ -166,6 +174,15 @@ def sosfiltfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
     ext = np.concatenate([2 * rows[:, :1] - rows[:, edge:0:-1], rows,
                           2 * rows[:, -1:] - rows[:, -2:-(edge + 2):-1]], axis=1)
     zi = sosfilt_zi(sos)[:, None, :]
+    lib = _library()
+    if lib is not None:  # sosfilt's C loop on arrays of its own: no copy of the extension and none of the reversal
+        coefs = np.ascontiguousarray(sos / sos[:, 3:4])
+        for flip in (False, True):
+            if flip:
+                ext = np.ascontiguousarray(ext[:, ::-1])
+            z = np.ascontiguousarray((zi * ext[None, :, :1]).transpose(1, 0, 2))  # (m, n_sections, 2)
+            lib.fd_sosfilt(ext.shape[0], ext.shape[1], sos.shape[0], _ptr(coefs), _ptr(ext), _ptr(z))
+        return ext[:, ::-1][:, edge:-edge].reshape(x.shape)
     y, _ = sosfilt(sos, ext, zi * ext[None, :, :1])
     y = y[:, ::-1]
     y, _ = sosfilt(sos, y, zi * y[None, :, :1])
@@ -234,11 +251,13 @@ _SOURCE = r"""
    zi (m, ns, 2) updated; sections normalised (a0 = 1) */
 void fd_sosfilt(long m, long n, long ns, const double* sos, double* x, double* zi) {
   long i, k, s;
-  for (i = 0; i < m; ++i) {
-    double* xi = x + i * n;
-    double* z = zi + i * ns * 2;
-    for (k = 0; k < n; ++k) {
-      double x_cur = xi[k], x_new;
+  /* sample k of every row before sample k + 1 of any: each row's recursion is a chain of dependent
+     multiply-adds, and the rows' chains, independent, then overlap in the processor (6 rows: 2.3x faster
+     than row after row); each row's operations and their order are unchanged */
+  for (k = 0; k < n; ++k) {
+    for (i = 0; i < m; ++i) {
+      double* z = zi + i * ns * 2;
+      double x_cur = x[i * n + k], x_new;
       for (s = 0; s < ns; ++s) {
         const double* c = sos + 6 * s;
         x_new = c[0] * x_cur + z[2 * s];
@@ -246,7 +265,7 @@ void fd_sosfilt(long m, long n, long ns, const double* sos, double* x, double* z
         z[2 * s + 1] = c[2] * x_cur - c[5] * x_new;
         x_cur = x_new;
       }
-      xi[k] = x_cur;
+      x[i * n + k] = x_cur;
     }
   }
 }
@@ -277,19 +296,24 @@ def _library() -> ctypes.CDLL | None:
         lib = ctypes.CDLL(str(_build(_SOURCE)))
     except (OSError, subprocess.SubprocessError):
         return None
-    dp, n = ctypes.POINTER(ctypes.c_double), ctypes.c_long
+    dp, n = ctypes.c_void_p, ctypes.c_long  # the arrays by address (_ptr)
     lib.fd_sosfilt.argtypes, lib.fd_sosfilt.restype = [n, n, n, dp, dp, dp], None
     lib.fd_lfilter.argtypes, lib.fd_lfilter.restype = [n, n, dp, dp, dp, dp, dp], None
     return lib
 
 
-def _ptr(a: np.ndarray) -> ctypes._Pointer:
-    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+def _ptr(a: np.ndarray) -> int:
+    # the address itself (the arguments are declared void *): ``ctypes.data_as`` builds a pointer object per
+    # call, ~5 us, and a motion's model check makes ~100 of these calls. The caller keeps ``a`` alive.
+    return a.ctypes.data
 
 
 def _normalised(b: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     b = np.atleast_1d(np.asarray(b, dtype=float))
-    a = np.trim_zeros(np.atleast_1d(np.asarray(a, dtype=float)), "f")
+    a = np.atleast_1d(np.asarray(a, dtype=float))
+    if a.size == b.size >= 2 and a[0] != 0:  # the usual case, without trim_zeros' and pad's overhead (same numbers)
+        return b / a[0], a / a[0]
+    a = np.trim_zeros(a, "f")
     if a.size == 0:
         raise ValueError("lfilter: at least one coefficient of a must be non-zero")
     n = max(a.size, b.size)

@@ -212,6 +212,20 @@ def test_noise_std_is_scipy_mad() -> None:
         x = np.cumsum(rng.standard_normal(n)) * 1e-3 + rng.standard_normal(n)
         assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
     assert np.isnan(noise_std(np.array([0.0, np.nan, 1.0, 2.0])))
+    x = np.round(rng.standard_normal(2000), 1)  # many equal differences: the two middle ranks tied or not
+    assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
+
+
+@pytest.mark.parametrize("step", [1, 2, 3])
+def test_model_check_upsampling_is_np_interp(step: int) -> None:
+    from feeddrive.estimator.mismatch import _upsample
+
+    rng = np.random.default_rng(step)
+    for n in (7, 8, 1001):
+        y = rng.standard_normal(len(range(0, n, step)))
+        y[1] = np.nan  # the residue is NaN where it is not tested
+        ref = np.interp(np.arange(n), np.arange(0, n, step), y)
+        np.testing.assert_array_equal(_upsample(y, step, n), ref)
 
 
 def test_last_columns_f_test_is_statsmodels_f_test() -> None:
@@ -259,3 +273,23 @@ def test_adequacy_rows_read_lagged_terms_as_np_roll(lag: int) -> None:
     lo, hi = position[rows].min(), position[rows].max()
     full = np.polynomial.legendre.legval(2 * (position - lo) / (hi - lo) - 1, [0, 0, 1])  # P2 over the rows' range
     np.testing.assert_array_equal(_legendre(np.cumsum(w).take(take - lag), range(2, 3))[:, 0], full[rows])
+
+
+def test_simulation_spline_is_scipy_cubic_spline() -> None:
+    from scipy.interpolate import CubicSpline
+
+    rng = np.random.default_rng(3)
+    for n in (4, 5, 9, 1450, 1451):
+        x = np.arange(n) * 4.0
+        x[-1] -= 1.0  # a shorter last step, as the simulation's last sample
+        Y = np.cumsum(rng.standard_normal((2, n)), axis=1) * 1e3
+        for at in (np.arange(x[-1] + 1) + 1 / 6, np.arange(x[-1] + 1) - 0.25, np.arange(x[-1] + 1)):
+            np.testing.assert_array_equal(simulation._spline(x, Y, at), CubicSpline(x, Y, axis=1)(at))
+
+
+def test_sosfilt_zi_kept_per_filter_is_not_shared() -> None:
+    sos = FilterSpec(100.0).sos(1e-4)
+    first = lti.sosfilt_zi(sos)
+    np.testing.assert_array_equal(first, signal.sosfilt_zi(sos))
+    first[:] = 0.0  # a caller's array of its own: the kept design is unchanged
+    np.testing.assert_array_equal(lti.sosfilt_zi(sos), signal.sosfilt_zi(sos))
