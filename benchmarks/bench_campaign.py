@@ -17,6 +17,12 @@ forked from this process (warm, as the pool's). As for the pool, the campaign's 
 a cluster's start is not in it and is printed apart (``start s``: the pool starts its workers inside
 ``run_campaign``). The load average is printed first.
 
+Where the wall time goes: ``runs s`` is the time the runs took in their workers (the sum of the records'
+``elapsed_s``, each run's ``execute``, divided by the workers: the wall time of perfectly balanced
+workers), ``rest s`` the wall time beyond it: the serial parts in this process (the check of every run's
+scenario before the first starts, the aggregation and its files), the executor's start and dispatch,
+and the idle tail (one worker done while the other runs the last run).
+
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
         [--modes serial pool dask "dask spawned" "dask warm"]
 """
@@ -100,7 +106,7 @@ def main() -> int:
         print(f"a run imports {len(late)} modules that run_cosim.prepare does not: {', '.join(late[:8])}", file=sys.stderr)
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
-    times, aggregates, cpu, start = {}, {}, {}, {}
+    times, aggregates, cpu, start, busy = {}, {}, {}, {}, {}
     modes = ["serial"] + [m for m in MODES[1:] if m in args.modes]  # the serial run: the reference
     with tempfile.TemporaryDirectory() as tmp:
         for mode in modes:
@@ -131,6 +137,7 @@ def main() -> int:
                 time.sleep(SETTLE_S)
                 own, children = (a - b for a, b in zip(_cpu(), (own, children)))
             cpu[mode] = (own, children)
+            busy[mode] = sum(r["elapsed_s"] or 0.0 for r in res.records)  # each run's execute, in its worker
             aggregates[mode] = res.aggregates
             if res.failed:
                 print(f"{mode}: {len(res.failed)} runs failed: {res.failed[0]['reason']}", file=sys.stderr)
@@ -139,13 +146,15 @@ def main() -> int:
     print(f"campaign of {args.runs} runs (2 s tool change, monitor, LS + IV), {args.workers} workers; "
           f"aggregates identical: {same}")
     print(f"{'mode':12} {'wall s':>8} {'runs/min':>9} {'speed-up':>9} {'CPU s':>7} {'(here':>6} {'workers)':>8} "
-          f"{'on free cores':>14} {'start s':>8}")
+          f"{'on free cores':>14} {'start s':>8} {'runs s':>7} {'rest s':>7}")
     serial_cpu = sum(cpu["serial"])
+    runs = {mode: busy[mode] / (1 if mode == "serial" else args.workers) for mode in times}
     for mode, t in times.items():
         own, children = cpu[mode]
         ideal = serial_cpu / (own + children / (1 if mode == "serial" else args.workers))
         print(f"{mode:12} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
-              f"{own:6.1f} {children:8.1f} {ideal:14.2f} {f'{start[mode]:8.2f}' if mode in start else ''}")
+              f"{own:6.1f} {children:8.1f} {ideal:14.2f} {f'{start[mode]:8.2f}' if mode in start else '':8} "
+              f"{runs[mode]:7.2f} {t - runs[mode]:7.2f}")
     if args.drift_motions:
         sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
         from drift import run_drift
