@@ -214,8 +214,8 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
     them all submitted, a scheduler at the default saturation (1.1) gave each one-thread worker a second run
     behind the one it ran, so at the campaign's end one worker could still have two runs while the other
     idled (no work stealing: cluster.QUIET), and a run that killed its worker took the run queued behind it
-    down too (the scheduler blames every task on a dead worker). That costs a round trip through this
-    process between a worker's runs (~20 ms idle each, more when this process is busy: issue 26).
+    down too (the scheduler blames every task on a dead worker). That leaves each worker idle between its
+    runs for a round trip through this process, longer when this process is busy (issue 26).
     """
     from distributed import as_completed as dask_completed
     from distributed.scheduler import KilledWorker
@@ -344,6 +344,8 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
         check = getattr(resolve_function(fn) if isinstance(fn, str) else fn, "validate", None)
         for spec in pending if check else ():
             check(spec)
+        if client is not None or workers > 1:
+            pending = longest_first(fn, pending)
         _execute(campaign, fn, pending, len(specs), finished, out, workers, client, progress, timeout)
     finally:
         if client is not None:
@@ -355,6 +357,22 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
     if plots:
         plot_campaign(records, aggregates, out / "plots")
     return CampaignResult(out, records, len(pending), aggregates)
+
+
+def longest_first(run: str | Callable, specs: list[RunSpec]) -> list[RunSpec]:
+    """``specs`` by the run function's ``cost(spec)`` hook, the costliest first (ties in campaign order).
+
+    On several workers the campaign ends when its last run does: a long run started last would keep one
+    worker busy while the others idle. Unchanged when the hook is missing or cannot cost every run (None).
+    """
+    cost = getattr(resolve_function(run) if isinstance(run, str) else run, "cost", None)
+    if not callable(cost):
+        return specs
+    costs = [cost(spec) for spec in specs]
+    if any(c is None for c in costs):
+        return specs
+    order = sorted(range(len(specs)), key=lambda k: -costs[k])  # stable: equal costs keep their order
+    return [specs[k] for k in order]
 
 
 def _execute(campaign: Campaign, fn: str | Callable, pending: list[RunSpec], total: int, finished: dict[str, dict],

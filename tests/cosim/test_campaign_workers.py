@@ -68,3 +68,26 @@ def test_a_run_gives_the_same_signals_with_cold_and_warm_worker_caches():
     digests = json.loads(cold.value)
     assert len(digests) > 20 and {"plant.speed", "sensors.Im1", "nc.state"} <= set(digests)
     assert digests == warm[0]["result"] == warm[1]["result"]
+
+
+def test_the_longest_runs_start_first_on_several_workers(tmp_path):
+    """``run_cosim.cost``: the plant steps of each run (its stop time, else the NC program's + the settling
+    time, over the step, times the oversampling); ``longest_first`` orders the runs by it, ties in campaign
+    order, and leaves them as they are when a run has no cost (not resolved here)."""
+    from feeddrive.cosim.campaign.execute import longest_first
+    from feeddrive.cosim.nc import SETTLING, plan_program
+    from feeddrive.cosim.scenario import scenario_from_dict
+
+    base = {"name": "s", "step": 1e-3, "plant": {"fmu": "builtin", "oversample": 2},
+            "nc": {"program": [{"dwell": {"time": 0.05}}]}}
+    c = Campaign(name="c", base=base, sweep={"stop_time": [0.2, 0.5, None, 0.5]})
+    specs = expand(c)
+    assert [cosim_run.run_cosim.cost(s) for s in specs] == [None] * 4  # not resolved in this process yet
+    assert longest_first(cosim_run.run_cosim, specs) == specs
+    for s in specs:
+        cosim_run.run_cosim.validate(s)
+    default = plan_program(scenario_from_dict(base).nc)[-1][0] + SETTLING
+    costs = [cosim_run.run_cosim.cost(s) for s in specs]
+    assert costs == [0.2 / 1e-3 * 2, 0.5 / 1e-3 * 2, default / 1e-3 * 2, 0.5 / 1e-3 * 2] and 0.2 < default < 0.5
+    assert [s.index for s in longest_first(cosim_run.run_cosim, specs)] == [1, 3, 2, 0]
+    assert longest_first("test_campaign:toy_run", specs) == specs  # no cost hook
