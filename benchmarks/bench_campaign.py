@@ -24,7 +24,10 @@ scenario before the first starts, the aggregation and its files), the executor's
 and the idle tail (one worker done while the other runs the last run).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_campaign.py [--runs 8] [--workers 2] [--drift-motions 20]
-        [--repeat 1] [--modes serial pool dask "dask spawned" "dask warm"]
+        [--repeat 1] [--dispatch] [--modes serial pool dask "dask spawned" "dask warm"]
+
+``--dispatch`` measures only how long a ``local_cluster`` worker waits between two runs (runs that sleep,
+so that the machine's load hardly matters), with the scheduler's queue and as the runs were submitted before.
 
 ``--repeat K`` runs every mode K times, in turn (serial, pool, dask, serial, ...), and prints each mode's
 best round: the least wall time (its speed-up, ``runs s`` and ``rest s``) and the least CPU time (the CPU
@@ -82,6 +85,35 @@ def _late_imports(run, spec) -> list[str]:
     return text.split()
 
 
+def _nap(spec) -> dict:
+    """A run without CPU: 0.1 s asleep (``--dispatch``)."""
+    time.sleep(0.1)
+    return {"truth": {}, "injected": {"plant": {}, "sensors": {}}, "motions": []}
+
+
+def _dispatch(workers: int, runs: int = 40, repeat: int = 3) -> None:
+    """How long a ``local_cluster`` worker waits between two runs (``--dispatch``): runs that sleep 0.1 s, handed
+    out by the scheduler's queue (``execute._dask``) or, as before, submitted by this process as runs end."""
+    import importlib
+
+    from feeddrive.cosim.campaign import local_cluster
+
+    execute = importlib.import_module("feeddrive.cosim.campaign.execute")  # the module (the package's is the function)
+    campaign, queues, best = Campaign(name="nap", base={"name": "s"}, repetitions=runs), execute._queues, {}
+    with local_cluster(workers, run=_nap) as cluster, tempfile.TemporaryDirectory() as tmp:
+        for k in range(repeat):
+            for how in ("queued", "submitted one by one"):
+                execute._queues = queues if how == "queued" else (lambda client, n: False)
+                t = time.perf_counter()
+                res = run_campaign(campaign, Path(tmp, f"{k}-{how[0]}"), scheduler=cluster.scheduler_address, run=_nap,
+                                   plots=False)
+                idle = (time.perf_counter() - t - sum(r["elapsed_s"] for r in res.records) / workers) / (runs / workers)
+                best[how] = min(best.get(how, idle), idle)
+    execute._queues = queues
+    print(f"Dask dispatch, {runs} runs of 0.1 s asleep on {workers} workers, best of {repeat}: a worker waits "
+          + "; ".join(f"{1e3 * t:.0f} ms a run {how}" for how, t in best.items()))
+
+
 def _measure(mode: str, campaign: Campaign, out: Path, workers: int) -> dict:
     """One campaign with the executor of ``mode``: its result, wall time, CPU (this process, the workers),
     the cluster's start (Dask) and the runs' time in their workers."""
@@ -124,10 +156,14 @@ def main() -> int:
     parser.add_argument("--runs", type=int, default=8, help="runs in the campaign")
     parser.add_argument("--workers", type=int, default=2, help="local processes and Dask workers")
     parser.add_argument("--drift-motions", type=int, default=20, help="motions of the drift example (0: skip)")
+    parser.add_argument("--dispatch", action="store_true", help="only the Dask dispatch's wait between runs")
     parser.add_argument("--repeat", type=int, default=1, help="rounds of every mode; the best of each is printed")
     parser.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES, help="the executors measured")
     args = parser.parse_args()
     warnings.simplefilter("ignore")
+    if args.dispatch:
+        _dispatch(args.workers)
+        return 0
     from feeddrive.fmu_build import builtin_fmu
 
     builtin_fmu()  # build outside the timings
