@@ -28,7 +28,7 @@ import shutil
 from collections.abc import Sequence
 from typing import Any
 
-from fmpy import calloc, extract, free, read_model_description
+from fmpy import calloc, extract, free
 from fmpy.fmi2 import (
     FMU2Model,
     FMU2Slave,
@@ -42,6 +42,7 @@ from feeddrive.cosim import fmi_progress, fmu_ports
 from feeddrive.cosim.component import Component
 from feeddrive.cosim.errors import FMIError, ScenarioError
 from feeddrive.cosim.fmu_components import convert_links
+from feeddrive.cosim.fmu_inspect import model_description
 from feeddrive.cosim.fmu_me import MEAN_ROLES, ModelExchange
 from feeddrive.cosim.scenario import INPUT_ROLES, OUTPUT_ROLES, ROLE_UNITS, PlantConfig
 
@@ -134,7 +135,11 @@ class FMUComponent(ModelExchange, Component):
     def setup(self, t0: float, h: float, n_steps: int) -> None:
         cfg: PlantConfig = self.config
         self._t0, self._h, self._failure = t0, h, None
-        md = read_model_description(cfg.fmu)
+        # read once per process (fmu_inspect's cache): a campaign's run inherits it from its worker, which
+        # resolved the run's scenario. The FMU is still extracted and loaded, and instantiated, by each run:
+        # a run is a forked child (cosim/supervise.py) whose FMU dies with it, so it never needs a reset, and
+        # runs share no folder an FMU might write into, nor a library whose globals a run changed
+        md = model_description(cfg.fmu)
         cs = cfg.interface == "cs"
         self._unzip = extract(cfg.fmu)
         self._fmu = fmu = self._open(md, cs)

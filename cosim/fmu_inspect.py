@@ -1,15 +1,59 @@
-"""Reading a plant FMU's archive without running it: FMI version, model description, content hash."""
+"""Reading a plant FMU's archive without running it: FMI version, model description, content hash.
+
+Each answer is kept per process, keyed by the file's identity (``_identity``: path, size, mtime, inode), so
+that a campaign's runs, which resolve the same FMU hundreds of times (its check of every run, each worker's
+resolution), read and hash it once per process; a file rebuilt or replaced since is read again (issue 26).
+Failures are not kept. The model description is shared by the callers: treat it as read-only.
+"""
 from __future__ import annotations
 
 import hashlib
+import os
+import stat
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
 
+#: answers by (question, ``_identity``); a few FMUs per process, at most ``CACHE_MAX`` entries
+_CACHE: dict[tuple, Any] = {}
+CACHE_MAX = 256
+
+
+def _identity(path: Path | str) -> tuple | None:
+    """(absolute path, size, mtime [ns], inode, ctime [ns]) of a regular file, or None for anything else: a
+    folder (an extracted FMU, whose files may change under an unchanged folder) or a path that cannot be read
+    (the question is then asked of the file itself, which raises the error the caller reports)."""
+    try:
+        st = os.stat(path)
+    except (OSError, TypeError, ValueError):
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    return os.path.abspath(path), st.st_size, st.st_mtime_ns, st.st_ino, st.st_ctime_ns
+
+
+def _cached(question: str, path: Path | str, answer: Callable[[], Any]) -> Any:
+    """``answer()``, computed once per process for this file as it is now (see the module's docstring)."""
+    identity = _identity(path)
+    if identity is None:
+        return answer()
+    key = (question, identity)
+    if key not in _CACHE:
+        value = answer()  # raises for a bad file: nothing kept
+        if len(_CACHE) >= CACHE_MAX:
+            _CACHE.pop(next(iter(_CACHE)))  # the oldest (dicts keep their insertion order)
+        _CACHE[key] = value
+    return _CACHE[key]
+
 
 def fmi_version(path: Path) -> str:
     """The ``fmiVersion`` attribute of an FMU's modelDescription.xml (raises ValueError if unreadable)."""
+    return _cached("version", path, lambda: _fmi_version(path))
+
+
+def _fmi_version(path: Path) -> str:
     try:
         with zipfile.ZipFile(path) as z, z.open("modelDescription.xml") as f:
             return ElementTree.parse(f).getroot().get("fmiVersion", "")
@@ -25,6 +69,10 @@ def model_description(path: Path) -> Any:
     ValueError
         The modelDescription.xml fails fmpy's validation; the message gives its first problem.
     """
+    return _cached("description", path, lambda: _model_description(path))
+
+
+def _model_description(path: Path) -> Any:
     from fmpy import read_model_description
     from fmpy.model_description import ValidationError as FMIValidationError
 
@@ -125,6 +173,11 @@ def runnable(md: Any, interface: str, name: str) -> tuple[str, str] | None:
 
 
 def sha256(path: Path) -> str:
+    """The hex SHA-256 of a file's bytes."""
+    return _cached("sha256", path, lambda: _sha256(path))
+
+
+def _sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -142,6 +195,10 @@ def check_archive(path: Path, model_identifier: str | None = None) -> None:
         extraction folder); no ``binaries/<platform>/<model_identifier><ext>`` for this platform
         (checked when ``model_identifier`` is given). The message says what was expected.
     """
+    _cached(f"archive {model_identifier}", path, lambda: _check_archive(path, model_identifier))
+
+
+def _check_archive(path: Path, model_identifier: str | None) -> bool:
     import fmpy
 
     try:
@@ -160,3 +217,4 @@ def check_archive(path: Path, model_identifier: str | None = None) -> None:
             have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
             raise ValueError(f"no binary for this platform: expected {binary} in the FMU"
                              f"{' (it has binaries for ' + ', '.join(have) + ')' if have else ' (it has no binaries)'}")
+    return True

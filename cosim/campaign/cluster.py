@@ -19,9 +19,12 @@ from typing import Any
 #: sampling every thread's stack every 10 ms: ~9 % of the workers' CPU on bench_campaign), the event loops'
 #: tick every 20 ms and the system monitor every 0.5 s in each process, the scheduler's work stealing every
 #: 100 ms (runs wait on the scheduler until a worker is free: nothing to steal); together ~0.5 s of this
-#: process's CPU (the scheduler and the nannies of a LocalCluster run here) per 8 runs
+#: process's CPU (the scheduler and the nannies of a LocalCluster run here) per 8 runs. A worker-saturation
+#: of 1: the scheduler queues a campaign's runs and sends each worker one per thread, the next as soon as it
+#: is done (cosim/campaign/execute.py ``_dask``), where the default 1.1 sends a one-thread worker two
 QUIET = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
-         "distributed.admin.system-monitor.interval": "5s", "distributed.scheduler.work-stealing": False}
+         "distributed.admin.system-monitor.interval": "5s", "distributed.scheduler.work-stealing": False,
+         "distributed.scheduler.worker-saturation": 1.0}
 
 
 def local_cluster(workers: int, run: str | Callable | None = None, **options: Any) -> Any:

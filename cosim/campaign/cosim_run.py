@@ -212,6 +212,22 @@ def _validate(spec: RunSpec) -> None:
 run_cosim.validate = _validate
 
 
+def _cost(spec: RunSpec) -> float | None:
+    """The plant steps of a run (its stop time over the plant's finest step), from the scenario ``validate``
+    resolved in this process (None when it did not): ``run_campaign`` starts the longest runs first."""
+    from feeddrive.cosim.nc import SETTLING, plan_program
+
+    hit = _RESOLVED.get(_key(spec))
+    if hit is None:
+        return None
+    s = hit[0]
+    stop = s.stop_time if s.stop_time is not None or s.nc is None else plan_program(s.nc)[-1][0] + SETTLING
+    return None if stop is None else stop / s.step * s.plant.oversample
+
+
+run_cosim.cost = _cost
+
+
 def _prepare() -> None:
     """What every run needs built, once per worker process before its runs are forked (cosim/supervise.py).
 

@@ -208,10 +208,14 @@ def _prepare_worker(run: str | Callable) -> None:
 def _dask(run, specs, client, on_done, timeout=None) -> None:
     """Run ``specs`` on the cluster of ``client``, at most one per worker thread at a time.
 
-    The next run is submitted when one ends, not all at once: with them all submitted, the scheduler gave each
-    worker a second run behind the one it ran (``worker-saturation``), so at the campaign's end one worker
-    could still have two runs while the other idled (no work stealing: cluster.QUIET), and a run that killed
-    its worker took the run queued behind it down too (the scheduler blames every task on a dead worker).
+    A scheduler that queues runs itself (``_queues``: ``distributed.scheduler.worker-saturation`` <= 1, as
+    ``local_cluster``'s) gets them all at once, as one group: it keeps them and hands a worker its next run as
+    soon as the worker reports one done. Else the next run is submitted when one ends, not all at once: with
+    them all submitted, a scheduler at the default saturation (1.1) gave each one-thread worker a second run
+    behind the one it ran, so at the campaign's end one worker could still have two runs while the other
+    idled (no work stealing: cluster.QUIET), and a run that killed its worker took the run queued behind it
+    down too (the scheduler blames every task on a dead worker). That leaves each worker idle between its
+    runs for a round trip through this process, longer when this process is busy (issue 26).
     """
     from distributed import as_completed as dask_completed
     from distributed.scheduler import KilledWorker
@@ -226,18 +230,45 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
         return future
 
     try:
-        pending = dask_completed([submit() for _ in range(min(len(queue), _threads(client)))])
+        if _queues(client, len(specs)):
+            queue.reverse()
+            futures = client.map(execute, [run] * len(queue), queue, [timeout] * len(queue),
+                                 key=[f"campaign-{spec.id}" for spec in queue], pure=False)
+            by_key |= {f.key: spec for f, spec in zip(futures, queue)}
+            running |= set(futures)
+            queue.clear()
+            pending = dask_completed(futures)
+        else:
+            pending = dask_completed([submit() for _ in range(min(len(queue), _threads(client)))])
         for future in pending:
             running.discard(future)
+            free = _threads(client) - len(running) if queue else 0  # workers may have come or gone
+            for _ in range(min(len(queue), max(free, 0 if running else 1))):
+                pending.add(submit())  # before this run's record is written: its worker waits for it
             try:
                 on_done(future.result())
             except KilledWorker as exc:  # the scheduler gave up after its allowed-failures: no endless retry
                 on_done(_lost(by_key[future.key], f"crashed: Dask workers died running it ({exc})"))
-            free = _threads(client) - len(running) if queue else 0  # workers may have come or gone
-            for _ in range(min(len(queue), max(free, 0 if running else 1))):
-                pending.add(submit())
     finally:
         client.cancel(list(running))
+
+
+def _queues(client: Any, runs: int) -> bool:
+    """Whether the scheduler would keep ``runs`` submitted at once and send each worker one per thread.
+
+    Its ``worker-saturation`` must be at most 1 (a one-thread worker gets ``ceil(saturation)`` runs at a
+    time), and the runs must be more than twice the cluster's threads, else the scheduler sends every one
+    to a worker straight away (``Scheduler.is_rootish``: only a large group of tasks is queued)."""
+    try:
+        saturation = client.run_on_scheduler(_saturation)
+    except Exception:  # noqa: BLE001 - a scheduler that refuses to run code (or an old one): the safe way
+        return False
+    return 0 < saturation <= 1 and runs > 2 * _threads(client)
+
+
+def _saturation(dask_scheduler: Any) -> float:
+    """On the scheduler: its ``distributed.scheduler.worker-saturation``."""
+    return float(dask_scheduler.WORKER_SATURATION)
 
 
 def _threads(client: Any) -> int:
@@ -313,6 +344,8 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
         check = getattr(resolve_function(fn) if isinstance(fn, str) else fn, "validate", None)
         for spec in pending if check else ():
             check(spec)
+        if client is not None or workers > 1:
+            pending = longest_first(fn, pending)
         _execute(campaign, fn, pending, len(specs), finished, out, workers, client, progress, timeout)
     finally:
         if client is not None:
@@ -324,6 +357,22 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
     if plots:
         plot_campaign(records, aggregates, out / "plots")
     return CampaignResult(out, records, len(pending), aggregates)
+
+
+def longest_first(run: str | Callable, specs: list[RunSpec]) -> list[RunSpec]:
+    """``specs`` by the run function's ``cost(spec)`` hook, the costliest first (ties in campaign order).
+
+    On several workers the campaign ends when its last run does: a long run started last would keep one
+    worker busy while the others idle. Unchanged when the hook is missing or cannot cost every run (None).
+    """
+    cost = getattr(resolve_function(run) if isinstance(run, str) else run, "cost", None)
+    if not callable(cost):
+        return specs
+    costs = [cost(spec) for spec in specs]
+    if any(c is None for c in costs):
+        return specs
+    order = sorted(range(len(specs)), key=lambda k: -costs[k])  # stable: equal costs keep their order
+    return [specs[k] for k in order]
 
 
 def _execute(campaign: Campaign, fn: str | Callable, pending: list[RunSpec], total: int, finished: dict[str, dict],

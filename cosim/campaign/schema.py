@@ -46,6 +46,11 @@ Run function protocol: ``fn(spec: RunSpec) -> dict`` (JSON-serialisable), shaped
                   "sensor_faults": [{"sensor": "Im1", ...}],
                   "diagnosis": [{"fault": "brush wear", "parameters": ["R"], "evidence": ...}]}]}
 
+Optional hooks, attributes of the function: ``prepare()`` (once per worker process, before its runs are
+forked: imports), ``validate(spec)`` (before any run: one input error, not N failed runs) and
+``cost(spec) -> float | None`` (how long the run takes, in any unit: on several workers the costliest runs
+start first). ``run_cosim`` has all three.
+
 ``aggregate`` turns the records into the detection and estimation tables (see its docstring for the
 exact definitions of the rates).
 """

@@ -174,21 +174,50 @@ def warm_toy_run(spec):
 warm_toy_run.prepare = lambda: PREPARED.append(os.getpid())
 
 
+#: (task key, new state, runs processing on its worker) of each campaign run's transition to ``queued`` or
+#: ``processing``, seen by ``_Dispatch`` on a LocalCluster's scheduler (which runs in this process)
+DISPATCH: list[tuple[str, str, int]] = []
+
+
+class _Dispatch:
+    """A scheduler plugin recording how the scheduler hands out a campaign's runs (``DISPATCH``)."""
+
+    idempotent = False
+    name = "campaign-dispatch"
+
+    def __init__(self, scheduler):
+        self.scheduler = scheduler
+
+    def transition(self, key, start, finish, *args, **kwargs):
+        if str(key).startswith("campaign-") and not str(key).startswith("campaign-prepare") \
+                and finish in ("queued", "processing"):
+            ws = self.scheduler.tasks[key].processing_on
+            DISPATCH.append((str(key), finish, len(ws.processing) if ws is not None else 0))
+
+
 @pytest.mark.slow
 def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
     """``local_cluster``: worker processes (not threads) forked from this process after the run's prepare hook
-    ran here, so they start with its imports; the campaign's records are the serial run's."""
+    ran here, so they start with its imports; the campaign's records are the serial run's. Its scheduler
+    keeps the runs (all 12 submitted at once, more than twice its 2 threads) and gives each worker one at a
+    time: no worker ever holds a second run behind the one it runs (cosim/campaign/execute.py ``_dask``)."""
     from distributed import Client
+    from distributed.diagnostics.plugin import SchedulerPlugin
 
     from feeddrive.cosim.campaign import local_cluster
 
     c = campaign(tmp_path, fail_if_Cd=1.3)
     serial = run_campaign(c, tmp_path / "serial", run=warm_toy_run, plots=False)
     PREPARED.clear()
+    DISPATCH.clear()
     with local_cluster(2, run=warm_toy_run) as cluster, Client(cluster) as client:
+        cluster.scheduler.add_plugin(type("Dispatch", (_Dispatch, SchedulerPlugin), {})(cluster.scheduler))
         seen = client.run(lambda: (os.getpid(), list(PREPARED)))
         dask = run_campaign(c, tmp_path / "dask", scheduler=cluster.scheduler_address, run=warm_toy_run, plots=False)
     assert len(seen) == 2 and all(pid != os.getpid() and prepared == [os.getpid()] for pid, prepared in seen.values())
+    processing = [n for _, state, n in DISPATCH if state == "processing"]
+    assert len(processing) == 12 and max(processing) == 1
+    assert sum(state == "queued" for _, state, _ in DISPATCH) >= 10  # all but the first run of each worker
     assert dask.aggregates == serial.aggregates
     assert [(r["id"], r["status"], r["result"]) for r in dask.records] == \
            [(r["id"], r["status"], r["result"]) for r in serial.records]
