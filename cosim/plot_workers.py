@@ -4,8 +4,8 @@ A run's five PNGs and the import of matplotlib they need took longer than the co
 the user waited for them after it. :class:`PlotWorkers` forks its processes at the start of the run: each
 imports matplotlib and draws a first, throw-away figure (fonts, the Agg renderer) while the simulation
 runs in the parent, then waits for figures. At the end of the run the parent sends each figure as a
-:class:`FigureJob` (the drawing function's name and its data, pickled: a few MB) to the next idle
-process; the run itself never imports matplotlib.
+:class:`FigureJob` (the drawing function's name and what it draws, pickled: each long trace as its
+envelope, tens of kB) to the next idle process; the run itself never imports matplotlib.
 
 Jobs that are not :class:`FigureJob` (a user component's own ``write_plots``) are drawn in this process,
 while the workers draw theirs, unless they were given when the workers were forked (``jobs``): the
@@ -82,7 +82,8 @@ def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
 
 def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder: str | Path,
                     title: str = "") -> list[FigureJob]:
-    """The run's figures (cosim.plots) as jobs, each with only the samples of its motion.
+    """The run's figures (cosim.plots) as jobs, each with what it draws of its motion: every trace already reduced
+    to its min/max envelope at the figure's width (``cosim.plots.envelope``), so a job is tens of kB, not MB.
 
     Parameters
     ----------
@@ -101,24 +102,70 @@ def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder:
     for k, idx in motions(signals).items():
         if idx.size < 2:
             continue
-        part = {name: np.ascontiguousarray(signals[name][idx]) for name in wanted if name in signals}
-        t = np.ascontiguousarray(time[idx])
+        t = time[idx]
+        part = {name: signals[name][idx] for name in wanted if name in signals}
+        traces = {name: envelope(t, y) for name, y in part.items()}
+        args = {"profiles_figure": (k, traces), "currents_figure": (k, traces, None)}
+        if all(name in part for name in CURRENTS):  # the residue and its mean from every sample
+            residue = part[CURRENTS[0]] - part[CURRENTS[1]]
+            args["currents_figure"] = (k, traces | {"residue": envelope(t, residue)}, float(np.mean(residue)))
         for pattern, function, cost in RUN_FIGURES:
             path = folder / pattern.format(k=k)
-            jobs.append(FigureJob("feeddrive.cosim.plots", function, (k, t, part, path, title), cost))
+            jobs.append(FigureJob("feeddrive.cosim.plots", function, (*args[function], path, title), cost))
     return jobs
+
+
+#: samples drawn per trace at most, as min/max pairs: the figures' width in pixels (9 in at 110 dpi: 990)
+DISPLAY_BUCKETS = 1000
+
+
+def envelope(t: np.ndarray, y: np.ndarray, buckets: int = DISPLAY_BUCKETS) -> tuple[np.ndarray, np.ndarray]:
+    """The samples of a long trace that a figure can show: the first and last, and the minimum and maximum
+    of each of ``buckets`` runs of consecutive samples, in time order.
+
+    A line through them covers the same pixels as the whole trace at a width of ``buckets`` pixels or less:
+    a one-sample spike is kept at its time and value. Agg's rendering of a 35 000-sample trace was a third
+    of a figure's time, and sending the whole traces to the drawing processes 0.8 s of a run. Shorter
+    traces are returned whole.
+
+    Parameters
+    ----------
+    t, y : ndarray, shape (n,)
+        Times [s] and values of the trace.
+    buckets : int
+        Number of runs (at least the drawing's width in pixels).
+
+    Returns
+    -------
+    t, y : ndarray, shape (m,), m <= 2 * buckets + 2 + n % buckets
+    """
+    y = np.asarray(y)
+    n = y.shape[0]
+    size = n // buckets
+    if size < 3:  # no fewer samples to draw
+        return np.asarray(t), y
+    head = y[: size * buckets].reshape(buckets, size)
+    offsets = np.arange(buckets) * size
+    keep = np.concatenate(([0], offsets + np.argmin(head, axis=1), offsets + np.argmax(head, axis=1),
+                           np.arange(size * buckets, n), [n - 1]))
+    keep = np.unique(keep)
+    return np.asarray(t)[keep], y[keep]
 
 
 def monitor_figure_jobs(traces: Sequence, motions: Sequence[Mapping], folder: str | Path,
                         thresholds: Mapping | None = None) -> list[FigureJob]:
     """The monitor's figures (cosim.monitor_plots) as jobs: ``monitor_motion<k>.png`` and
     ``monitor_correlation<k>.png`` of each kept trace, ``monitor_trends.png`` of the axis."""
+    from feeddrive.cosim.monitor_figure import motion_figure
+
     folder = Path(folder)
     module = "feeddrive.cosim.monitor_plots"
+    # what the figures draw of each trace: its long series as envelopes (kB to send, not the motion's MB)
+    shown = [motion_figure(tr) for tr in traces]
     # costs measured against the run's figures (cosim.plots): 4 and 2 panels, and 6 panels for the trends
-    jobs = [FigureJob(module, "plot_motion", (tr, folder / f"monitor_motion{tr.motion}.png"), 6.0) for tr in traces]
-    jobs += [FigureJob(module, "plot_correlation", (tr, folder / f"monitor_correlation{tr.motion}.png"), 4.0)
-             for tr in traces if tr.mismatch is not None]
+    jobs = [FigureJob(module, "plot_motion", (f, folder / f"monitor_motion{f.motion}.png"), 6.0) for f in shown]
+    jobs += [FigureJob(module, "plot_correlation", (f, folder / f"monitor_correlation{f.motion}.png"), 4.0)
+             for f in shown if f.mismatch is not None]
     if any(m.get("parameters") for m in motions):
         axis = motions[-1].get("axis")
         jobs.append(FigureJob(module, "plot_trends", (list(motions), folder / "monitor_trends.png",
