@@ -3,11 +3,13 @@
 A :class:`cosim.monitor_pipeline.MotionTrace` holds every sample of the motion (MB on a 10 kHz axis); the
 figures draw each long series as its min/max envelope at the figure's width (``cosim.plot_workers.envelope``).
 :func:`motion_figure` reduces the trace to that where the trace is, so a drawing process is sent kB and the
-figure is the one drawn from the whole trace.
+figure is the one drawn from the whole trace. The results of the estimator become plain namespaces with the
+values the figures read: a drawing process unpickles them without importing the estimator (and scipy).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -28,10 +30,14 @@ class MotionFigure:
         model's ``i_q``, ``i_d``, ``w``): ``<name> measured`` (filtered), ``<name> simulated``, ``<name> residue``.
     windows : ndarray, shape (n_windows,) or None
         Times [s] of the current residue's windows (``residue.centers`` at the motion's sample spacing).
-    residue : estimator.validation.ResidueTest or None
-        The current pair's window test (small: one value per window).
-    mismatch : estimator.mismatch.MismatchResult or None
-        The model check, its checks without their per-sample ``simulated`` and ``residue`` (in ``lines``).
+    residue : SimpleNamespace or None
+        The current pair's window test (``estimator.validation.ResidueTest``): ``kind``, ``means``, ``levels``
+        (one value per window), ``offset``, ``gain_diff``.
+    mismatch : SimpleNamespace or None
+        The model check (``estimator.mismatch.MismatchResult``): ``test``, ``statistic``, ``p_value``, ``alpha``,
+        ``passed`` and ``checks``: name -> ``signal``, ``rms``, ``noise_std``, ``tests`` (name -> ``p_value``),
+        ``correlation``, ``band`` and ``inputs`` (the names of the correlated inputs); the per-sample
+        ``simulated`` and ``residue`` are in ``lines``.
     result : dict
         The motion's result (report.json ``motions[k]``).
     """
@@ -55,13 +61,23 @@ def motion_figure(trace: Any) -> MotionFigure:
         lines["r"] = envelope(t, np.asarray(im1) - np.asarray(im2))
     v, res, windows = trace.validation, None, None
     if v is not None and v.pairs["current"].residue is not None:
-        res = v.pairs["current"].residue
-        windows = t[0] + res.centers * (t[1] - t[0])
-    mm = trace.mismatch
+        r = v.pairs["current"].residue
+        windows = t[0] + r.centers * (t[1] - t[0])
+        res = SimpleNamespace(kind=r.kind, means=r.means, levels=r.levels, offset=r.offset, gain_diff=r.gain_diff)
+    mm, shown = trace.mismatch, None
     if mm is not None:
+        from feeddrive.estimator.mismatch import INPUTS  # loaded with the monitor that made the trace
+
+        checks = {}
         for name, check in mm.checks.items():
             lines[f"{name} measured"] = envelope(t, check.simulated + check.residue)
             lines[f"{name} simulated"] = envelope(t, check.simulated)
             lines[f"{name} residue"] = envelope(t, check.residue)
-        mm = replace(mm, checks={name: replace(check, simulated=None, residue=None) for name, check in mm.checks.items()})
-    return MotionFigure(trace.motion, lines, windows, res, mm, trace.result)
+            inputs = INPUTS.get(name) or [f"{j + 1}" for j in range(check.correlation.shape[1])]  # a model's own
+            checks[name] = SimpleNamespace(
+                signal=check.signal, rms=check.rms, noise_std=check.noise_std, correlation=check.correlation,
+                band=check.band, inputs=list(inputs), tests={k: SimpleNamespace(p_value=r.p_value)
+                                                             for k, r in check.tests.items()})
+        shown = SimpleNamespace(test=mm.test, statistic=mm.statistic, p_value=mm.p_value, alpha=mm.alpha,
+                                passed=mm.passed, checks=checks)
+    return MotionFigure(trace.motion, lines, windows, res, shown, trace.result)

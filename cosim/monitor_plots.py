@@ -135,12 +135,9 @@ def plot_correlation(trace, path: Path) -> Path:
     trace = motion_figure(trace)
     mm = trace.mismatch
     fig, axes = plt.subplots(1, len(mm.checks), figsize=(10, 3.2), squeeze=False)
-    from feeddrive.estimator.mismatch import INPUTS
-
     for ax, (name, check) in zip(axes[0], mm.checks.items()):
         lags = np.arange(check.correlation.shape[0])
-        names = INPUTS.get(name) or [f"{j + 1}" for j in range(check.correlation.shape[1])]  # a model's own check
-        for j, x in enumerate(names):
+        for j, x in enumerate(check.inputs):  # a model's own check: 1, 2, ...
             ax.stem(lags + 0.15 * j, check.correlation[:, j], linefmt=f"C{j}-", markerfmt=f"C{j}o",
                     basefmt=" ", label=f"input {x}")
         ax.axhspan(-check.band, check.band, color="0.9", zorder=0, label=f"{100 * (1 - mm.alpha):g} % band")

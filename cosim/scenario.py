@@ -278,7 +278,7 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
         except ValidationError as exc:
             raise from_validation(exc, raw, source, lines, prefix=("monitor",), model=ComponentSpec) from None
     try:
-        from feeddrive.cosim.monitor import MonitorConfig, resolve_files
+        from feeddrive.cosim.monitor_config import MonitorConfig, resolve_files
     except ImportError:
         warnings.warn(f"{source}: monitor: cosim.monitor is not available; running without a monitor",
                       stacklevel=3)

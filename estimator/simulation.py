@@ -12,7 +12,6 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.models.drives import drive_model
@@ -147,6 +146,8 @@ def simulate(equations: tuple[str, ...], inputs: Mapping[str, np.ndarray], param
         raise NumericalFailure(f"the simulation of the {' and '.join(equations)} equation(s) is unstable or non-finite "
                                f"with an integration step of {k * h:.3g} s" + (f" ({hint})" if hint else ""))
     if k > 1 or at is not None:
+        from scipy.interpolate import CubicSpline  # here: scipy.interpolate takes 0.5-1 s to import
+
         X = CubicSpline(idx, X, axis=1)(np.arange(n) if at is None else at)
     return {s: X[j] for j, s in enumerate(states)}
 
