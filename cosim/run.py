@@ -131,9 +131,15 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         if updated is not scenario:  # the default history is used: its folder (runs/) is made on first use
             db.parent.mkdir(parents=True, exist_ok=True)
         scenario = updated
-    master = Master.from_scenario(scenario)
-    # the figures' processes start now: their import of matplotlib overlaps the simulation (cosim.plot_workers)
+    # the figures' processes start first (cosim.plot_workers): their import of matplotlib overlaps the import of
+    # the monitor (scipy, when its component is made) and the simulation, on another CPU
     workers = PlotWorkers(preload=FIGURE_MODULES) if plots else None
+    try:
+        master = Master.from_scenario(scenario)
+    except BaseException:
+        if workers is not None:
+            workers.close()
+        raise
     wall = _time.perf_counter()
     try:
         master.setup()
