@@ -42,6 +42,9 @@ from feeddrive.cosim.scenario import Scenario, load_scenario
 
 #: the modules of the run's figures (cosim.plot_workers.FigureJob), loaded by the drawing processes at the start
 FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
+#: modules the monitor imports when it treats its first motion (estimator.simulation's CubicSpline), imported
+#: while the simulation's compiled loop runs (cosim.run._import_meanwhile)
+MONITOR_LATE_IMPORTS = ("scipy.interpolate",)
 OUTPUTS = ("signals.csv", "signals.meta.json", "scenario.resolved.yaml", "report.json", "report.html")
 
 
@@ -150,6 +153,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         if signals:
             master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
             write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names))
+        if scenario.monitor is not None:
+            _import_meanwhile(MONITOR_LATE_IMPORTS)
         recorder = master.run(progress=progress, signals_path=paths["signals"] if signals else None)
         report["loop"] = master.loop  # compiled fine loop or Python loop, and why (cosim/fastloop)
         report["components"] = master.reports()
@@ -234,6 +239,24 @@ def _write_page(out_dir: Path, report: dict) -> None:
         write_run_page(out_dir, json.loads((out_dir / "report.json").read_text(encoding="utf-8")))
     except Exception as exc:  # noqa: BLE001 - the run's outcome is what matters here
         print(f"{out_dir / 'report.html'}: not written ({type(exc).__name__}: {exc})", file=sys.stderr)
+
+
+def _import_meanwhile(modules: Sequence[str]) -> None:
+    """Import ``modules`` in a background thread: the simulation's compiled loop releases the GIL (ctypes), so
+    the import runs on another CPU instead of in the monitor's treatment of the first motion. A module the
+    monitor asks for before the thread is done waits for it (Python's per-module import lock); a failure is
+    left to the monitor's own import to report."""
+    import importlib
+    import threading
+
+    def load() -> None:
+        for name in modules:
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001 - the monitor's own import reports it
+                pass
+
+    threading.Thread(target=load, name="feeddrive-imports", daemon=True).start()
 
 
 def _prepare_page() -> None:
