@@ -153,8 +153,9 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         if signals:
             master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
             write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names))
-        if scenario.monitor is not None:
-            _import_meanwhile(MONITOR_LATE_IMPORTS)
+        # imported while the compiled loop runs: the monitor's on its first motion, report.html's at the end
+        _import_meanwhile((MONITOR_LATE_IMPORTS if scenario.monitor is not None else ())
+                          + (("feeddrive.cosim.report.page",) if page else ()))
         recorder = master.run(progress=progress, signals_path=paths["signals"] if signals else None)
         report["loop"] = master.loop  # compiled fine loop or Python loop, and why (cosim/fastloop)
         report["components"] = master.reports()
@@ -256,7 +257,8 @@ def _import_meanwhile(modules: Sequence[str]) -> None:
             except Exception:  # noqa: BLE001 - the monitor's own import reports it
                 pass
 
-    threading.Thread(target=load, name="feeddrive-imports", daemon=True).start()
+    if modules:
+        threading.Thread(target=load, name="feeddrive-imports", daemon=True).start()
 
 
 def _prepare_page() -> None:
