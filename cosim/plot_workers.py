@@ -83,7 +83,7 @@ def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
 def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder: str | Path,
                     title: str = "") -> list[FigureJob]:
     """The run's figures (cosim.plots) as jobs, each with what it draws of its motion: every trace already reduced
-    to its min/max envelope at the figure's width (``cosim.plots.envelope``), so a job is tens of kB, not MB.
+    to its min/max envelope at the figure's width (:func:`envelope`), so a job is tens of kB, not MB.
 
     Parameters
     ----------
