@@ -18,7 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from feeddrive.cosim.monitor_figure import motion_figure  # noqa: E402
+from feeddrive.cosim.figure_data import motion_figure  # noqa: E402
 from feeddrive.cosim.plot_workers import PNG, monitor_figure_jobs  # noqa: E402
 from feeddrive.cosim.plots import draw_concurrently  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
@@ -29,7 +29,7 @@ def plot_motion(trace, path: Path) -> Path:
     """One motion's validation and model check into ``path`` (PNG).
 
     ``trace``: ``cosim.monitor_pipeline.MotionTrace``, or what the figure draws of it
-    (``cosim.monitor_figure.MotionFigure``: its long series as envelopes, what a drawing process is sent)."""
+    (``cosim.figure_data.MotionFigure``: its long series as envelopes, what a drawing process is sent)."""
     shown = motion_figure(trace)
     lines, mm = shown.lines, shown.mismatch
     generic = mm is not None and "current" not in mm.checks  # a model's own equations (the PMSM's i_q, i_d, w)

@@ -32,6 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from feeddrive.cosim.figure_data import DISPLAY_BUCKETS, PNG, envelope, motion_figure  # noqa: F401 - re-exported
+
 #: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots, cost)
 RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure", 3.0), ("motion_{k}_currents.png", "currents_figure", 2.0))
 #: rows of the profiles figure: (label, unit, candidate signals in order of preference: measured first)
@@ -115,53 +117,10 @@ def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder:
     return jobs
 
 
-#: PNG options of every figure (``savefig(..., pil_kwargs=PNG)``): zlib level 3 instead of Pillow's 6 encodes the
-#: same pixels in 60 % of the time (5 figures of a tool change: 0.55 -> 0.34 s) into 9 % more bytes
-PNG = {"compress_level": 3}
-
-#: samples drawn per trace at most, as min/max pairs: the figures' width in pixels (9 in at 110 dpi: 990)
-DISPLAY_BUCKETS = 1000
-
-
-def envelope(t: np.ndarray, y: np.ndarray, buckets: int = DISPLAY_BUCKETS) -> tuple[np.ndarray, np.ndarray]:
-    """The samples of a long trace that a figure can show: the first and last, and the minimum and maximum
-    of each of ``buckets`` runs of consecutive samples, in time order.
-
-    A line through them covers the same pixels as the whole trace at a width of ``buckets`` pixels or less:
-    a one-sample spike is kept at its time and value. Agg's rendering of a 35 000-sample trace was a third
-    of a figure's time, and sending the whole traces to the drawing processes 0.8 s of a run. Shorter
-    traces are returned whole.
-
-    Parameters
-    ----------
-    t, y : ndarray, shape (n,)
-        Times [s] and values of the trace.
-    buckets : int
-        Number of runs (at least the drawing's width in pixels).
-
-    Returns
-    -------
-    t, y : ndarray, shape (m,), m <= 2 * buckets + 2 + n % buckets
-    """
-    y = np.asarray(y)
-    n = y.shape[0]
-    size = n // buckets
-    if size < 3:  # no fewer samples to draw
-        return np.asarray(t), y
-    head = y[: size * buckets].reshape(buckets, size)
-    offsets = np.arange(buckets) * size
-    keep = np.concatenate(([0], offsets + np.argmin(head, axis=1), offsets + np.argmax(head, axis=1),
-                           np.arange(size * buckets, n), [n - 1]))
-    keep = np.unique(keep)
-    return np.asarray(t)[keep], y[keep]
-
-
 def monitor_figure_jobs(traces: Sequence, motions: Sequence[Mapping], folder: str | Path,
                         thresholds: Mapping | None = None) -> list[FigureJob]:
     """The monitor's figures (cosim.monitor_plots) as jobs: ``monitor_motion<k>.png`` and
     ``monitor_correlation<k>.png`` of each kept trace, ``monitor_trends.png`` of the axis."""
-    from feeddrive.cosim.monitor_figure import motion_figure
-
     folder = Path(folder)
     module = "feeddrive.cosim.monitor_plots"
     # what the figures draw of each trace: its long series as envelopes (kB to send, not the motion's MB)

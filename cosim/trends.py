@@ -130,7 +130,7 @@ def plot_trends(motions: Sequence[Mapping], path: Path, title: str = "", thresho
     """Draw ``trend_figure`` into ``path`` (PNG); returns ``path``."""
     import matplotlib.pyplot as plt
 
-    from feeddrive.cosim.plot_workers import PNG
+    from feeddrive.cosim.figure_data import PNG
 
     fig = trend_figure(motions, title, thresholds, x, units)
     path.parent.mkdir(parents=True, exist_ok=True)

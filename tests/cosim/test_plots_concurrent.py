@@ -116,11 +116,11 @@ def test_a_figure_drawn_in_a_child_is_the_figure_drawn_here(tmp_path):
 
 
 def test_the_monitor_figures_are_sent_as_envelopes_and_drawn_the_same(tmp_path):
-    """What a drawing process is sent of a monitor trace (cosim.monitor_figure.MotionFigure) is a fraction of it,
+    """What a drawing process is sent of a monitor trace (cosim.figure_data.MotionFigure) is a fraction of it,
     needs no estimator, keeps a one-sample fault in a residue and in r = Im1 - Im2, and draws the same bytes."""
     import pickle
 
-    from feeddrive.cosim.monitor_figure import motion_figure
+    from feeddrive.cosim.figure_data import motion_figure
     from feeddrive.cosim.monitor_pipeline import MotionTrace
     from feeddrive.cosim.monitor_plots import plot_motion
     from feeddrive.estimator.mismatch import MismatchResult, ResidueCheck
