@@ -8,7 +8,13 @@
   motion; ``processing_s`` of the motions is printed too); target ratio <= 2. The rest is start-up
   (imports, scenario and FMU check), the supervised child, report.json/report.html and the plots.
 
-    python benchmarks/bench_cli.py [--repeat 3] [--scenario examples/tool_change.yaml]
+    python benchmarks/bench_cli.py [--repeat 3] [--scenario examples/tool_change.yaml] [--phases]
+
+``--phases``: where the run's wall time goes, in a fresh interpreter running what ``cosim run``'s
+supervised child runs (``run_scenario``), with the time at which each phase ends: imports, scenario,
+drawing processes forked and the monitor made (its imports), simulation, figures (with report.html's
+preparation meanwhile), report.json and report.html; and when each drawing process warmed up and drew
+each figure (wall time and CPU time of the figure).
 
 Times depend on the machine's load: compare the ratios, measured in the same run.
 """
@@ -41,8 +47,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3, help="repetitions (best is reported)")
     parser.add_argument("--scenario", type=Path, default=ROOT / "examples" / "tool_change.yaml")
+    parser.add_argument("--phases", action="store_true", help="where a run's wall time goes (module docstring)")
     args = parser.parse_args(argv)
     cosim = [sys.executable, "-m", "feeddrive.cosim"]
+    if args.phases:
+        wall([*cosim, "info", "builtin"])  # the FMU built and cached first
+        print(wall([sys.executable, str(ROOT / "benchmarks" / "cli_phases.py"), str(args.scenario.resolve())])[1].stdout,
+              end="")
+        return 0
 
     for option in ("--version", "--help"):
         best = min(wall([*cosim, option])[0] for _ in range(args.repeat))

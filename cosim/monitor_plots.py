@@ -18,46 +18,49 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from feeddrive.cosim.plot_workers import monitor_figure_jobs  # noqa: E402
-from feeddrive.cosim.plots import draw_concurrently, envelope  # noqa: E402
+from feeddrive.cosim.figure_data import motion_figure  # noqa: E402
+from feeddrive.cosim.plot_workers import PNG, monitor_figure_jobs  # noqa: E402
+from feeddrive.cosim.plots import draw_concurrently  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
 
 
 def plot_motion(trace, path: Path) -> Path:
-    """One motion's validation and model check (``trace``: ``cosim.monitor.MotionTrace``) into ``path`` (PNG)."""
-    v, mm = trace.validation, trace.mismatch
+    """One motion's validation and model check into ``path`` (PNG).
+
+    ``trace``: ``cosim.monitor_pipeline.MotionTrace``, or what the figure draws of it
+    (``cosim.figure_data.MotionFigure``: its long series as envelopes, what a drawing process is sent)."""
+    shown = motion_figure(trace)
+    lines, mm = shown.lines, shown.mismatch
     generic = mm is not None and "current" not in mm.checks  # a model's own equations (the PMSM's i_q, i_d, w)
     panels = 1 + (mm is not None) * (len(mm.checks) if generic else 3)
     fig, axes = plt.subplots(panels, 1, figsize=(9, 2.4 * panels), sharex=True, squeeze=False)
     axes = axes[:, 0]
-    t = trace.t
-    if trace.signals.get("Im1") is not None and trace.signals.get("Im2") is not None:
-        r = np.asarray(trace.signals["Im1"]) - np.asarray(trace.signals["Im2"])
-        axes[0].plot(*envelope(t, r), lw=0.3, color="0.6", label="r = Im1 - Im2")
+    if "r" in lines:
+        axes[0].plot(*lines["r"], lw=0.3, color="0.6", label="r = Im1 - Im2")
     else:  # one current sensor or a torque signal: the pair is not checked, and the panel says so
-        why = trace.result.get("not_checked", {}).get("current", "not checked")
+        why = shown.result.get("not_checked", {}).get("current", "not checked")
         axes[0].text(0.5, 0.5, f"current residue: {why}", transform=axes[0].transAxes, ha="center", va="center")
-    if v is not None and v.pairs["current"].residue is not None:
-        res = v.pairs["current"].residue
-        tw = t[0] + res.centers * (t[1] - t[0])
+    if shown.residue is not None:
+        res, tw = shown.residue, shown.windows
         axes[0].step(tw, res.means, where="mid", color="C0", label=f"window means ({res.kind})")
         axes[0].plot(tw, res.offset + res.gain_diff * res.levels, "C3--", lw=1, label="offset + gain diff x level")
     axes[0].set_ylabel("residue [A]")
     if axes[0].get_legend_handles_labels()[0]:
         _legend_outside(axes[0])
     if generic:
-        _plot_equations(axes[1:], t, mm, trace.result)
+        _plot_equations(axes[1:], lines, mm, shown.result)
     elif mm is not None:
         cur, speed = mm.checks["current"], mm.checks["speed"]
-        axes[1].plot(*envelope(t, cur.simulated + cur.residue), label="measured (filtered)")
-        axes[1].plot(*envelope(t, cur.simulated), "--", label="simulated from the estimated model")
+        axes[1].plot(*lines["current measured"], label="measured (filtered)")
+        axes[1].plot(*lines["current simulated"], "--", label="simulated from the estimated model")
         axes[1].set_ylabel("current [A]")
-        axes[2].plot(*envelope(t, speed.simulated + speed.residue), label="measured (filtered)")
-        axes[2].plot(*envelope(t, speed.simulated), "--", label="simulated on each constant-sign segment")
+        axes[2].plot(*lines["speed measured"], label="measured (filtered)")
+        axes[2].plot(*lines["speed simulated"], "--", label="simulated on each constant-sign segment")
         axes[2].set_ylabel("speed [rad/s]")
-        for ax, check, unit, color in ((axes[3], speed, "rad/s", "C3"), (axes[3].twinx(), cur, "A", "C0")):
-            ax.plot(*envelope(t, check.residue), color=color, lw=0.6, label=f"{check.signal} residue [{unit}]")
+        for ax, (name, check), unit, color in ((axes[3], ("speed", speed), "rad/s", "C3"),
+                                               (axes[3].twinx(), ("current", cur), "A", "C0")):
+            ax.plot(*lines[f"{name} residue"], color=color, lw=0.6, label=f"{check.signal} residue [{unit}]")
             if np.isfinite(check.noise_std):
                 ax.axhline(check.noise_std, color=color, ls=":", lw=0.8)
                 ax.axhline(-check.noise_std, color=color, ls=":", lw=0.8)
@@ -71,25 +74,25 @@ def plot_motion(trace, path: Path) -> Path:
     axes[-1].set_xlabel("time [s]")
     from feeddrive.cosim.report.verdict import verdict_line
 
-    fig.suptitle(f"motion {trace.motion}: {verdict_line(trace.result)}", fontsize=10, wrap=True)
+    fig.suptitle(f"motion {shown.motion}: {verdict_line(shown.result)}", fontsize=10, wrap=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, pil_kwargs=dict(PNG))
     plt.close(fig)
     return path
 
 
-def _plot_equations(axes, t: np.ndarray, mm, result: dict) -> None:  # noqa: ANN001 - MismatchResult
+def _plot_equations(axes, lines: dict, mm, result: dict) -> None:  # noqa: ANN001 - MismatchResult
     """Paper Fig. 13, 14 for any model's check (``estimator.model_check``: the PMSM's q and d currents and speed):
     per simulated state, the measured and simulated signal and, on the right axis, the residue with +- the
     sensor noise. On a PMSM the check is advisory (report.json ``output_error_check.deciding``): said so."""
     units = {"w": "rad/s"}
     for ax, (name, check) in zip(axes, mm.checks.items()):
         unit = units.get(name, "A")
-        ax.plot(*envelope(t, check.simulated + check.residue), label=f"{name} measured (filtered)")
-        ax.plot(*envelope(t, check.simulated), "--", label=f"{name} simulated from the estimated model")
+        ax.plot(*lines[f"{name} measured"], label=f"{name} measured (filtered)")
+        ax.plot(*lines[f"{name} simulated"], "--", label=f"{name} simulated from the estimated model")
         ax.set_ylabel(f"{name} [{unit}]")
         right = ax.twinx()
-        right.plot(*envelope(t, check.residue), color="C3", lw=0.6, label=f"{name} residue")
+        right.plot(*lines[f"{name} residue"], color="C3", lw=0.6, label=f"{name} residue")
         if np.isfinite(check.noise_std):
             for y in (check.noise_std, -check.noise_std):
                 right.axhline(y, color="C3", ls=":", lw=0.8)
@@ -127,15 +130,14 @@ def decision_text(mm) -> str:
 
 def plot_correlation(trace, path: Path) -> Path:
     """Correlation of each prewhitened residue with each prewhitened input against the lag, with the band
-    of independence at the check's level (as MATLAB's ``resid``), into ``path`` (PNG)."""
+    of independence at the check's level (as MATLAB's ``resid``), into ``path`` (PNG); ``trace`` as
+    :func:`plot_motion`."""
+    trace = motion_figure(trace)
     mm = trace.mismatch
     fig, axes = plt.subplots(1, len(mm.checks), figsize=(10, 3.2), squeeze=False)
-    from feeddrive.estimator.mismatch import INPUTS
-
     for ax, (name, check) in zip(axes[0], mm.checks.items()):
         lags = np.arange(check.correlation.shape[0])
-        names = INPUTS.get(name) or [f"{j + 1}" for j in range(check.correlation.shape[1])]  # a model's own check
-        for j, x in enumerate(names):
+        for j, x in enumerate(check.inputs):  # a model's own check: 1, 2, ...
             ax.stem(lags + 0.15 * j, check.correlation[:, j], linefmt=f"C{j}-", markerfmt=f"C{j}o",
                     basefmt=" ", label=f"input {x}")
         ax.axhspan(-check.band, check.band, color="0.9", zorder=0, label=f"{100 * (1 - mm.alpha):g} % band")
@@ -150,7 +152,7 @@ def plot_correlation(trace, path: Path) -> Path:
     axes[0, 0].set_ylabel("correlation")
     fig.suptitle(f"motion {trace.motion}: residue-input correlation", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, pil_kwargs=dict(PNG))
     plt.close(fig)
     return path
 

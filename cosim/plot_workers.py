@@ -4,8 +4,8 @@ A run's five PNGs and the import of matplotlib they need took longer than the co
 the user waited for them after it. :class:`PlotWorkers` forks its processes at the start of the run: each
 imports matplotlib and draws a first, throw-away figure (fonts, the Agg renderer) while the simulation
 runs in the parent, then waits for figures. At the end of the run the parent sends each figure as a
-:class:`FigureJob` (the drawing function's name and its data, pickled: a few MB) to the next idle
-process; the run itself never imports matplotlib.
+:class:`FigureJob` (the drawing function's name and what it draws, pickled: each long trace as its
+envelope, tens of kB) to the next idle process; the run itself never imports matplotlib.
 
 Jobs that are not :class:`FigureJob` (a user component's own ``write_plots``) are drawn in this process,
 while the workers draw theirs, unless they were given when the workers were forked (``jobs``): the
@@ -31,6 +31,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from feeddrive.cosim.figure_data import DISPLAY_BUCKETS, PNG, envelope, motion_figure  # noqa: F401 - re-exported
 
 #: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots, cost)
 RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure", 3.0), ("motion_{k}_currents.png", "currents_figure", 2.0))
@@ -82,7 +84,8 @@ def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
 
 def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder: str | Path,
                     title: str = "") -> list[FigureJob]:
-    """The run's figures (cosim.plots) as jobs, each with only the samples of its motion.
+    """The run's figures (cosim.plots) as jobs, each with what it draws of its motion: every trace already reduced
+    to its min/max envelope at the figure's width (:func:`envelope`), so a job is tens of kB, not MB.
 
     Parameters
     ----------
@@ -101,11 +104,16 @@ def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder:
     for k, idx in motions(signals).items():
         if idx.size < 2:
             continue
-        part = {name: np.ascontiguousarray(signals[name][idx]) for name in wanted if name in signals}
-        t = np.ascontiguousarray(time[idx])
+        t = time[idx]
+        part = {name: signals[name][idx] for name in wanted if name in signals}
+        traces = {name: envelope(t, y) for name, y in part.items()}
+        args = {"profiles_figure": (k, traces), "currents_figure": (k, traces, None)}
+        if all(name in part for name in CURRENTS):  # the residue and its mean from every sample
+            residue = part[CURRENTS[0]] - part[CURRENTS[1]]
+            args["currents_figure"] = (k, traces | {"residue": envelope(t, residue)}, float(np.mean(residue)))
         for pattern, function, cost in RUN_FIGURES:
             path = folder / pattern.format(k=k)
-            jobs.append(FigureJob("feeddrive.cosim.plots", function, (k, t, part, path, title), cost))
+            jobs.append(FigureJob("feeddrive.cosim.plots", function, (*args[function], path, title), cost))
     return jobs
 
 
@@ -115,10 +123,12 @@ def monitor_figure_jobs(traces: Sequence, motions: Sequence[Mapping], folder: st
     ``monitor_correlation<k>.png`` of each kept trace, ``monitor_trends.png`` of the axis."""
     folder = Path(folder)
     module = "feeddrive.cosim.monitor_plots"
+    # what the figures draw of each trace: its long series as envelopes (kB to send, not the motion's MB)
+    shown = [motion_figure(tr) for tr in traces]
     # costs measured against the run's figures (cosim.plots): 4 and 2 panels, and 6 panels for the trends
-    jobs = [FigureJob(module, "plot_motion", (tr, folder / f"monitor_motion{tr.motion}.png"), 6.0) for tr in traces]
-    jobs += [FigureJob(module, "plot_correlation", (tr, folder / f"monitor_correlation{tr.motion}.png"), 4.0)
-             for tr in traces if tr.mismatch is not None]
+    jobs = [FigureJob(module, "plot_motion", (f, folder / f"monitor_motion{f.motion}.png"), 6.0) for f in shown]
+    jobs += [FigureJob(module, "plot_correlation", (f, folder / f"monitor_correlation{f.motion}.png"), 4.0)
+             for f in shown if f.mismatch is not None]
     if any(m.get("parameters") for m in motions):
         axis = motions[-1].get("axis")
         jobs.append(FigureJob(module, "plot_trends", (list(motions), folder / "monitor_trends.png",

@@ -21,46 +21,14 @@ import numpy as np  # noqa: E402
 
 from feeddrive.cosim.plot_workers import (  # noqa: E402, F401 - re-exported
     CURRENTS,
+    DISPLAY_BUCKETS,
+    PNG,
     PROFILES,
     PlotWorkers,
     drawing_processes,
+    envelope,
     motions,
 )
-
-#: samples drawn per trace at most, as min/max pairs: twice the figures' width in pixels (9 in at 110 dpi)
-DISPLAY_BUCKETS = 1000
-
-
-def envelope(t: np.ndarray, y: np.ndarray, buckets: int = DISPLAY_BUCKETS) -> tuple[np.ndarray, np.ndarray]:
-    """The samples of a long trace that a figure can show: the first and last, and the minimum and maximum
-    of each of ``buckets`` runs of consecutive samples, in time order.
-
-    A line through them covers the same pixels as the whole trace at a width of ``buckets`` pixels or less:
-    a one-sample spike is kept at its time and value. Agg's rendering of a 35 000-sample trace was a third
-    of a figure's time. Shorter traces are returned whole.
-
-    Parameters
-    ----------
-    t, y : ndarray, shape (n,)
-        Times [s] and values of the trace.
-    buckets : int
-        Number of runs (at least the drawing's width in pixels).
-
-    Returns
-    -------
-    t, y : ndarray, shape (m,), m <= 2 * buckets + 2 + n % buckets
-    """
-    y = np.asarray(y)
-    n = y.shape[0]
-    size = n // buckets
-    if size < 3:  # no fewer samples to draw
-        return np.asarray(t), y
-    head = y[: size * buckets].reshape(buckets, size)
-    offsets = np.arange(buckets) * size
-    keep = np.concatenate(([0], offsets + np.argmin(head, axis=1), offsets + np.argmax(head, axis=1),
-                           np.arange(size * buckets, n), [n - 1]))
-    keep = np.unique(keep)
-    return np.asarray(t)[keep], y[keep]
 
 
 def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str | Path,
@@ -83,7 +51,7 @@ def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str |
     return [path for job in run_figure_jobs(time, signals, out_dir, title) for path in job()]
 
 
-def profiles_figure(k: int, t: np.ndarray, signals: Mapping[str, np.ndarray], path: Path, title: str = ""
+def profiles_figure(k: int, traces: Mapping[str, tuple[np.ndarray, np.ndarray]], path: Path, title: str = ""
                     ) -> list[Path]:
     """Voltage, current and speed of high-speed motion ``k`` against time (paper Fig. 3 and 8) into ``path``.
 
@@ -91,10 +59,9 @@ def profiles_figure(k: int, t: np.ndarray, signals: Mapping[str, np.ndarray], pa
     ----------
     k : int
         The motion's index.
-    t : ndarray, shape (n,)
-        The motion's sample times [s].
-    signals : mapping name -> ndarray, shape (n,)
-        The motion's samples of the recorded signals.
+    traces : mapping name -> (t, y)
+        The motion's recorded signals as drawn (``run_figure_jobs``: their envelopes): times [s] and values,
+        shape (m,) each.
     path : Path
         The PNG file.
     title : str
@@ -105,15 +72,15 @@ def profiles_figure(k: int, t: np.ndarray, signals: Mapping[str, np.ndarray], pa
     list of Path
         ``[path]``, or ``[]`` when none of the signals was recorded.
     """
-    rows = [(label, unit, [s for s in names if s in signals]) for label, unit, names in PROFILES]
+    rows = [(label, unit, [s for s in names if s in traces]) for label, unit, names in PROFILES]
     rows = [(label, unit, names[0], names[-1]) for label, unit, names in rows if names]
     if not rows:
         return []
     fig, axes = plt.subplots(len(rows), 1, sharex=True, figsize=(9, 2.2 * len(rows) + 0.6))
     for ax, (label, unit, measured, true) in zip(np.atleast_1d(axes), rows):
-        ax.plot(*envelope(t, signals[measured]), lw=0.6, label=measured)
+        ax.plot(*traces[measured], lw=0.6, label=measured)
         if true != measured:
-            ax.plot(*envelope(t, signals[true]), lw=0.9, label=true)
+            ax.plot(*traces[true], lw=0.9, label=true)
         ax.set_ylabel(f"{label} [{unit}]")
         ax.grid(alpha=0.3)
         _legend_outside(ax)
@@ -122,20 +89,20 @@ def profiles_figure(k: int, t: np.ndarray, signals: Mapping[str, np.ndarray], pa
     return [_save(fig, path)]
 
 
-def currents_figure(k: int, t: np.ndarray, signals: Mapping[str, np.ndarray], path: Path, title: str = ""
-                    ) -> list[Path]:
+def currents_figure(k: int, traces: Mapping[str, tuple[np.ndarray, np.ndarray]], residue_mean: float | None,
+                    path: Path, title: str = "") -> list[Path]:
     """The two current measurements of high-speed motion ``k`` and their residue r = Im1 - Im2 (paper
-    Fig. 9 and 10) into ``path``; parameters as :func:`profiles_figure` (``[]``: a sensor is missing)."""
-    if not all(name in signals for name in CURRENTS):
+    Fig. 9 and 10) into ``path``; ``traces`` as :func:`profiles_figure`, with ``residue``: r's envelope [A],
+    and ``residue_mean``: r's mean over every sample [A] (``[]``: a sensor is missing)."""
+    if not all(name in traces for name in CURRENTS) or "residue" not in traces:
         return []
-    im1, im2 = (signals[name] for name in CURRENTS)
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(9, 5))
-    ax1.plot(*envelope(t, im1), lw=0.6, label="Im1")
-    ax1.plot(*envelope(t, im2), lw=0.6, label="Im2")
+    ax1.plot(*traces[CURRENTS[0]], lw=0.6, label="Im1")
+    ax1.plot(*traces[CURRENTS[1]], lw=0.6, label="Im2")
     ax1.set_ylabel("current [A]")
     _legend_outside(ax1)
-    ax2.plot(*envelope(t, im1 - im2), lw=0.6, color="C3")
-    ax2.axhline(float(np.mean(im1 - im2)), color="k", lw=0.8, ls="--", label="mean")
+    ax2.plot(*traces["residue"], lw=0.6, color="C3")
+    ax2.axhline(residue_mean, color="k", lw=0.8, ls="--", label="mean")
     ax2.set_ylabel("residue Im1 - Im2 [A]")
     ax2.set_xlabel("time [s]")
     _legend_outside(ax2)
@@ -177,6 +144,6 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     for ax in fig.axes:  # plain tick labels: an offset ("1e-5+1e-1") reads badly
         ax.ticklabel_format(useOffset=False, style="plain")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, pil_kwargs=dict(PNG))
     plt.close(fig)
     return path

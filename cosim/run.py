@@ -24,6 +24,7 @@ import json
 import os
 import platform
 import sys
+import threading
 import time as _time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -42,6 +43,9 @@ from feeddrive.cosim.scenario import Scenario, load_scenario
 
 #: the modules of the run's figures (cosim.plot_workers.FigureJob), loaded by the drawing processes at the start
 FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
+#: modules the monitor imports when it treats its first motion (estimator.simulation's CubicSpline), imported
+#: while the simulation's compiled loop runs (cosim.run._import_meanwhile)
+MONITOR_LATE_IMPORTS = ("scipy.interpolate",)
 OUTPUTS = ("signals.csv", "signals.meta.json", "scenario.resolved.yaml", "report.json", "report.html")
 
 
@@ -131,10 +135,17 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         if updated is not scenario:  # the default history is used: its folder (runs/) is made on first use
             db.parent.mkdir(parents=True, exist_ok=True)
         scenario = updated
-    master = Master.from_scenario(scenario)
-    # the figures' processes start now: their import of matplotlib overlaps the simulation (cosim.plot_workers)
+    # the figures' processes start first (cosim.plot_workers): their import of matplotlib overlaps the import of
+    # the monitor (scipy, when its component is made) and the simulation, on another CPU
     workers = PlotWorkers(preload=FIGURE_MODULES) if plots else None
+    try:
+        master = Master.from_scenario(scenario)
+    except BaseException:
+        if workers is not None:
+            workers.close()
+        raise
     wall = _time.perf_counter()
+    importer = None
     try:
         master.setup()
         resolved = scenario.to_dict() | {"stop_time": float(f"{master.stop_time:.12g}"),  # drop n*h rounding
@@ -144,13 +155,16 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         if signals:
             master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
             write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names))
+        # imported while the compiled loop runs: the monitor's on its first motion, report.html's at the end
+        importer = _import_meanwhile((MONITOR_LATE_IMPORTS if scenario.monitor is not None else ())
+                                     + (("feeddrive.cosim.report.page",) if page else ()))
         recorder = master.run(progress=progress, signals_path=paths["signals"] if signals else None)
         report["loop"] = master.loop  # compiled fine loop or Python loop, and why (cosim/fastloop)
         report["components"] = master.reports()
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
         signals = recorder.signals()
         if workers is not None:
-            # report.html's imports and template are loaded while the workers draw: the page then only renders
+            # report.html's template is loaded while the workers draw (its imports were made during the loop)
             paths["plots"] = workers.draw(plot_jobs(master, recorder.time, signals, out_dir / "plots", scenario.name),
                                           meanwhile=_prepare_page if page else None)
     except BaseException as exc:
@@ -164,6 +178,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         raise
     finally:
         master.terminate()
+        if importer is not None:  # no thread outlives the run: a fork amid its import would inherit a held lock
+            importer.join()
         if workers is not None:
             workers.close()
     report["status"] = "ok"
@@ -228,6 +244,27 @@ def _write_page(out_dir: Path, report: dict) -> None:
         write_run_page(out_dir, json.loads((out_dir / "report.json").read_text(encoding="utf-8")))
     except Exception as exc:  # noqa: BLE001 - the run's outcome is what matters here
         print(f"{out_dir / 'report.html'}: not written ({type(exc).__name__}: {exc})", file=sys.stderr)
+
+
+def _import_meanwhile(modules: Sequence[str]) -> threading.Thread | None:
+    """Import ``modules`` in a background thread: the simulation's compiled loop releases the GIL (ctypes), so
+    the import runs on another CPU instead of in the monitor's treatment of the first motion. A module the
+    monitor asks for before the thread is done waits for it (Python's per-module import lock); a failure is
+    left to the monitor's own import to report. Returns the thread (None: nothing to import)."""
+    import importlib
+
+    def load() -> None:
+        for name in modules:
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001 - the monitor's own import reports it
+                pass
+
+    if not modules:
+        return None
+    thread = threading.Thread(target=load, name="feeddrive-imports", daemon=True)
+    thread.start()
+    return thread
 
 
 def _prepare_page() -> None:

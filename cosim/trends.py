@@ -130,9 +130,11 @@ def plot_trends(motions: Sequence[Mapping], path: Path, title: str = "", thresho
     """Draw ``trend_figure`` into ``path`` (PNG); returns ``path``."""
     import matplotlib.pyplot as plt
 
+    from feeddrive.cosim.figure_data import PNG
+
     fig = trend_figure(motions, title, thresholds, x, units)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=100, pil_kwargs=dict(PNG))
     plt.close(fig)
     return path
 

@@ -9,12 +9,13 @@ probability outside [0, 1], degrees of freedom <= 0, NaN) gives NaN. tests/estim
 checks each against scipy.stats.
 
 Every function takes scalars or arrays (broadcast together) and returns a float for scalar arguments,
-else an ndarray of the broadcast shape.
+else an ndarray of the broadcast shape. ``scipy.special`` is imported by the first call (0.6 s): the
+modules that import these functions (the monitor's configuration, read by every ``cosim`` command that
+loads a scenario) do not pay for it.
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy import special
 
 __all__ = ["chi2_sf", "f_sf", "norm_isf", "norm_ppf", "norm_sf", "t_ppf", "t_sf"]
 
@@ -30,12 +31,16 @@ def _positive(df: np.ndarray) -> np.ndarray:
 
 def t_sf(x: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
     """``P(T > x)`` of Student's t with ``df`` degrees of freedom (``scipy.stats.t.sf``)."""
+    from scipy import special
+
     x, df = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(df, dtype=float))
     return _out(np.where(_positive(df), special.stdtr(df, -x), np.nan))
 
 
 def t_ppf(q: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
     """Quantile ``x`` with ``P(T <= x) = q`` of Student's t (``scipy.stats.t.ppf``)."""
+    from scipy import special
+
     q, df = np.broadcast_arrays(np.asarray(q, dtype=float), np.asarray(df, dtype=float))
     valid = _positive(df) & (q >= 0) & (q <= 1)
     with np.errstate(invalid="ignore"):
@@ -46,23 +51,31 @@ def t_ppf(q: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
 
 def norm_ppf(q: float | np.ndarray) -> float | np.ndarray:
     """Quantile of the standard normal distribution (``scipy.stats.norm.ppf``)."""
+    from scipy import special
+
     q = np.asarray(q, dtype=float)
     return _out(np.where((q >= 0) & (q <= 1), special.ndtri(q), np.nan))
 
 
 def norm_sf(x: float | np.ndarray) -> float | np.ndarray:
     """``P(Z > x)`` for the standard normal distribution (``scipy.stats.norm.sf``)."""
+    from scipy import special
+
     return _out(special.ndtr(-np.asarray(x, dtype=float)))
 
 
 def norm_isf(q: float | np.ndarray) -> float | np.ndarray:
     """``z`` with ``P(Z > z) = q`` for the standard normal distribution (``scipy.stats.norm.isf``)."""
+    from scipy import special
+
     q = np.asarray(q, dtype=float)
     return _out(np.where((q >= 0) & (q <= 1), -special.ndtri(q), np.nan))
 
 
 def chi2_sf(x: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
     """``P(X > x)`` of the chi-square distribution with ``df`` degrees of freedom (``scipy.stats.chi2.sf``)."""
+    from scipy import special
+
     x, df = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(df, dtype=float))
     with np.errstate(invalid="ignore"):
         out = np.where(x <= 0, 1.0, special.chdtrc(df, np.maximum(x, 0.0)))
@@ -71,6 +84,8 @@ def chi2_sf(x: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray
 
 def f_sf(x: float | np.ndarray, dfn: float | np.ndarray, dfd: float | np.ndarray) -> float | np.ndarray:
     """``P(F > x)`` of the F distribution with ``dfn`` and ``dfd`` degrees of freedom (``scipy.stats.f.sf``)."""
+    from scipy import special
+
     x, dfn, dfd = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, dfn, dfd)))
     with np.errstate(invalid="ignore"):
         out = np.where(x <= 0, 1.0, special.fdtrc(dfn, dfd, np.maximum(x, 0.0)))

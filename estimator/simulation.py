@@ -12,7 +12,6 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.models.drives import drive_model
@@ -254,6 +253,8 @@ def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray) -> np.ndarray:
     """
     n = x.size
     if n < 4:
+        from scipy.interpolate import CubicSpline  # here: scipy.interpolate takes 0.5-1 s to import
+
         return CubicSpline(x, Y, axis=1)(at)
     from scipy.linalg import solve_banded
 

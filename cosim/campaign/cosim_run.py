@@ -255,6 +255,8 @@ def _prepare() -> None:
 RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.estimator.estimate",
                "statsmodels.regression.linear_model", "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
                "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
-               "multiprocessing.synchronize")
+               "multiprocessing.synchronize",
+               # imported by the estimator's functions when first called (estimator.distributions, .simulation)
+               "scipy.special", "scipy.interpolate")
 
 run_cosim.prepare = _prepare

@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import pickle
 import signal
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from feeddrive.cosim.plot_workers import FigureJob, PlotWorkers, run_figure_jobs
-from feeddrive.cosim.plots import plot_run
+from feeddrive.cosim.plot_workers import DISPLAY_BUCKETS, FigureJob, PlotWorkers, run_figure_jobs
 
 needs_fork = pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
                                 reason="no fork start method on this platform: figures are drawn in turn")
@@ -95,7 +95,8 @@ def test_a_daemonic_process_has_no_workers_and_draws_its_figures_itself(tmp_path
 
 @needs_fork
 def test_the_run_figures_drawn_by_a_worker_are_those_drawn_here(tmp_path):
-    """Each figure job carries only its motion's samples; a worker draws the bytes plot_run draws here."""
+    """Each figure job carries only its motion's traces, as envelopes (kB, not the motion's MB) that keep a
+    one-sample spike; a worker draws the bytes drawn here (plot_run draws the same jobs)."""
     n = 30_000
     t = np.arange(n) * 1e-4
     rng = np.random.default_rng(5)
@@ -105,13 +106,25 @@ def test_the_run_figures_drawn_by_a_worker_are_those_drawn_here(tmp_path):
                "plant.current": current, "sensors.Im1": current + rng.normal(0, 0.05, n),
                "sensors.Im2": current + rng.normal(0, 0.05, n), "plant.voltage": 50 * np.cos(2 * np.pi * t),
                "plant.position": np.cumsum(current)}
+    signals["sensors.Im1"][n // 4] += 30.0  # a one-sample spike of one sensor: in its trace and in the residue
     jobs = run_figure_jobs(t, signals, tmp_path / "there", title="T")
-    assert all("plant.position" not in job.args[2] for job in jobs)  # not drawn: not sent
-    assert [job.args[1].size for job in jobs] == [n // 2 - 200] * 4
-    here = plot_run(t, signals, tmp_path / "here", title="T")
-    with PlotWorkers(processes=2) as workers:
-        there = workers.draw(jobs)
+    assert all("plant.position" not in job.args[1] for job in jobs)  # not drawn: not sent
+    motion = np.flatnonzero(state == 1)[: n // 2 - 200]
+    for job in jobs[:2]:  # motion 1's figures
+        for name, (te, ye) in job.args[1].items():
+            assert te[0] == t[motion[0]] and te[-1] == t[motion[-1]]  # the motion's span, not the other's
+            assert ye.size <= 2 * DISPLAY_BUCKETS + 2 + motion.size % DISPLAY_BUCKETS < motion.size
+        assert len(pickle.dumps(job)) < 400_000  # the motion's 6 traces whole: 1.1 MB
+    im1, residue = jobs[1].args[1]["sensors.Im1"], jobs[1].args[1]["residue"]
+    assert im1[1].max() == signals["sensors.Im1"][motion].max() and im1[0][np.argmax(im1[1])] == t[n // 4]
+    full = signals["sensors.Im1"][motion] - signals["sensors.Im2"][motion]
+    assert residue[1].max() == full.max() and jobs[1].args[2] == pytest.approx(full.mean(), rel=1e-12)
     names = ["motion_1_profiles.png", "motion_1_currents.png", "motion_2_profiles.png", "motion_2_currents.png"]
-    assert [p.name for p in here] == [p.name for p in there] == names
+    assert [job.args[-2].name for job in jobs] == names
+    # motion 2's figures (half the drawing: the test's time) drawn here, as plot_run does, and by the workers
+    here = [path for job in run_figure_jobs(t, signals, tmp_path / "here", title="T")[2:] for path in job()]
+    with PlotWorkers(processes=2) as workers:
+        there = workers.draw(jobs[2:])
+    assert [p.name for p in here] == [p.name for p in there] == names[2:]
     for a, b in zip(here, there):
         assert a.read_bytes() == b.read_bytes()

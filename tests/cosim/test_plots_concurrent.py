@@ -113,3 +113,41 @@ def test_a_figure_drawn_in_a_child_is_the_figure_drawn_here(tmp_path):
     assert [p.name for p in here] == [p.name for p in there] == ["motion_1_profiles.png", "motion_1_currents.png"]
     for a, b in zip(here, there):
         assert a.read_bytes() == b.read_bytes()
+
+
+def test_the_monitor_figures_are_sent_as_envelopes_and_drawn_the_same(tmp_path):
+    """What a drawing process is sent of a monitor trace (cosim.figure_data.MotionFigure) is a fraction of it,
+    needs no estimator, keeps a one-sample fault in a residue and in r = Im1 - Im2, and draws the same bytes."""
+    import pickle
+
+    from feeddrive.cosim.figure_data import motion_figure
+    from feeddrive.cosim.monitor_pipeline import MotionTrace
+    from feeddrive.cosim.monitor_plots import plot_motion
+    from feeddrive.estimator.mismatch import MismatchResult, ResidueCheck
+    from feeddrive.estimator.residue_tests import TestResult
+
+    rng = np.random.default_rng(1)
+    n = 20_000
+    t = 0.3 + np.arange(n) * 1e-4
+    im1, im2 = 5 * np.sin(3 * t) + rng.normal(0, 0.05, n), 5 * np.sin(3 * t) + rng.normal(0, 0.05, n)
+    im1[7_777] += 2.0  # a one-sample fault of one sensor
+    checks = {}
+    for j, name in enumerate(("i_q",)):  # a model's own check: two panels (a DC axis's current and speed: four)
+        residue = 0.05 * rng.standard_normal(n)
+        residue[:40] = np.nan
+        residue[12_345] = -1.5  # a one-sample spike of the residue
+        checks[name] = ResidueCheck(name, {"independence": TestResult("independence", 1.0, (30.0, 80.0), 0.5)},
+                                    0.05, 0.05, 10 * np.sin(4 * t + j), residue, rng.standard_normal((11, 2)) * 0.05,
+                                    0.2)
+    mm = MismatchResult("i_q independence", 1.0, 1.0, 0.01, True, "Bonferroni over 1 test", checks)
+    trace = MotionTrace(1, t, {"Im1": im1, "Im2": im2}, None, mm, {"verdict": "healthy"})
+    shown = motion_figure(trace)
+    sent = pickle.dumps(shown)
+    assert len(sent) < len(pickle.dumps(trace)) / 4  # 4 lines of ~2000 samples: 0.13 MB, not 0.8
+    assert b"feeddrive.estimator" not in sent  # a drawing process unpickles it without importing the estimator
+    te, r = shown.lines["r"]
+    assert r.max() == (im1 - im2).max() and te[np.argmax(r)] == t[7_777]
+    te, res = shown.lines["i_q residue"]
+    assert np.nanmin(res) == -1.5 and te[np.nanargmin(res)] == t[12_345]
+    # the figure with the most long series (the correlation figure draws none of them)
+    assert plot_motion(trace, tmp_path / "whole.png").read_bytes() == plot_motion(shown, tmp_path / "sent.png").read_bytes()
