@@ -43,9 +43,9 @@ from feeddrive.cosim.scenario import Scenario, load_scenario
 
 #: the modules of the run's figures (cosim.plot_workers.FigureJob), loaded by the drawing processes at the start
 FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
-#: modules the monitor imports when it treats its first motion (estimator.simulation's CubicSpline), imported
-#: while the simulation's compiled loop runs (cosim.run._import_meanwhile)
-MONITOR_LATE_IMPORTS = ("scipy.interpolate",)
+#: modules the monitor imports when it treats its first motion (estimator.distributions' scipy.special,
+#: estimator.kernels' scipy.fft), imported while the simulation's compiled loop runs (cosim.run._import_meanwhile)
+MONITOR_LATE_IMPORTS = ("scipy.special", "scipy.fft")
 OUTPUTS = ("signals.csv", "signals.meta.json", "scenario.resolved.yaml", "report.json", "report.html")
 
 

@@ -256,7 +256,7 @@ RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.esti
                "statsmodels.regression.linear_model", "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
                "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
                "multiprocessing.synchronize",
-               # imported by the estimator's functions when first called (estimator.distributions, .simulation)
-               "scipy.special", "scipy.interpolate")
+               # imported by the estimator's functions when first called (estimator.distributions, .kernels)
+               "scipy.special", "scipy.fft")
 
 run_cosim.prepare = _prepare
