@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,6 +23,13 @@ def pytest_configure(config: pytest.Config) -> None:
     root = Path(feeddrive.estimator.__file__).resolve().parents[1]
     for folder in ("models", "fmu_build", "estimator", "cosim"):
         compileall.compile_dir(root / folder, quiet=2)
+
+
+# pytest rewrites the asserts of every test module it imports (parse, rewrite, compile: ~8 s of CPU per process
+# for this suite's ~220 modules, each xdist worker again) and caches the result in tests/**/__pycache__ only when
+# bytecode may be written: with PYTHONDONTWRITEBYTECODE set (as on this machine and in CI) it redid the work in
+# every run. This process (not the subprocesses the tests start) writes bytecode, so the next run reads it back.
+sys.dont_write_bytecode = False
 
 
 @pytest.fixture(scope="session", autouse=True)
