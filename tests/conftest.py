@@ -56,14 +56,27 @@ def feeddrive_fmu(fmu_cache_dir: Path) -> Path:
 
 
 @pytest.fixture(scope="session")
-def vendor_pmsm_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The hand-written vendor-style PMSM FMU (tests/plants/vendor_pmsm), compiled once per test session."""
-    import sys
+def vendor_pmsm_fmu(fmu_cache_dir: Path) -> Path:
+    """The hand-written vendor-style PMSM FMU (tests/plants/vendor_pmsm), compiled once per test session.
 
-    sys.path.insert(0, str(Path(__file__).parent / "plants"))
-    from vendor_pmsm import build_vendor_pmsm
+    In the session's FMU cache, which the xdist workers share: the first worker to need it compiles it into a
+    private folder and renames that into place (atomic), the others take it (or, racing, build their own copy
+    and discard it)."""
+    import tempfile
 
-    return build_vendor_pmsm(tmp_path_factory.mktemp("vendor_pmsm"))
+    plants = Path(__file__).parent / "plants"
+    sys.path.insert(0, str(plants))
+    from vendor_pmsm import MODEL, build_vendor_pmsm
+
+    target = fmu_cache_dir / "vendor_pmsm"  # the cache lives for this session only: the sources cannot change
+    if not (target / f"{MODEL}.fmu").is_file():
+        with tempfile.TemporaryDirectory(dir=fmu_cache_dir) as tmp:
+            build_vendor_pmsm(Path(tmp) / "fmu")
+            try:
+                os.rename(Path(tmp) / "fmu", target)
+            except OSError:  # another worker put its copy there first
+                pass
+    return target / f"{MODEL}.fmu"
 
 
 # hypothesis profiles: the fuzz tests (tests/cosim/test_fuzz.py) run 500 examples each by default;
