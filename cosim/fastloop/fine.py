@@ -5,8 +5,8 @@
 stepping order, both at the finest rate, the plant's inputs read from components outside the block (or
 numbers) and the sensors' from the plant (or numbers). Anything else (Model Exchange, FMI 3.0, another
 sensor class, a plant split into FMUs, ``FEEDDRIVE_FASTLOOP=0``, no C compiler) runs the Python loop, with
-the reason in ``Master.loop``. The standard NC and the monitor's buffering join the block where their ports
-allow (:func:`_absorbed`); ``Master.loop`` names them.
+the reason in ``Master.loop``. The standard NC, a PMSM's servo sensors (``servo.candidate``) and the monitor's
+buffering join the block where their ports allow (:func:`_absorbed`); ``Master.loop`` names them.
 """
 from __future__ import annotations
 
