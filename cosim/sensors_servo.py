@@ -243,9 +243,10 @@ class ServoSensors(Component):
 
     def _sample(self) -> None:
         """``measure_servo`` on one sample, written with scalars (the master's loop calls it every step)."""
-        if self._k == BLOCK:  # noise drawn in blocks, one draw per channel and sample
-            self._z = np.column_stack([rng.standard_normal(BLOCK) for rng in self._rngs.values()]).tolist()
-            self._k = 0
+        if self._k == BLOCK:
+            self._new_block()
+        if self._z is None:
+            self._z = self._zarr.tolist()
         z = self._z[self._k]
         self._k += 1
         true, theta, x_table = self._true()
@@ -262,6 +263,13 @@ class ServoSensors(Component):
         theta_enc = q * math.floor((pe["gain"] * theta + pe["offset"] + pe["noise"] * z[8]) / q + 0.5)
         x_lin = res * math.floor((ps["gain"] * x_table + ps["offset"] + ps["noise"] * z[9]) / res + 0.5)
         self._y = [*y, theta_enc, theta_enc * self._conv, x_lin]
+
+    def _new_block(self) -> None:
+        """Noise drawn in blocks, one draw per channel and sample: ``_zarr`` (BLOCK, 10), which the compiled
+        fine loop reads (cosim/fastloop/servo.py)."""
+        self._zarr = np.column_stack([rng.standard_normal(BLOCK) for rng in self._rngs.values()])
+        self._z = None  # its rows as lists, made on first use by the Python loop
+        self._k = 0
 
     def _true(self) -> tuple[list[float], float, float]:
         """The analogue channels' true values at this instant (``OUTPUTS[:8]``), the motor angle and the table."""

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,6 +23,13 @@ def pytest_configure(config: pytest.Config) -> None:
     root = Path(feeddrive.estimator.__file__).resolve().parents[1]
     for folder in ("models", "fmu_build", "estimator", "cosim"):
         compileall.compile_dir(root / folder, quiet=2)
+
+
+# pytest rewrites the asserts of every test module it imports (parse, rewrite, compile: ~8 s of CPU per process
+# for this suite's ~220 modules, each xdist worker again) and caches the result in tests/**/__pycache__ only when
+# bytecode may be written: with PYTHONDONTWRITEBYTECODE set (as on this machine and in CI) it redid the work in
+# every run. This process (not the subprocesses the tests start) writes bytecode, so the next run reads it back.
+sys.dont_write_bytecode = False
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -48,14 +56,27 @@ def feeddrive_fmu(fmu_cache_dir: Path) -> Path:
 
 
 @pytest.fixture(scope="session")
-def vendor_pmsm_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The hand-written vendor-style PMSM FMU (tests/plants/vendor_pmsm), compiled once per test session."""
-    import sys
+def vendor_pmsm_fmu(fmu_cache_dir: Path) -> Path:
+    """The hand-written vendor-style PMSM FMU (tests/plants/vendor_pmsm), compiled once per test session.
 
-    sys.path.insert(0, str(Path(__file__).parent / "plants"))
-    from vendor_pmsm import build_vendor_pmsm
+    In the session's FMU cache, which the xdist workers share: the first worker to need it compiles it into a
+    private folder and renames that into place (atomic), the others take it (or, racing, build their own copy
+    and discard it)."""
+    import tempfile
 
-    return build_vendor_pmsm(tmp_path_factory.mktemp("vendor_pmsm"))
+    plants = Path(__file__).parent / "plants"
+    sys.path.insert(0, str(plants))
+    from vendor_pmsm import MODEL, build_vendor_pmsm
+
+    target = fmu_cache_dir / "vendor_pmsm"  # the cache lives for this session only: the sources cannot change
+    if not (target / f"{MODEL}.fmu").is_file():
+        with tempfile.TemporaryDirectory(dir=fmu_cache_dir) as tmp:
+            build_vendor_pmsm(Path(tmp) / "fmu")
+            try:
+                os.rename(Path(tmp) / "fmu", target)
+            except OSError:  # another worker put its copy there first
+                pass
+    return target / f"{MODEL}.fmu"
 
 
 # hypothesis profiles: the fuzz tests (tests/cosim/test_fuzz.py) run 500 examples each by default;

@@ -5,7 +5,7 @@ the monitor and the user components at their own rates. Between two ticks at whi
 steps or an event lands (cosim/fastloop/blocks.py), the standard NC (its plan, position loop and motion
 count; the steps that insert an identification motion go back to Python), the plant (fmi2SetReal,
 fmi2SetRealInputDerivatives, fmi2DoStep, fmi2GetReal through the FMU's own function pointers), the sensors (interval means, low-pass filters,
-noise, encoder) and the monitor's buffering of a motion's samples (it stops the block where the monitor's
+noise, encoder), a PMSM's servo sensors (cosim/fastloop/servo.py) and the monitor's buffering of a motion's samples (it stops the block where the monitor's
 step does more) run in ``fineloop.c`` without the interpreter, with the same arithmetic in the same order,
 and the rows recorded inside the block go to a preallocated array (the master fills in the columns of
 the Python components, constant over the block, and takes the block's last row itself): the results are

@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from feeddrive.cosim.fastloop import servo as servo_loop
+
 
 def tables(master: Any, fine: Any, schedule: list[list[tuple]], period: int) -> tuple:
     """Per tick residue modulo ``P = lcm(period, m)``: the Python entries before the plant and after the
@@ -24,7 +26,8 @@ def tables(master: Any, fine: Any, schedule: list[list[tuple]], period: int) -> 
     P = math.lcm(period, master.m)
     absorbed = fine.absorbed
     pre = [[x for x in schedule[r % period] if order[x[0]] < i_plant and x[0] not in absorbed] for r in range(P)]
-    post = [[x for x in schedule[r % period] if order[x[0]] > i_sensors] for r in range(P)]
+    # the servo sensors step in the compiled loop at every tick of theirs: not in Python at a block's end
+    post = [[x for x in schedule[r % period] if order[x[0]] > i_sensors and x[0] is not fine.servo] for r in range(P)]
     is_rec = [master.m == 1 or (r + 1) % master.m == 0 for r in range(P)]
     ends = [any(x[0] not in absorbed for x in post[t]) or bool(pre[(t + 1) % P]) for t in range(P)]
     span = [master.block * master.m] * P  # nothing in Python: blocks of a whole stretch
@@ -43,7 +46,7 @@ def run_blocks(master: Any, fine: Any, fast: tuple, k: int, k1: int, Y: list, ro
     pre, post, is_rec, span, P = fast
     recorder, components = master.recorder, master.components
     events, rec = master._events, master._rec_get
-    plant, sensors, s = fine.plant, fine.sensors, fine.s
+    plant, sensors, servo, s = fine.plant, fine.sensors, fine.servo, fine.s
     set_plant, get_plant = plant.set_inputs, master._getters[list(components).index("plant")]
     run, out, a, b = fine.run, fine.out, fine.a, fine.b
     nc = fine.nc
@@ -59,6 +62,8 @@ def run_blocks(master: Any, fine: Any, fast: tuple, k: int, k1: int, Y: list, ro
                     c.set_parameter(param, value)
                     if c is sensors:
                         fine.noise_changed()
+                    elif c is servo:
+                        servo_loop.changed(fine, servo)
                     e += 1
                     next_event = events[e][0] if e < len(events) else -1
             r = k % P

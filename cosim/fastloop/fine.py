@@ -5,8 +5,8 @@
 stepping order, both at the finest rate, the plant's inputs read from components outside the block (or
 numbers) and the sensors' from the plant (or numbers). Anything else (Model Exchange, FMI 3.0, another
 sensor class, a plant split into FMUs, ``FEEDDRIVE_FASTLOOP=0``, no C compiler) runs the Python loop, with
-the reason in ``Master.loop``. The standard NC and the monitor's buffering join the block where their ports
-allow (:func:`_absorbed`); ``Master.loop`` names them.
+the reason in ``Master.loop``. The standard NC, a PMSM's servo sensors (``servo.candidate``) and the monitor's
+buffering join the block where their ports allow (:func:`_absorbed`); ``Master.loop`` names them.
 """
 from __future__ import annotations
 
@@ -15,10 +15,11 @@ import os
 from typing import Any
 
 from feeddrive.cosim import fmi_progress
+from feeddrive.cosim.fastloop import servo as servo_loop
 from feeddrive.cosim.fastloop.build import BuildFailed, library
 
 MAX_FILTERS, MAX_SECTIONS = 5, 4
-DONE, FMI_ERROR, NON_FINITE, NEED_ROWS, NEED_NC, MONITOR = 0, 1, 2, 3, 4, 5
+DONE, FMI_ERROR, NON_FINITE, NEED_ROWS, NEED_NC, MONITOR, NEED_SERVO_ROWS = 0, 1, 2, 3, 4, 5, 6
 
 _p, _i, _l, _d = ctypes.c_void_p, ctypes.c_int, ctypes.c_long, ctypes.c_double
 
@@ -50,6 +51,12 @@ class _Fine(ctypes.Structure):
         ("mon", _i), ("mon_d", _l), ("n_mon", _l), ("mon_src", _p), ("mon_const", _p), ("mon_state", _l),
         ("mon_motion_in", _l), ("mon_active", _i), ("mon_motion", _d), ("age_step", _d), ("mon_buf", _p),
         ("mon_rows", _l), ("mon_cap", _l),
+        ("sv", _i), ("sv_fine", _i), ("sv_kinds", _i * 8), ("sv_second", _i), ("sv_copy_iu", _i), ("sv_src", _p),
+        ("sv_const", _p), ("sv_scale", _p), ("sv_p", _d), ("sv_angle", _d * 3), ("sv_sin120", _d), ("sv_inv_m", _d),
+        ("sv_weights", _p), ("sv_acc", _d * 8), ("sv_lp", _d * 8), ("sv_nfilt", _i), ("sv_filt_channel", _i * 8),
+        ("sv_filt_sections", _i * 8), ("sv_coefs", _d * (8 * MAX_SECTIONS * 5)), ("sv_zst", _d * (8 * MAX_SECTIONS * 2)),
+        ("sv_gain", _d * 10), ("sv_offset", _d * 10), ("sv_noise", _d * 10), ("sv_z", _p), ("sv_k", _l),
+        ("sv_block", _l), ("sv_q", _d), ("sv_conv", _d), ("sv_res", _d), ("sv_out", _p),
     ]
 
 
@@ -94,14 +101,17 @@ def plan(master: Any) -> tuple[FineLoop | None, str]:
         lib = library()
     except BuildFailed as exc:
         return None, f"python loop: {exc}"
-    nc, monitor = _absorbed(master, plant, sensors)
-    fine = FineLoop(lib, master, plant, sensors, nc, monitor)
-    parts = ["NC"] * (nc is not None) + ["plant FMU", "sensors"] + ["monitor's buffering"] * (monitor is not None)
+    servo = servo_loop.candidate(master, plant, sensors, MAX_SECTIONS)
+    nc, monitor = _absorbed(master, plant, sensors if servo is None else servo)
+    fine = FineLoop(lib, master, plant, sensors, nc, monitor, servo)
+    parts = ["NC"] * (nc is not None) + ["plant FMU", "sensors"] + ["servo sensors"] * (servo is not None) + \
+        ["monitor's buffering"] * (monitor is not None)
     return fine, f"compiled fine loop ({', '.join(parts)})"
 
 
-def _absorbed(master: Any, plant: Any, sensors: Any) -> tuple[Any, Any]:
-    """The NC and the monitor that the compiled loop steps too, or None each.
+def _absorbed(master: Any, plant: Any, last: Any) -> tuple[Any, Any]:
+    """The NC and the monitor that the compiled loop steps too, or None each (``last``: the block's last
+    component, the sensors or the servo sensors after them).
 
     The NC (:class:`NCComponent`): right before the plant, which is the first component at the finest rate
     (or the NC at the finest rate too: it steps at the start of its cycle), its position from the plant or a number, its request from
@@ -114,7 +124,7 @@ def _absorbed(master: Any, plant: Any, sensors: Any) -> tuple[Any, Any]:
 
     names, rates, n_sig = list(master.components), master.rates, master.n_signals
     nc, monitor = master.components.get("nc"), master.components.get("monitor")
-    ip, b = names.index("plant"), master._slices[sensors][1]
+    ip, b = names.index("plant"), master._slices[last][1]
     first_fine = next(j for j, n in enumerate(names) if rates[n] == 1)
     if type(nc) is NCComponent and names.index("nc") == ip - 1 and (first_fine == ip or rates["nc"] == 1):
         na, nb = master._slices[nc]
@@ -145,8 +155,10 @@ class FineLoop:
     same errors as the Python loop (through the plant's own methods).
     """
 
-    def __init__(self, lib: Any, master: Any, plant: Any, sensors: Any, nc: Any = None, monitor: Any = None) -> None:
-        self.plant, self.sensors, self.nc, self.monitor = plant, sensors, nc, monitor
+    def __init__(self, lib: Any, master: Any, plant: Any, sensors: Any, nc: Any = None, monitor: Any = None,
+                 servo: Any = None) -> None:
+        self.plant, self.sensors, self.nc, self.monitor, self.servo = plant, sensors, nc, monitor, servo
+        self.max_sections = MAX_SECTIONS
         #: the components the compiled loop steps (the master keeps the NC out of its Python steps inside a
         #: block and gives the monitor the samples the block buffered, see cosim/fastloop/blocks.py)
         self.absorbed = {c for c in (nc, monitor) if c is not None}
@@ -184,12 +196,14 @@ class FineLoop:
                 s.have_prev = 1
         #: the block's part of the master's bus Y: [a, b), the NC's outputs first when it steps here
         self.a = a = master._slices[nc if nc is not None else plant][0]
-        self.b = master._slices[sensors][1]
+        self.b = master._slices[sensors if servo is None else servo][1]
         self.p = p = master._slices[plant][0] - a  # the plant's first output in out
         self.out = (_d * (self.b - a))()
         s.out, s.pout = _addr(self.out), _addr(self.out) + p * ctypes.sizeof(_d)
         s.nc_done = -1
         self._load_sensors(master, master._slices[plant][0])
+        if servo is not None:
+            servo_loop.load(self, master, servo)
         self._load_recorder(master, a)
         if nc is not None:
             self._load_nc_ports(master)
@@ -255,7 +269,7 @@ class FineLoop:
             self._buffer[:] = sn._buffer
             s.have_buffer = 1
         p, ny = self.p, self.plant._ny
-        self.out[p + ny:] = sn._y
+        self.out[p + ny:p + ny + 8] = sn._y
         self.out[p:p + ny] = self.plant.get_outputs()
         self.noise_changed(reset=True)
 
@@ -291,6 +305,9 @@ class FineLoop:
             if status == NEED_NC:  # the NC's step at tick k inserts pieces: in Python, as the Python loop
                 self._nc_in_python(k, Y)
                 hold = 1
+            elif status == NEED_SERVO_ROWS:  # the servo sensors' next block of noise, drawn by them
+                servo_loop.new_rows(self, self.servo)
+                hold = 0
             else:  # a new block of noise rows: drawn by the sensors as the Python loop would
                 self.sensors._k = s.krow
                 self.sensors._new_block()
@@ -407,6 +424,8 @@ class FineLoop:
         if s.have_buffer:
             sn._buffer = self._buffer[:]
         sn._j, sn._k = s.jbuf, s.krow
-        sn._y = self.out[self.p + plant._ny:]
+        sn._y = self.out[self.p + plant._ny:self.p + plant._ny + 8]
+        if self.servo is not None:
+            servo_loop.sync(self, self.servo)
         if self.nc is not None:
             self.sync_nc()

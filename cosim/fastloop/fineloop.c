@@ -113,10 +113,26 @@ typedef struct {
     double mon_motion, age_step;
     double *mon_buf;       /* mon_cap rows of n_mon: the inputs of the steps that buffer a sample */
     long mon_rows, mon_cap;
+    /* the servo sensors (cosim/sensors_servo.py ServoSensors.step, _fine, _true, _sample) when sv */
+    int sv, sv_fine;       /* sv_fine: stepped every tick (interval means, filters), else at the samples only */
+    int sv_kinds[8], sv_second, sv_copy_iu;
+    const long *sv_src;    /* each of the 8 inputs' index in out, or -1: sv_const */
+    const double *sv_const, *sv_scale;
+    double sv_p, sv_angle[3], sv_sin120, sv_inv_m;
+    const double *sv_weights;
+    double sv_acc[8], sv_lp[8];
+    int sv_nfilt, sv_filt_channel[8], sv_filt_sections[8];
+    double sv_coefs[8][MAX_SECTIONS][5];
+    double sv_zst[8][MAX_SECTIONS][2];
+    double sv_gain[10], sv_offset[10], sv_noise[10];
+    const double *sv_z;    /* the noise draws, sv_block x 10 */
+    long sv_k, sv_block;
+    double sv_q, sv_conv, sv_res;
+    double *sv_out;        /* the 11 outputs in out */
 } fine_t;
 
 enum { FINE_DONE = 0, FINE_FMI_ERROR = 1, FINE_NON_FINITE = 2, FINE_NEED_ROWS = 3, FINE_NEED_NC = 4,
-       FINE_MONITOR = 5 };
+       FINE_MONITOR = 5, FINE_NEED_SERVO_ROWS = 6 };
 #define RAPID 1.0
 
 static const int SOURCE[5] = {2, 2, 0, 1, 3};
@@ -156,6 +172,66 @@ static void measure(fine_t *s, const double *tr) {
     sy[5] = theta;
     sy[6] = w_enc;
     sy[7] = theta / s->conv;
+}
+
+/* ServoSensors.step at tick n (its steps: every tick when sv_fine, else at the samples (n + 1) % m == 0) */
+static void servo_step(fine_t *s, long n) {
+    const double *sc = s->sv_scale, *out = s->out;
+    double v[8];
+    for (int i = 0; i < 8; i++) v[i] = s->sv_src[i] >= 0 ? out[s->sv_src[i]] : s->sv_const[i];
+    if (s->sv_fine) { /* ServoSensors._fine, then the sums and the filters */
+        double i_d = v[0] * sc[0], i_q = v[1] * sc[1];
+        double phi = s->sv_p * v[2] * sc[2];
+        double c = cos(phi), sn = sin(phi);
+        double a = i_d * c - i_q * sn, b = i_d * sn + i_q * c;
+        double raw[3] = {a, -0.5 * a + s->sv_sin120 * b, -0.5 * a - s->sv_sin120 * b};
+        double x[8] = {raw[0], raw[1], raw[2], raw[s->sv_second], v[3] * sc[3], v[4] * sc[4], v[5] * sc[5],
+                       v[6] * sc[6]};
+        double w = s->sv_weights[n % s->m];
+        for (int j = 0; j < 8; j++)
+            if (s->sv_kinds[j] == 1) s->sv_acc[j] += w * x[j];
+        for (int f = 0; f < s->sv_nfilt; f++) { /* direct form II transposed, per second-order section */
+            int j = s->sv_filt_channel[f];
+            double xv = x[j];
+            for (int k = 0; k < s->sv_filt_sections[f]; k++) {
+                const double *cf = s->sv_coefs[f][k];
+                double *z = s->sv_zst[f][k];
+                double yv = cf[0] * xv + z[0];
+                z[0] = cf[1] * xv - cf[3] * yv + z[1];
+                z[1] = cf[2] * xv - cf[4] * yv;
+                xv = yv;
+            }
+            s->sv_lp[j] = xv;
+        }
+    }
+    if ((n + 1) % s->m) return;
+    /* ServoSensors._sample: _true at this instant, each channel's sample, gain, offset, noise */
+    const double *z = s->sv_z + 10 * s->sv_k;
+    s->sv_k++;
+    double tv[8];
+    for (int i = 0; i < 8; i++) tv[i] = v[i] * sc[i];
+    double theta = tv[2], x_table = tv[7];
+    double phi = s->sv_p * theta;
+    double raw[3];
+    for (int i = 0; i < 3; i++) raw[i] = tv[0] * cos(phi - s->sv_angle[i]) - tv[1] * sin(phi - s->sv_angle[i]);
+    double tr[8] = {raw[0], raw[1], raw[2], raw[s->sv_second], tv[3], tv[4], tv[5], tv[6]};
+    if (s->sv_fine) {
+        for (int j = 0; j < 8; j++) {
+            int k = s->sv_kinds[j];
+            if (k == 1) tr[j] = s->sv_acc[j] * s->sv_inv_m;
+            else if (k == 2) tr[j] = s->sv_lp[j];
+        }
+        for (int j = 0; j < 8; j++) s->sv_acc[j] = 0.0;
+    }
+    const double *g = s->sv_gain, *o = s->sv_offset, *e = s->sv_noise;
+    double *y = s->sv_out;
+    for (int j = 0; j < 8; j++) y[j] = g[j] * tr[j] + o[j] + e[j] * z[j];
+    if (s->sv_copy_iu) y[3] = y[0];
+    double q = s->sv_q, res = s->sv_res;
+    double theta_enc = q * floor((g[8] * theta + o[8] + e[8] * z[8]) / q + 0.5);
+    y[8] = theta_enc;
+    y[9] = theta_enc * s->sv_conv;
+    y[10] = res * floor((g[9] * x_table + o[9] + e[9] * z[9]) / res + 0.5);
 }
 
 /* NCComponent._load_segment */
@@ -234,6 +310,10 @@ static int run(fine_t *s, long first, long count, int hold) {
             s->tick = n; /* a new block of noise rows: drawn in Python, before this tick */
             return FINE_NEED_ROWS;
         }
+        if (s->sv && (n + 1) % s->m == 0 && s->sv_k == s->sv_block) {
+            s->tick = n; /* a new block of the servo sensors' noise: drawn in Python, before this tick */
+            return FINE_NEED_SERVO_ROWS;
+        }
         if (s->nc && n % s->nc_d == 0 && n != s->nc_done && nc_step(s, n / s->nc_d)) {
             s->tick = n; /* the NC's step in Python, then on from this tick */
             return FINE_NEED_NC;
@@ -295,6 +375,7 @@ static int run(fine_t *s, long first, long count, int hold) {
             s->lp[s->filt_channel[f]] = x;
         }
         if ((n + 1) % s->m == 0) measure(s, tr);
+        if (s->sv) servo_step(s, n);
         if (s->mon && (n + 1) % s->mon_d == 0 && n < end - 1 && mon_step(s, n / s->mon_d)) {
             s->tick = n; /* this tick ends the block: the monitor steps in Python */
             return FINE_MONITOR;

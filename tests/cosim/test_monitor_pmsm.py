@@ -154,7 +154,7 @@ def test_a_lost_motion_of_the_vendor_drive_chain_is_seen_by_the_two_encoders(ven
     """0.02 mm of play between the vendor FMU's screw and table: the motor encoder against the linear scale
     measures it within 0.002 mm on the tool change (0.01995 mm measured) and the monitor reports it as a drive-chain finding
     (``lost motion (backlash)``), not a sensor fault."""
-    res = run_scenario(scenario_from_dict(vendor_scenario(vendor_pmsm_fmu, 1, 0.02)), tmp_path / "lost")
+    res = run_scenario(scenario_from_dict(vendor_scenario(vendor_pmsm_fmu, 1, 0.02)), tmp_path / "lost", plots=False)
     (m,) = res.report["motions"]
     assert (tmp_path / "lost" / "report.html").is_file()  # the finding's evidence in the page's table
     lost = m["servo_checks"]["lost_motion"]
