@@ -137,6 +137,20 @@ enum { FINE_DONE = 0, FINE_FMI_ERROR = 1, FINE_NON_FINITE = 2, FINE_NEED_ROWS = 
 
 static const int SOURCE[5] = {2, 2, 0, 1, 3};
 
+/* one sample through a cascade of second-order sections, direct form II transposed (scipy's sosfilt order of
+   operations: the sensors' and the servo sensors' low-pass filters share it) */
+static double sos_step(double x, int sections, double (*coefs)[5], double (*zst)[2]) {
+    for (int k = 0; k < sections; k++) {
+        const double *c = coefs[k];
+        double *z = zst[k];
+        double yv = c[0] * x + z[0];
+        z[0] = c[1] * x - c[3] * yv + z[1];
+        z[1] = c[2] * x - c[4] * yv;
+        x = yv;
+    }
+    return x;
+}
+
 static void measure(fine_t *s, const double *tr) {
     const double *o = s->rows + 6 * s->krow;
     const double *g = s->gains;
@@ -192,16 +206,7 @@ static void servo_step(fine_t *s, long n) {
             if (s->sv_kinds[j] == 1) s->sv_acc[j] += w * x[j];
         for (int f = 0; f < s->sv_nfilt; f++) { /* direct form II transposed, per second-order section */
             int j = s->sv_filt_channel[f];
-            double xv = x[j];
-            for (int k = 0; k < s->sv_filt_sections[f]; k++) {
-                const double *cf = s->sv_coefs[f][k];
-                double *z = s->sv_zst[f][k];
-                double yv = cf[0] * xv + z[0];
-                z[0] = cf[1] * xv - cf[3] * yv + z[1];
-                z[1] = cf[2] * xv - cf[4] * yv;
-                xv = yv;
-            }
-            s->sv_lp[j] = xv;
+            s->sv_lp[j] = sos_step(x[j], s->sv_filt_sections[f], s->sv_coefs[f], s->sv_zst[f]);
         }
     }
     if ((n + 1) % s->m) return;
@@ -363,16 +368,7 @@ static int run(fine_t *s, long first, long count, int hold) {
             s->acc[3] += wt * tr[3];
         }
         for (int f = 0; f < s->nfilt; f++) { /* direct form II transposed, per second-order section */
-            double x = tr[s->filt_source[f]];
-            for (int k = 0; k < s->filt_sections[f]; k++) {
-                const double *c = s->coefs[f][k];
-                double *z = s->zst[f][k];
-                double yv = c[0] * x + z[0];
-                z[0] = c[1] * x - c[3] * yv + z[1];
-                z[1] = c[2] * x - c[4] * yv;
-                x = yv;
-            }
-            s->lp[s->filt_channel[f]] = x;
+            s->lp[s->filt_channel[f]] = sos_step(tr[s->filt_source[f]], s->filt_sections[f], s->coefs[f], s->zst[f]);
         }
         if ((n + 1) % s->m == 0) measure(s, tr);
         if (s->sv) servo_step(s, n);
