@@ -34,7 +34,7 @@ from feeddrive.cosim.recorded_options import (  # noqa: F401 - the shared option
     sampling_modes,
 )
 
-__all__ = ["TIME_JITTER", "Recording", "load_recording", "si_factor", "split_map", "split_scale"]
+__all__ = ["TIME_JITTER", "Recording", "load_recording", "si_factor", "split_map"]
 
 #: Fewest samples a recording must have.
 MIN_SAMPLES = 10
@@ -182,12 +182,6 @@ def si_factor(unit: str, role: str, where: str) -> tuple[float, str]:
 SCALE_AGREES = 1e-3
 _STATED = re.compile(r"^(?P<column>.*\S)\s+\[(?P<unit>[^\[\]]*)\]\s*$")
 _SCALED = re.compile(r"^(?P<column>.*\S)\s*\*\s*(?P<scale>[^\s*\[\]]+)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
-
-
-def split_scale(column: str) -> tuple[str, float | None]:
-    """``"x*0.001"`` -> ``("x", 0.001)``: an explicit scale; else ``(column, None)`` (see :func:`split_map`)."""
-    name, scale, _ = split_map(column)
-    return name, scale
 
 
 def split_map(column: str) -> tuple[str, float | None, str | None]:
