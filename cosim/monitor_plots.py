@@ -18,8 +18,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from feeddrive.cosim.figure_data import motion_figure  # noqa: E402
-from feeddrive.cosim.plot_workers import PNG, monitor_figure_jobs  # noqa: E402
+from feeddrive.cosim.figure_data import (
+    PNG,  # noqa: E402
+    motion_figure,  # noqa: E402
+)
+from feeddrive.cosim.plot_workers import monitor_figure_jobs  # noqa: E402
 from feeddrive.cosim.plots import draw_concurrently  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402

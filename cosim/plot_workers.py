@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from feeddrive.cosim.figure_data import DISPLAY_BUCKETS, PNG, envelope, motion_figure  # noqa: F401 - re-exported
+from feeddrive.cosim.figure_data import envelope, motion_figure
 
 #: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots, cost)
 RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure", 3.0), ("motion_{k}_currents.png", "currents_figure", 2.0))

@@ -19,14 +19,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from feeddrive.cosim.figure_data import PNG  # noqa: E402
 from feeddrive.cosim.plot_workers import (  # noqa: E402, F401 - re-exported
     CURRENTS,
-    DISPLAY_BUCKETS,
-    PNG,
     PROFILES,
     PlotWorkers,
     drawing_processes,
-    envelope,
     motions,
 )
 

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from feeddrive.cosim.plot_workers import DISPLAY_BUCKETS, FigureJob, PlotWorkers, run_figure_jobs
+from feeddrive.cosim.figure_data import DISPLAY_BUCKETS
+from feeddrive.cosim.plot_workers import FigureJob, PlotWorkers, run_figure_jobs
 
 needs_fork = pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
                                 reason="no fork start method on this platform: figures are drawn in turn")

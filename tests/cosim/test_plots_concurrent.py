@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from feeddrive.cosim.plots import DISPLAY_BUCKETS, draw_concurrently, envelope, plot_run
+from feeddrive.cosim.figure_data import DISPLAY_BUCKETS, envelope
+from feeddrive.cosim.plots import draw_concurrently, plot_run
 
 needs_fork = pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
                                 reason="no fork start method on this platform: figures are drawn in turn")
