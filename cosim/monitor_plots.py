@@ -18,10 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from feeddrive.cosim.figure_data import (
-    PNG,  # noqa: E402
-    motion_figure,  # noqa: E402
-)
+from feeddrive.cosim.figure_data import PNG, motion_figure  # noqa: E402
 from feeddrive.cosim.plot_workers import monitor_figure_jobs  # noqa: E402
 from feeddrive.cosim.plots import draw_concurrently  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
