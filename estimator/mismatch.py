@@ -73,7 +73,12 @@ from scipy import ndimage
 
 from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
-from feeddrive.estimator.filtering import FilterSpec, decimation_factor
+from feeddrive.estimator.filtering import (
+    MAX_DECIMATED_PHASE,
+    MIN_DECIMATED_SAMPLES,
+    FilterSpec,
+    decimation_factor,
+)
 from feeddrive.estimator.kernels import bilinear_first_order, erode
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
@@ -310,6 +315,46 @@ def _instrument_signals(instruments: Mapping[str, np.ndarray], n: int) -> dict[s
     return out
 
 
+def check_decimation(cutoff_hz: float, h: float, n: int, requested: int | str = "auto", rate_hz: float = 50.0) -> int:
+    """Every how many filtered samples the model check simulates and tests: D >= 1.
+
+    ``requested`` "auto": the largest D with ``2 pi fc h D <= filtering.MAX_DECIMATED_PHASE``. The check has no
+    split halves (the estimator's rule, ``filtering.decimation_factor``, bounds their period 2 h D): it simulates
+    the model from the filtered inputs at h D and tests block means of ``1 / rate_hz``. A factor given is
+    taken as it is. Either is then lowered to a divisor of the tests' block (``block_samples(rate_hz, h)``), so
+    that the blocks keep their duration: with 67 samples of 0.3 ms for 200 of 0.1 ms (20.1 ms) the check
+    rejected 4 of 150 healthy motions at alpha = 0.01, with 100 of 0.2 ms 1 (as D = 1). At 10 kHz with the
+    monitor's 100 Hz filter: D = 5 (7, lowered; the estimator's is 3). On the first 100 healthy motions of
+    examples/campaign_check_healthy.yaml D = 5 rejected 3 and D = 2 4 (the same motions but one), and the
+    friction-step and backlash campaigns were flagged alike (benchmarks/bench_model_check_rate.py).
+
+    Parameters
+    ----------
+    cutoff_hz : float
+        The identical low-pass' cut-off [Hz].
+    h : float
+        The record's sample period [s].
+    n : int
+        Samples of the record.
+    requested : int or "auto"
+        ``EstimationOptions.decimation`` (the monitor's ``decimation`` setting).
+    rate_hz : float
+        The tests' block rate [Hz].
+
+    Returns
+    -------
+    int
+    """
+    if requested == "auto":
+        step = int(np.floor(MAX_DECIMATED_PHASE / (2 * np.pi * cutoff_hz * h) + 1e-9))
+        step = max(1, min(step, n // MIN_DECIMATED_SAMPLES))
+    else:
+        step = decimation_factor(cutoff_hz, h, n, requested)
+    while step > 1 and block_samples(rate_hz, h) % step:
+        step -= 1
+    return step
+
+
 def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameters: Mapping[str, float],
                 filter: FilterSpec, alpha: float = 0.01, covariance: np.ndarray | None = None,
                 names: Sequence[str] | None = None, noise: Mapping[str, float] | None = None,
@@ -348,9 +393,9 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     rate_hz, lags, ar_order : float, int, int
         See ``residue_tests``.
     decimation : int or "auto"
-        Every how many filtered samples are simulated and tested (``EstimationOptions.decimation``, the
-        estimator's rule ``filtering.decimation_factor``, lowered to a divisor of the tests' block at
-        ``rate_hz``); the residues are given back on every sample (linear interpolation, for the plots).
+        Every how many filtered samples are simulated and tested (``EstimationOptions.decimation``; "auto":
+        the check's own rule, :func:`check_decimation`); the residues are given back on every sample (linear
+        interpolation, for the plots).
 
     Returns
     -------
@@ -372,12 +417,8 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     names = tuple(parameters) if names is None else tuple(names)
     f = filter.apply({"u": u, "i": i, "w": w}, h)
     n, record_h = len(f["w"]), h
-    # the filtered signals carry the model on every D-th sample (as the estimator): simulated and tested there
-    step = decimation_factor(filter.cutoff_hz, h, n, decimation)
-    # and a divisor of the tests' blocks, so that they keep their duration: with 67 samples of 0.3 ms for 200 of
-    # 0.1 ms (20.1 ms) the check rejected 4 of 150 healthy motions at alpha = 0.01, with 100 of 0.2 ms 1 (as D = 1)
-    while step > 1 and block_samples(rate_hz, h) % step:
-        step -= 1
+    # the filtered signals carry the model on every D-th sample: simulated and tested there
+    step = check_decimation(filter.cutoff_hz, h, n, decimation, rate_hz)
     if step > 1:
         f = {k: np.ascontiguousarray(x[::step]) for k, x in f.items()}
         h = h * step
