@@ -150,6 +150,20 @@ def decimation_factor(cutoff_hz: float, h: float, n: int, requested: int | str =
     return max(d, 1)
 
 
+def check_rate_factor(cutoff_hz: float, h: float, n: int, requested: int | str = "auto") -> int:
+    """D of the model checks (mismatch.check_model, adequacy.check_adequacy): every D-th filtered sample.
+
+    A check simulates or differentiates the filtered signals at h D and tests averages over blocks of many
+    samples; it has no split halves, whose period 2 h D bounds the estimator's D (:func:`decimation_factor`).
+    "auto": the largest D with ``2 pi fc h D <= MAX_DECIMATED_PHASE`` (7 at 10 kHz with a 100 Hz filter, the
+    estimator's 3), 1 when fewer than ``MIN_DECIMATED_SAMPLES`` would be left; a factor given is taken as it is.
+    """
+    if requested != "auto":
+        return int(requested)
+    d = int(np.floor(MAX_DECIMATED_PHASE / (2 * np.pi * cutoff_hz * h) + 1e-9))
+    return max(1, min(d, n // MIN_DECIMATED_SAMPLES))
+
+
 def lowpass(signals: Mapping[str, np.ndarray], h: float, cutoff_hz: float, order: int = 4,
             zero_phase: bool = True) -> dict[str, np.ndarray]:
     """Thin wrapper: ``FilterSpec(cutoff_hz, order, zero_phase).apply(signals, h)``."""

@@ -73,12 +73,7 @@ from scipy import ndimage
 
 from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
-from feeddrive.estimator.filtering import (
-    MAX_DECIMATED_PHASE,
-    MIN_DECIMATED_SAMPLES,
-    FilterSpec,
-    decimation_factor,
-)
+from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
 from feeddrive.estimator.kernels import bilinear_first_order, erode
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
@@ -318,15 +313,14 @@ def _instrument_signals(instruments: Mapping[str, np.ndarray], n: int) -> dict[s
 def check_decimation(cutoff_hz: float, h: float, n: int, requested: int | str = "auto", rate_hz: float = 50.0) -> int:
     """Every how many filtered samples the model check simulates and tests: D >= 1.
 
-    ``requested`` "auto": the largest D with ``2 pi fc h D <= filtering.MAX_DECIMATED_PHASE``. The check has no
-    split halves (the estimator's rule, ``filtering.decimation_factor``, bounds their period 2 h D): it simulates
-    the model from the filtered inputs at h D and tests block means of ``1 / rate_hz``. A factor given is
-    taken as it is. Either is then lowered to a divisor of the tests' block (``block_samples(rate_hz, h)``), so
-    that the blocks keep their duration: with 67 samples of 0.3 ms for 200 of 0.1 ms (20.1 ms) the check
-    rejected 4 of 150 healthy motions at alpha = 0.01, with 100 of 0.2 ms 1 (as D = 1). At 10 kHz with the
-    monitor's 100 Hz filter: D = 5 (7, lowered; the estimator's is 3). On the first 100 healthy motions of
-    examples/campaign_check_healthy.yaml D = 5 rejected 3 and D = 2 4 (the same motions but one), and the
-    friction-step and backlash campaigns were flagged alike (benchmarks/bench_model_check_rate.py).
+    ``filtering.check_rate_factor`` ("auto": the largest D with ``2 pi fc h D <= MAX_DECIMATED_PHASE``; the check
+    has no split halves, whose period 2 h D bounds the estimator's D; a factor given is taken as it is), lowered
+    to a divisor of the tests' block (``block_samples(rate_hz, h)``), so that the blocks keep their duration:
+    with 67 samples of 0.3 ms for 200 of 0.1 ms (20.1 ms) the check rejected 4 of 150 healthy motions at
+    alpha = 0.01, with 100 of 0.2 ms 1 (as D = 1). At 10 kHz with the monitor's 100 Hz filter: D = 5 (7, lowered;
+    the estimator's is 3). On the first 100 healthy motions of examples/campaign_check_healthy.yaml D = 5
+    rejected 3 and D = 2 4 (the same motions but one), on the vendor FMU's 9 and 9 (the same), and the
+    friction-step and backlash campaigns were all flagged at both (benchmarks/bench_model_check_rate.py).
 
     Parameters
     ----------
@@ -345,11 +339,7 @@ def check_decimation(cutoff_hz: float, h: float, n: int, requested: int | str = 
     -------
     int
     """
-    if requested == "auto":
-        step = int(np.floor(MAX_DECIMATED_PHASE / (2 * np.pi * cutoff_hz * h) + 1e-9))
-        step = max(1, min(step, n // MIN_DECIMATED_SAMPLES))
-    else:
-        step = decimation_factor(cutoff_hz, h, n, requested)
+    step = check_rate_factor(cutoff_hz, h, n, requested)
     while step > 1 and block_samples(rate_hz, h) % step:
         step -= 1
     return step
