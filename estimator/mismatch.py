@@ -310,41 +310,6 @@ def _instrument_signals(instruments: Mapping[str, np.ndarray], n: int) -> dict[s
     return out
 
 
-def check_decimation(cutoff_hz: float, h: float, n: int, requested: int | str = "auto", rate_hz: float = 50.0) -> int:
-    """Every how many filtered samples the model check simulates and tests: D >= 1.
-
-    ``filtering.check_rate_factor`` ("auto": the largest D with ``2 pi fc h D <= MAX_DECIMATED_PHASE``; the check
-    has no split halves, whose period 2 h D bounds the estimator's D; a factor given is taken as it is), lowered
-    to a divisor of the tests' block (``block_samples(rate_hz, h)``), so that the blocks keep their duration:
-    with 67 samples of 0.3 ms for 200 of 0.1 ms (20.1 ms) the check rejected 4 of 150 healthy motions at
-    alpha = 0.01, with 100 of 0.2 ms 1 (as D = 1). At 10 kHz with the monitor's 100 Hz filter: D = 5 (7, lowered;
-    the estimator's is 3). On the first 100 healthy motions of examples/campaign_check_healthy.yaml D = 5
-    rejected 3 and D = 2 4 (the same motions but one), on the vendor FMU's 9 and 9 (the same), and the
-    friction-step and backlash campaigns were all flagged at both (benchmarks/bench_model_check_rate.py).
-
-    Parameters
-    ----------
-    cutoff_hz : float
-        The identical low-pass' cut-off [Hz].
-    h : float
-        The record's sample period [s].
-    n : int
-        Samples of the record.
-    requested : int or "auto"
-        ``EstimationOptions.decimation`` (the monitor's ``decimation`` setting).
-    rate_hz : float
-        The tests' block rate [Hz].
-
-    Returns
-    -------
-    int
-    """
-    step = check_rate_factor(cutoff_hz, h, n, requested)
-    while step > 1 and block_samples(rate_hz, h) % step:
-        step -= 1
-    return step
-
-
 def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameters: Mapping[str, float],
                 filter: FilterSpec, alpha: float = 0.01, covariance: np.ndarray | None = None,
                 names: Sequence[str] | None = None, noise: Mapping[str, float] | None = None,
@@ -384,7 +349,7 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         See ``residue_tests``.
     decimation : int or "auto"
         Every how many filtered samples are simulated and tested (``EstimationOptions.decimation``; "auto":
-        the check's own rule, :func:`check_decimation`); the residues are given back on every sample (linear
+        the checks' rule, ``filtering.check_rate_factor``); the residues are given back on every sample (linear
         interpolation, for the plots).
 
     Returns
@@ -408,7 +373,7 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     f = filter.apply({"u": u, "i": i, "w": w}, h)
     n, record_h = len(f["w"]), h
     # the filtered signals carry the model on every D-th sample: simulated and tested there
-    step = check_decimation(filter.cutoff_hz, h, n, decimation, rate_hz)
+    step = check_rate_factor(filter.cutoff_hz, h, n, decimation, rate_hz)
     if step > 1:
         f = {k: np.ascontiguousarray(x[::step]) for k, x in f.items()}
         h = h * step

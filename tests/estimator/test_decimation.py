@@ -44,11 +44,11 @@ def test_the_factor_follows_the_halves_phase_and_the_record_length(cutoff, h, n,
     (100.0, 1e-4, 35000, 3, 2),          # a factor given: lowered to a divisor too
     (100.0, 1e-4, 35000, 1, 1),
 ])
-def test_the_model_checks_factor_follows_its_own_phase_and_divides_its_blocks(cutoff, h, n, requested, expected):
-    from feeddrive.estimator.mismatch import check_decimation
+def test_the_checks_factor_follows_their_own_phase_and_divides_the_blocks(cutoff, h, n, requested, expected):
+    from feeddrive.estimator.filtering import check_rate_factor
     from feeddrive.estimator.residue_tests import block_samples
 
-    d = check_decimation(cutoff, h, n, requested)
+    d = check_rate_factor(cutoff, h, n, requested)
     assert d == expected
     assert block_samples(50.0, h) % d == 0
     assert requested != "auto" or d == 1 or (2 * np.pi * cutoff * h * d <= MAX_DECIMATED_PHASE
