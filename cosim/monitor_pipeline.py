@@ -177,7 +177,7 @@ class MonitorPipeline:
             if cfg.sampling.get("speed") == "mean" and signals.get("w_enc") is not None:
                 signals = {**signals, "w_enc": interval_mean_speed(signals["w_enc"])}
             v = validate_measurements(signals, h, electrical, cfg.filter, self.validation_options,
-                                      nominal=self.nominal)
+                                      nominal=self.nominal, decimation=self.estimation_options.decimation)
             trace.validation = v
             faults = [f.to_dict() for f in v.sensor_faults]
             ratio = v.pairs["current"].gain_ratio if v.pairs["current"].residue is not None else None

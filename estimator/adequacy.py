@@ -46,7 +46,7 @@ from numpy.polynomial import legendre
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.distributions import f_sf
 from feeddrive.estimator.errors import EstimatorInputError
-from feeddrive.estimator.filtering import FilterSpec, decimation_factor
+from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
 from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
@@ -268,8 +268,9 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         place of the DC equations; each is tested against ``output^2`` and ``output x |speed|`` (and the
         position polynomials when ``friction``: the equation holding sign(w)).
     decimation : int or "auto"
-        Every how many filtered samples are tested (``EstimationOptions.decimation``, the estimator's rule:
-        ``filtering.decimation_factor``); the blocks, guards and lags stay the same in seconds.
+        Every how many filtered samples are tested (``EstimationOptions.decimation``; "auto": the checks' rule
+        ``filtering.check_rate_factor``, D = 5 at 10 kHz with a 100 Hz filter, where the estimator's is 3); the
+        blocks, guards and lags stay the same in seconds.
 
     Returns
     -------
@@ -300,8 +301,8 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
         return AdequacyResult("not enough excitation", None, alpha, f"too short to filter ({exc})")
     if "position" not in f:  # the integral of the speed: a position-dependent load needs no gear ratio
         f["position"] = np.concatenate([[0.0], np.cumsum(0.5 * (f["w"][1:] + f["w"][:-1])) * h])
-    # the filtered signals carry the model on every D-th sample (as the estimator's regressions)
-    step = decimation_factor(filter.cutoff_hz, h, n, decimation)
+    # the filtered signals carry the model on every D-th sample (the checks' rule: no split halves)
+    step = check_rate_factor(filter.cutoff_hz, h, n, decimation)
     if step > 1:
         f = {k: np.ascontiguousarray(v[::step]) for k, v in f.items()}
         h, n = h * step, f["w"].size

@@ -73,7 +73,7 @@ from scipy import ndimage
 
 from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
-from feeddrive.estimator.filtering import FilterSpec, decimation_factor
+from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
 from feeddrive.estimator.kernels import bilinear_first_order, erode
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
@@ -348,9 +348,9 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     rate_hz, lags, ar_order : float, int, int
         See ``residue_tests``.
     decimation : int or "auto"
-        Every how many filtered samples are simulated and tested (``EstimationOptions.decimation``, the
-        estimator's rule ``filtering.decimation_factor``, lowered to a divisor of the tests' block at
-        ``rate_hz``); the residues are given back on every sample (linear interpolation, for the plots).
+        Every how many filtered samples are simulated and tested (``EstimationOptions.decimation``; "auto":
+        the checks' rule, ``filtering.check_rate_factor``); the residues are given back on every sample (linear
+        interpolation, for the plots).
 
     Returns
     -------
@@ -372,12 +372,8 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     names = tuple(parameters) if names is None else tuple(names)
     f = filter.apply({"u": u, "i": i, "w": w}, h)
     n, record_h = len(f["w"]), h
-    # the filtered signals carry the model on every D-th sample (as the estimator): simulated and tested there
-    step = decimation_factor(filter.cutoff_hz, h, n, decimation)
-    # and a divisor of the tests' blocks, so that they keep their duration: with 67 samples of 0.3 ms for 200 of
-    # 0.1 ms (20.1 ms) the check rejected 4 of 150 healthy motions at alpha = 0.01, with 100 of 0.2 ms 1 (as D = 1)
-    while step > 1 and block_samples(rate_hz, h) % step:
-        step -= 1
+    # the filtered signals carry the model on every D-th sample: simulated and tested there
+    step = check_rate_factor(filter.cutoff_hz, h, n, decimation, rate_hz)
     if step > 1:
         f = {k: np.ascontiguousarray(x[::step]) for k, x in f.items()}
         h = h * step

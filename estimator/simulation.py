@@ -256,27 +256,31 @@ def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray) -> np.ndarray:
         from scipy.interpolate import CubicSpline  # here: scipy.interpolate takes 0.5-1 s to import
 
         return CubicSpline(x, Y, axis=1)(at)
-    from scipy.linalg import solve_banded
+    from scipy.linalg.lapack import dgtsv
 
     y = Y.T
     dx = np.diff(x)
     dxr = dx[:, None]
     slope = np.diff(y, axis=0) / dxr
-    A = np.zeros((3, n))  # banded: upper, main, lower diagonal
+    # the tridiagonal system's diagonals (solve_banded's rows of ab for (1, 1): upper, main, lower), given to the
+    # LAPACK routine it calls for them (gtsv) without its wrapper's checks: the same solve
+    upper, main, lower = np.empty(n - 1), np.empty(n), np.empty(n - 1)
     b = np.empty(y.shape)
-    A[1, 1:-1] = 2 * (dx[:-1] + dx[1:])
-    A[0, 2:] = dx[:-1]
-    A[-1, :-2] = dx[1:]
+    main[1:-1] = 2 * (dx[:-1] + dx[1:])
+    upper[1:] = dx[:-1]
+    lower[:-1] = dx[1:]
     b[1:-1] = 3 * (dxr[1:] * slope[:-1] + dxr[:-1] * slope[1:])
     d = x[2] - x[0]  # not-a-knot at the start ...
-    A[1, 0], A[0, 1] = dx[1], d
+    main[0], upper[0] = dx[1], d
     b[0] = ((dxr[0] + 2 * d) * dxr[1] * slope[0] + dxr[0] ** 2 * slope[1]) / d
     d = x[-1] - x[-3]  # ... and at the end
-    A[1, -1], A[-1, -2] = dx[-2], d
+    main[-1], lower[-1] = dx[-2], d
     b[-1] = (dxr[-1] ** 2 * slope[-2] + (2 * d + dxr[-1]) * dxr[-2] * slope[-1]) / d
-    s = solve_banded((1, 1), A, b, overwrite_ab=True, overwrite_b=True, check_finite=False)
+    s, info = dgtsv(lower, main, upper, b, 1, 1, 1, 1)[3:]
+    if info > 0:
+        raise np.linalg.LinAlgError("singular matrix")
     t = (s[:-1] + s[1:] - 2 * slope) / dxr
-    j = np.clip(np.searchsorted(x, at, side="right") - 1, 0, n - 2)  # the interval, the end ones extrapolated
+    j = np.clip(_intervals(x, at) - 1, 0, n - 2)  # the interval, the end ones extrapolated
     u = (at - x[j])[:, None]
     z = u
     res = 0.0 + y[:-1][j] * 1.0
@@ -286,3 +290,15 @@ def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray) -> np.ndarray:
     z = z * u
     res = res + (t / dxr)[j] * z
     return res.T
+
+
+def _intervals(x: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``np.searchsorted(x, at, side="right")``: how many knots ``x`` (increasing) are <= each of ``at``.
+
+    ``at`` sorted (a simulation's sample times, every sample): counted from where each knot falls among them
+    (``len(x)`` searches instead of ``len(at)``, the same integers); otherwise the search itself.
+    """
+    if not np.all(at[1:] >= at[:-1]):
+        return np.searchsorted(x, at, side="right")
+    first = np.searchsorted(at, x, side="left")  # knot i is <= at[t] for every t >= first[i]
+    return np.cumsum(np.bincount(first, minlength=at.size + 1)[:at.size])

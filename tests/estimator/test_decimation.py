@@ -35,6 +35,26 @@ def test_the_factor_follows_the_halves_phase_and_the_record_length(cutoff, h, n,
     assert decimation_factor(cutoff, h, n, 1) == 1 and decimation_factor(cutoff, h, n, 5) == 5
 
 
+@pytest.mark.parametrize(("cutoff", "h", "n", "requested", "expected"), [
+    (100.0, 1e-4, 35000, "auto", 5),     # 2 pi 100 (1e-4 D) <= 0.5 rad: D <= 7.96, lowered to a divisor of 200
+    (50.0, 1e-4, 35000, "auto", 10),     # D <= 15.9: 10 of the 200-sample block
+    (100.0, 1.25e-4, 32000, "auto", 5),  # 8 kHz: D <= 6.37, the block 160 samples
+    (50.0, 1e-3, 3500, "auto", 1),       # an NC's 1 ms
+    (100.0, 1e-4, 6000, "auto", 2),      # short: at least MIN_DECIMATED_SAMPLES kept (3, lowered)
+    (100.0, 1e-4, 35000, 3, 2),          # a factor given: lowered to a divisor too
+    (100.0, 1e-4, 35000, 1, 1),
+])
+def test_the_checks_factor_follows_their_own_phase_and_divides_the_blocks(cutoff, h, n, requested, expected):
+    from feeddrive.estimator.filtering import check_rate_factor
+    from feeddrive.estimator.residue_tests import block_samples
+
+    d = check_rate_factor(cutoff, h, n, requested)
+    assert d == expected
+    assert block_samples(50.0, h) % d == 0
+    assert requested != "auto" or d == 1 or (2 * np.pi * cutoff * h * d <= MAX_DECIMATED_PHASE
+                                             and n // d >= MIN_DECIMATED_SAMPLES)
+
+
 @pytest.mark.parametrize("bad", [0, -2, 2.5, "yes", True])
 def test_a_bad_decimation_is_refused_naming_the_option(bad):
     with pytest.raises(EstimatorInputError, match="decimation"):

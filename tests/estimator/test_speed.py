@@ -283,8 +283,21 @@ def test_simulation_spline_is_scipy_cubic_spline() -> None:
         x = np.arange(n) * 4.0
         x[-1] -= 1.0  # a shorter last step, as the simulation's last sample
         Y = np.cumsum(rng.standard_normal((2, n)), axis=1) * 1e3
-        for at in (np.arange(x[-1] + 1) + 1 / 6, np.arange(x[-1] + 1) - 0.25, np.arange(x[-1] + 1)):
+        for at in (np.arange(x[-1] + 1) + 1 / 6, np.arange(x[-1] + 1) - 0.25, np.arange(x[-1] + 1),
+                   rng.permutation(np.arange(x[-1] + 1)) + 0.5):  # sorted (knots counted among them) or not
             np.testing.assert_array_equal(simulation._spline(x, Y, at), CubicSpline(x, Y, axis=1)(at))
+
+
+def test_residue_segments_are_each_labels_samples() -> None:
+    from feeddrive.estimator.residue_tests import _segments
+
+    rng = np.random.default_rng(5)
+    for groups in (np.repeat([1, 2, 4, 5], [30, 1, 200, 7]), np.ones(50, dtype=int), rng.integers(0, 4, 300)):
+        expected = [np.flatnonzero(groups == g) for g in np.unique(groups)]
+        got = _segments(groups)
+        assert len(got) == len(expected)
+        for a, b in zip(got, expected):
+            np.testing.assert_array_equal(a, b)
 
 
 def test_sosfilt_zi_kept_per_filter_is_not_shared() -> None:
