@@ -49,6 +49,22 @@ def fmu_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
         yield cache
 
 
+@pytest.fixture(scope="session", autouse=True)
+def draw_in_turn() -> Iterator[None]:
+    """``FEEDDRIVE_PLOT_PROCESSES=1`` for the session (unless set): each ``cosim run`` draws its figures itself.
+
+    By default a run forks its drawing processes at its start, and the first one draws a throw-away figure to
+    warm matplotlib, whether the run draws anything or not: ~0.8 s of CPU per run (the Reference-FMU conformance
+    runs took 48 s of CPU with them, 23 s without). The suite already keeps both cores busy with its two xdist
+    workers, so drawing in parallel gained no time here. The processes themselves are tested with an explicit
+    count (tests/cosim/test_plot_workers.py, test_plots_concurrent.py, test_run_imports.py), and the README's
+    sessions run with the user's default (tests/layout/test_readme_outputs.py)."""
+    with pytest.MonkeyPatch.context() as mp:
+        if not os.environ.get("FEEDDRIVE_PLOT_PROCESSES"):
+            mp.setenv("FEEDDRIVE_PLOT_PROCESSES", "1")
+        yield
+
+
 @pytest.fixture(scope="session")
 def feeddrive_fmu(fmu_cache_dir: Path) -> Path:
     """The built-in feed-drive plant FMU (FMI 2.0, CS + ME), built once per test session."""

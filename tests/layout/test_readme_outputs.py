@@ -88,6 +88,7 @@ def test_readme_session_prints_what_it_shows(line, steps, tmp_path, feeddrive_fm
     shutil.copy(ROOT / "tests" / "cosim" / "linear_axis.py", tmp_path / "tests" / "cosim")
     env = os.environ | {"PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
                         "OPENBLAS_NUM_THREADS": "1", "CI": "1"}
+    env.pop("FEEDDRIVE_PLOT_PROCESSES", None)  # drawn as a user's run draws (tests/conftest.py sets 1)
     for command, expected in steps:
         proc = subprocess.run(command, shell=True, cwd=tmp_path, capture_output=True, text=True, env=env, timeout=900)
         assert proc.returncode == 0, f"README line {line}: {command}: exit {proc.returncode}\n{proc.stderr[-2000:]}"

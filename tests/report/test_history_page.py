@@ -51,7 +51,13 @@ def changes(k: int) -> tuple:
 
 
 def recording(path: Path, motions: range, end_time: float) -> Path:
-    """A CSV of the given motions (NC state 1) between idle stretches, modified at ``end_time``."""
+    """A Parquet table of the given motions (NC state 1) between idle stretches, modified at ``end_time``.
+
+    Parquet, not CSV: the ~250 000 rows of a 10-motion part took ~3 s of CPU to write as text and as much to
+    read back in each ``cosim monitor`` call; the CSV reader is tested on its own (tests/cosim/test_readers_*)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     idle = np.zeros((500, len(COLUMNS)))
     blocks, state = [], []
     for k in motions:
@@ -61,9 +67,8 @@ def recording(path: Path, motions: range, end_time: float) -> Path:
     blocks.append(idle)
     state += [0] * len(idle)
     data = np.vstack(blocks)
-    header = ",".join(["time"] + [c for c, _ in COLUMNS] + ["state"])
-    np.savetxt(path, np.column_stack([np.arange(len(state)) * H, data, state]), delimiter=",", header=header,
-               comments="", fmt="%.9g")
+    table = {"time": np.arange(len(state)) * H} | {c: data[:, j] for j, (c, _) in enumerate(COLUMNS)}
+    pq.write_table(pa.table(table | {"state": np.array(state, dtype=np.int8)}), path)
     os.utime(path, (end_time, end_time))  # the machine clock of cosim monitor: the file's modification time
     return path
 
@@ -75,10 +80,11 @@ def drift(tmp_path_factory) -> dict:
     db, now = work / "history.sqlite", time.time()
     # the first call's results are read back from the history (the same dicts as its report.json would hold),
     # so that only the second one draws its figures
-    csv = recording(work / "part1.csv", range(1, 11), now - 3 * 86400)
-    assert main(["monitor", str(csv), *MAP, "--db", str(db)]) == 0
-    csv = recording(work / "part2.csv", range(11, 21), now)
-    assert main(["monitor", str(csv), *MAP, "--db", str(db), "--out", str(work / "out")]) == 0
+    rec = recording(work / "part1.parquet", range(1, 11), now - 3 * 86400)
+    assert main(["monitor", str(rec), *MAP, "--db", str(db)]) == 0
+    rec = recording(work / "part2.parquet", range(11, 21), now)
+    # the figures of the last 2 motions (the default keeps 5: the page embeds whatever the report lists)
+    assert main(["monitor", str(rec), *MAP, "--db", str(db), "--out", str(work / "out"), "--keep-traces", "2"]) == 0
     report = json.loads((work / "out" / "report.json").read_text(encoding="utf-8"))
     with History(db) as history:
         first = history.motions("X")[:10]
@@ -92,7 +98,7 @@ def test_monitor_page(drift):
     root = checks.parse(out / "report.html")
     checks.assert_self_contained(out / "report.html", root)
     images = checks.embedded_images(root)
-    assert len(images) == 11  # the last 5 motions (keep_traces): residues and correlations; the trends
+    assert len(images) == 5  # the last 2 motions (--keep-traces): residues and correlations; the trends
     assert sorted(images) == sorted((out / p).read_bytes() for p in report["files"]["plots"])
     assert len(report["motions"]) == 10 and all(m["validated"] for m in report["motions"])
     for m in report["motions"]:
@@ -176,7 +182,7 @@ def test_bad_requests_are_one_line_errors_before_anything_is_written(drift, caps
     work = drift["work"]
     capsys.readouterr()
     # an existing report is not replaced without --overwrite, and the history is not touched
-    assert main(["monitor", str(work / "part2.csv"), *MAP, "--db", str(work / "other.sqlite"),
+    assert main(["monitor", str(work / "part2.parquet"), *MAP, "--db", str(work / "other.sqlite"),
                  "--out", str(work / "out")]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--out" in err and "--overwrite" in err and not (work / "other.sqlite").exists()
