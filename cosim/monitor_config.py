@@ -93,9 +93,12 @@ class MonitorConfig(BaseModel):
         A PMSM axis's acceptance value of the lost motion between the motor encoder and the linear scale [mm]:
         the one-sided test's null (an elastic drive chain has some um without play: 1.2 um on the vendor FMU).
     decimation : "auto" or int
-        Every how many filtered samples the estimation and both model checks use
-        (``EstimationOptions.decimation``): "auto" (default) from the filter's cut-off and the rate (3 at
-        10 kHz with the 100 Hz filter), 1 every sample; each motion's ``estimation_rate_hz`` says the rate.
+        Every how many filtered samples the estimation uses (``EstimationOptions.decimation``): "auto"
+        (default) from the filter's cut-off and the rate (3 at 10 kHz with the 100 Hz filter), 1 every
+        sample; each motion's ``estimation_rate_hz`` says the rate. The model checks have no split halves
+        and take their own D from the same rule (``estimator.filtering.check_rate_factor``: 5 at 10 kHz
+        with the 100 Hz filter); a factor given here is taken by them too, lowered to a divisor of their
+        50 Hz block.
     sampling : mapping of {"voltage", "current", "speed"} to {"instant", "mean"}
         What a sample of each quantity is: ``mean``, the mean over the sampling interval before its
         time stamp, which the estimator aligns to the interval's middle (h/2 earlier); default
