@@ -11,9 +11,13 @@ the time. The cluster leaves out Dask's diagnostics that cost CPU (``QUIET``). A
 """
 from __future__ import annotations
 
+import socket
+import weakref
 from collections.abc import Callable
 from multiprocessing import get_all_start_methods
 from typing import Any
+
+from feeddrive.cosim.campaign.zygote import ZygoteServer
 
 #: Dask's diagnostics that cost CPU for nothing a campaign reads: the workers' statistical profiler (a thread
 #: sampling every thread's stack every 10 ms: ~9 % of the workers' CPU on bench_campaign), the event loops'
@@ -47,7 +51,6 @@ def local_cluster(workers: int, run: str | Callable | None = None, **options: An
         Close it (``with local_cluster(2) as cluster: run_campaign(..., scheduler=cluster.scheduler_address)``).
     """
     import dask
-    from distributed import LocalCluster
 
     from feeddrive.cosim.campaign.execute import resolve_function
     from feeddrive.cosim.campaign.schema import CampaignError
@@ -61,9 +64,43 @@ def local_cluster(workers: int, run: str | Callable | None = None, **options: An
     if callable(prepare):
         prepare()
     method = "fork" if "fork" in get_all_start_methods() else "spawn"
-    with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
-        return LocalCluster(**({"n_workers": workers, "threads_per_worker": 1, "processes": True,
-                                "dashboard_address": None, "worker_class": _nanny(method)} | options))
+    # forked now, before the cluster starts its event loop's thread: the zygotes the runs are forked from
+    # (cosim/campaign/zygote.py) descend from this thread alone
+    server = ZygoteServer() if method == "fork" and hasattr(socket, "AF_UNIX") else None
+    try:
+        with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
+            cluster = _cluster_class()(**({"n_workers": workers, "threads_per_worker": 1, "processes": True,
+                                           "dashboard_address": None, "worker_class": _nanny(method)} | options))
+    except BaseException:
+        if server is not None:
+            server.close()
+        raise
+    cluster.zygote_server = server
+    if server is not None:  # also when the cluster is dropped without being closed
+        weakref.finalize(cluster, server.close)
+    return cluster
+
+
+_CLUSTER: list[type] = []
+
+
+def _cluster_class() -> type:
+    """A ``LocalCluster`` that stops its zygote server (``zygote_server``) when it closes."""
+    if not _CLUSTER:
+        from distributed import LocalCluster
+
+        class CampaignCluster(LocalCluster):
+            zygote_server: ZygoteServer | None = None
+
+            async def _close(self) -> Any:
+                try:
+                    return await super()._close()
+                finally:
+                    if self.zygote_server is not None:
+                        self.zygote_server.close()
+
+        _CLUSTER.append(CampaignCluster)
+    return _CLUSTER[0]
 
 
 _NANNIES: dict[str, type] = {}

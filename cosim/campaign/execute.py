@@ -220,11 +220,13 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
     from distributed import as_completed as dask_completed
     from distributed.scheduler import KilledWorker
 
+    from feeddrive.cosim.campaign.zygote import run_in_zygote  # the run forked from its worker's zygote, if any
+
     queue, by_key, running = list(reversed(specs)), {}, set()
 
     def submit() -> Any:
         spec = queue.pop()
-        future = client.submit(execute, run, spec, timeout, key=f"campaign-{spec.id}", pure=False)
+        future = client.submit(run_in_zygote, run, spec, timeout, key=f"campaign-{spec.id}", pure=False)
         by_key[future.key] = spec
         running.add(future)
         return future
@@ -232,7 +234,7 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
     try:
         if _queues(client, len(specs)):
             queue.reverse()
-            futures = client.map(execute, [run] * len(queue), queue, [timeout] * len(queue),
+            futures = client.map(run_in_zygote, [run] * len(queue), queue, [timeout] * len(queue),
                                  key=[f"campaign-{spec.id}" for spec in queue], pure=False)
             by_key |= {f.key: spec for f, spec in zip(futures, queue)}
             running |= set(futures)

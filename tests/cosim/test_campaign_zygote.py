@@ -1,0 +1,65 @@
+"""Campaign runs on a ``local_cluster`` are forked from a single-threaded zygote process per worker, not from the
+multi-threaded Dask worker (cosim/campaign/zygote.py): a lock another thread of the worker held at the fork
+could stay held for ever in the run's process, and the fork of the larger process cost ~20 ms a run."""
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+from feeddrive.cosim.campaign import Campaign, local_cluster, run_campaign
+
+
+def _status(pid: int) -> dict[str, int]:
+    """Threads and parent of the process ``pid`` (Linux /proc)."""
+    text = Path(f"/proc/{pid}/status").read_text()
+    return {key: int(re.search(rf"^{key}:\s+(\d+)", text, re.M).group(1)) for key in ("Threads", "PPid")}
+
+
+def where_am_i(spec):
+    """A run function reporting the process its run was forked from: its pid, threads and parent."""
+    parent = os.getppid()
+    return {"truth": {}, "injected": {"plant": {}, "sensors": {}}, "motions": [], "parent": parent,
+            "parent_status": _status(parent)}
+
+
+def kill_my_zygote(spec):
+    """Run 1 kills the process it was forked from (its zygote), from outside its containment."""
+    import signal
+
+    if spec.index == 1:
+        os.kill(os.getppid(), signal.SIGKILL)
+    return where_am_i(spec)
+
+
+def test_runs_are_forked_from_a_single_threaded_zygote_per_worker(tmp_path):
+    """8 runs on 2 workers: each run's parent is a one-thread process forked by the cluster's zygote server,
+    neither a Dask worker (which has several threads) nor this process; one zygote per worker, kept from one
+    run to the next. Closing the cluster stops the server and removes its socket."""
+    from distributed import Client
+
+    c = Campaign(name="z", base={"name": "s"}, run="test_campaign_zygote:where_am_i", repetitions=8)
+    with local_cluster(2, run=where_am_i) as cluster, Client(cluster) as client:
+        server = cluster.zygote_server
+        server_pid = server.pid
+        workers = client.run(os.getpid)
+        worker_threads = {pid: _status(pid)["Threads"] for pid in workers.values()}
+        res = run_campaign(c, tmp_path / "out", scheduler=cluster.scheduler_address, plots=False)
+    assert [r["status"] for r in res.records] == ["ok"] * 8
+    parents = {r["result"]["parent"] for r in res.records}
+    assert 1 <= len(parents) <= 2 and not parents & (set(workers.values()) | {os.getpid()})
+    assert all(r["result"]["parent_status"] == {"Threads": 1, "PPid": server_pid} for r in res.records)
+    assert min(worker_threads.values()) > 1  # what the runs were forked from before
+    assert server.pid is None and not Path(server.address).exists()
+    assert not Path(f"/proc/{server_pid}").exists()  # stopped and reaped
+
+
+def test_a_zygote_killed_under_a_run_fails_that_run_only(tmp_path):
+    """Run 1 kills its zygote: it is recorded failed with the reason; runs 0 and 2 are ok, run 2 in a new zygote
+    of the same worker."""
+    c = Campaign(name="k", base={"name": "s"}, run="test_campaign_zygote:kill_my_zygote", repetitions=3)
+    with local_cluster(1, run=kill_my_zygote) as cluster:
+        res = run_campaign(c, tmp_path / "out", scheduler=cluster.scheduler_address, plots=False)
+    assert [r["status"] for r in res.records] == ["ok", "failed", "ok"]
+    assert res.records[1]["reason"].startswith("crashed: its zygote process died")
+    assert res.records[0]["result"]["parent"] != res.records[2]["result"]["parent"]
