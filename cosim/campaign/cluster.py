@@ -19,16 +19,22 @@ from typing import Any
 
 from feeddrive.cosim.campaign.zygote import ZygoteServer
 
-#: Dask's diagnostics that cost CPU for nothing a campaign reads: the workers' statistical profiler (a thread
-#: sampling every thread's stack every 10 ms: ~9 % of the workers' CPU on bench_campaign), the event loops'
-#: tick every 20 ms and the system monitor every 0.5 s in each process, the scheduler's work stealing every
-#: 100 ms (runs wait on the scheduler until a worker is free: nothing to steal); together ~0.5 s of this
-#: process's CPU (the scheduler and the nannies of a LocalCluster run here) per 8 runs. A worker-saturation
-#: of 1: the scheduler queues a campaign's runs and sends each worker one per thread, the next as soon as it
-#: is done (cosim/campaign/execute.py ``_dask``), where the default 1.1 sends a one-thread worker two
+#: Dask's diagnostics and housekeeping that cost CPU for nothing a campaign reads: the workers' statistical
+#: profiler (a thread sampling every thread's stack every 10 ms: ~9 % of the workers' CPU on bench_campaign),
+#: the event loops' tick every 20 ms and the system monitor every 0.5 s in each process, the scheduler's work
+#: stealing every 100 ms (runs wait on the scheduler until a worker is free: nothing to steal), the memory
+#: monitor of each worker and of its nanny every 100 ms (1 s still stops a runaway worker in time: a run's
+#: memory grows with its process, not within a tenth of a second) and the active memory manager every 2 s
+#: (a campaign's results are small and never replicated). An idle cluster of 2 workers then costs this process
+#: (where the scheduler and the nannies run) 11 ms of CPU a second instead of 26, and each worker 5 instead
+#: of 10 (getrusage over 10 s of an idle ``local_cluster(2)`` with a client, loaded machine): CPU the runs,
+#: which share the cores with them, no longer lose. A worker-saturation of 1: the scheduler queues a campaign's runs and sends each worker one per
+#: thread, the next as soon as it is done (cosim/campaign/execute.py ``_dask``), where the default 1.1 sends a
+#: one-thread worker two
 QUIET = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
          "distributed.admin.system-monitor.interval": "5s", "distributed.scheduler.work-stealing": False,
-         "distributed.scheduler.worker-saturation": 1.0}
+         "distributed.scheduler.worker-saturation": 1.0, "distributed.worker.memory.monitor-interval": "1s",
+         "distributed.scheduler.active-memory-manager.start": False}
 
 
 def local_cluster(workers: int, run: str | Callable | None = None, **options: Any) -> Any:
@@ -107,7 +113,7 @@ _NANNIES: dict[str, type] = {}
 
 
 def _nanny(method: str) -> type:
-    """A ``distributed.Nanny`` that starts its worker process with ``method`` every time.
+    """A ``distributed.Nanny`` that starts its worker process with ``method`` (and ``QUIET``) every time.
 
     The nanny reads ``distributed.worker.multiprocessing-method`` when it starts a worker, and again when it
     restarts one that died (a run killed it, or the OOM killer): by then the setting in force was the
@@ -120,7 +126,7 @@ def _nanny(method: str) -> type:
 
         class CampaignNanny(Nanny):
             async def instantiate(self) -> Any:
-                with dask.config.set({"distributed.worker.multiprocessing-method": method}):
+                with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
                     return await super().instantiate()
 
         _NANNIES[method] = CampaignNanny

@@ -153,8 +153,10 @@ def _reap() -> None:  # pragma: no cover - runs in the server
 def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
     """A zygote's loop: the runs its worker sends, one at a time; returns when the worker closes."""
     global WORKER_PID
+    from feeddrive.cosim import supervise
     from feeddrive.cosim.campaign.execute import execute
 
+    supervise.REAP_IN_THREAD = False  # no thread, ever: every run's fork is from a single-threaded process
     while True:
         try:
             request = _recv(conn)
@@ -165,21 +167,14 @@ def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
             WORKER_PID = request[1]
             reply: Any = os.getpid()
         elif kind == "cpu":
-            _single_threaded()
+            supervise.reap(block=True)  # the runs' CPU counts once they are reaped
             own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
             reply = (own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime)
         else:
             _, run, spec, timeout = request
-            _single_threaded()
+            supervise.reap()  # the earlier runs' children that have exited (a zombie costs nothing meanwhile)
             reply = execute(run, spec, timeout)
         _send(conn, pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL))
-
-
-def _single_threaded() -> None:  # pragma: no cover - runs in a zygote
-    """Wait for the threads that reap the earlier runs' children (cosim/supervise.py): none at the next fork."""
-    for thread in threading.enumerate():
-        if thread is not threading.main_thread():
-            thread.join()
 
 
 # -- in the Dask worker ----------------------------------------------------------------------------------
