@@ -6,8 +6,11 @@ Dask spawns a LocalCluster's workers by default: each starts a new interpreter a
 at load) with its first run, which kept a fresh cluster of 2 workers well below 2 times one process
 (issue 26). Forked (``distributed.worker.multiprocessing-method: fork``), the workers inherit this process's
 imports, as the local pool's workers do (cosim/campaign/execute.py), and the cluster starts in a fraction of
-the time. The cluster leaves out Dask's diagnostics that cost CPU (``QUIET``). A cluster started elsewhere
-(``--scheduler``) cannot be forked from here; its workers run ``prepare`` once each, as their first task.
+the time. The cluster leaves out Dask's diagnostics that cost CPU (``QUIET``). Its workers do not fork the
+runs themselves: a zygote server forked from here before the cluster's threads start forks each worker a
+single-threaded zygote, which forks the worker's runs (cosim/campaign/zygote.py). A cluster started elsewhere
+(``--scheduler``) cannot be forked from here; its workers run ``prepare`` once each, as their first task, and
+fork the runs themselves.
 """
 from __future__ import annotations
 
@@ -39,7 +42,7 @@ QUIET = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.in
 
 def local_cluster(workers: int, run: str | Callable | None = None, **options: Any) -> Any:
     """A ``distributed.LocalCluster`` of ``workers`` worker processes (one thread each) forked warm, without
-    the diagnostics of ``QUIET``.
+    the diagnostics of ``QUIET``, whose runs are forked from a zygote per worker (``zygote_server``).
 
     Parameters
     ----------
@@ -54,9 +57,10 @@ def local_cluster(workers: int, run: str | Callable | None = None, **options: An
     Returns
     -------
     distributed.LocalCluster
-        Close it (``with local_cluster(2) as cluster: run_campaign(..., scheduler=cluster.scheduler_address)``).
+        With ``zygote_server`` (None where processes cannot fork). Close it (``with local_cluster(2) as cluster: run_campaign(..., scheduler=cluster.scheduler_address)``).
     """
     import dask
+    import distributed  # noqa: F401 - its config defaults now: loaded inside dask.config.set they would go with it
 
     from feeddrive.cosim.campaign.execute import resolve_function
     from feeddrive.cosim.campaign.schema import CampaignError
