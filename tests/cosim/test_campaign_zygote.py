@@ -32,26 +32,26 @@ def kill_my_zygote(spec):
     return where_am_i(spec)
 
 
-def test_runs_are_forked_from_a_single_threaded_zygote_per_worker(tmp_path):
-    """8 runs on 2 workers: each run's parent is a one-thread process forked by the cluster's zygote server,
-    neither a Dask worker (which has several threads) nor this process; one zygote per worker, kept from one
-    run to the next. Closing the cluster stops the server and removes its socket."""
-    from distributed import Client
-
+def check_runs_forked_from_zygotes(cluster, client, tmp_path) -> None:
+    """8 runs on the ``local_cluster`` of ``client`` (2 workers): each run's parent is a one-thread process forked by
+    the cluster's zygote server, neither a Dask worker (which has several threads) nor this process; one zygote
+    per worker, kept from one run to the next. Called by test_campaign.py's ``local_cluster`` test, whose
+    cluster it uses (a cluster's start is most of such a test's time), which then checks ``check_server_closed``."""
+    server = cluster.zygote_server
+    workers = client.run(os.getpid)
+    worker_threads = {pid: _status(pid)["Threads"] for pid in workers.values()}
     c = Campaign(name="z", base={"name": "s"}, run="test_campaign_zygote:where_am_i", repetitions=8)
-    with local_cluster(2, run=where_am_i) as cluster, Client(cluster) as client:
-        server = cluster.zygote_server
-        server_pid = server.pid
-        workers = client.run(os.getpid)
-        worker_threads = {pid: _status(pid)["Threads"] for pid in workers.values()}
-        res = run_campaign(c, tmp_path / "out", scheduler=cluster.scheduler_address, plots=False)
+    res = run_campaign(c, tmp_path / "zygotes", scheduler=cluster.scheduler_address, plots=False)
     assert [r["status"] for r in res.records] == ["ok"] * 8
     parents = {r["result"]["parent"] for r in res.records}
-    assert 1 <= len(parents) <= 2 and not parents & (set(workers.values()) | {os.getpid()})
-    assert [r["result"]["parent_status"] for r in res.records] == [{"Threads": 1, "PPid": server_pid}] * 8
+    assert len(parents) == len(workers) == 2 and not parents & (set(workers.values()) | {os.getpid()})
+    assert [r["result"]["parent_status"] for r in res.records] == [{"Threads": 1, "PPid": server.pid}] * 8
     assert min(worker_threads.values()) > 1  # what the runs were forked from before
-    assert server.pid is None and not Path(server.address).exists()
-    assert not Path(f"/proc/{server_pid}").exists()  # stopped and reaped
+
+
+def check_server_closed(server, pid: int) -> None:
+    """The closed cluster's zygote server is stopped and reaped, its socket removed."""
+    assert server.pid is None and not Path(server.address).exists() and not Path(f"/proc/{pid}").exists()
 
 
 def test_a_zygote_killed_under_a_run_fails_that_run_only(tmp_path):
