@@ -7,7 +7,8 @@ the same invocation. The aggregates of the three must be identical (checked).
 
 On a shared machine the wall-time speed-up says more about the other users than about the campaign, so
 each mode's CPU time is measured too (``getrusage``: this process and the processes it waited for, the
-pool's workers and the runs they forked; for Dask, read in each worker), and the speed-up the mode would
+pool's workers and the runs they forked; for Dask, read in each worker, with its zygotes' and their runs' for a
+``local_cluster``, cosim/campaign/zygote.py), and the speed-up the mode would
 have on ``--workers`` free cores is estimated as ``serial CPU / (this process's CPU + the workers' CPU /
 workers)`` (the runs spread evenly over the workers). The pool's workers are forked from this process
 once the run's imports are done; a fresh LocalCluster's workers import the stack with their first run
