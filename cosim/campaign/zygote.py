@@ -45,8 +45,8 @@ ADDRESS: tuple[int, str] | None = None
 WORKER_PID: int | None = None
 
 _HEADER = struct.Struct("!Q")
-#: this worker process's connections to its zygotes, one per thread: {thread id: socket}
-_CONNECTIONS: dict[int, socket.socket] = {}
+#: this worker process's connections to its zygotes, one per thread: {thread id: _Link}
+_LINKS: dict[int, _Link] = {}
 _LOCK = threading.Lock()
 
 
@@ -151,7 +151,12 @@ def _reap() -> None:  # pragma: no cover - runs in the server
 
 
 def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
-    """A zygote's loop: the runs its worker sends, one at a time; returns when the worker closes."""
+    """A zygote's loop: the runs its worker sends, one at a time; returns when the worker closes.
+
+    Each reply is ``("ok", value)``, or ``("refused", reason)`` for a request this process cannot read (e.g. a
+    run function of a module imported by the worker's parent after this process was forked): the worker then
+    runs it itself.
+    """
     global WORKER_PID
     from feeddrive.cosim import supervise
     from feeddrive.cosim.campaign.execute import execute
@@ -162,6 +167,9 @@ def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
             request = _recv(conn)
         except EOFError:
             return
+        except Exception as exc:  # noqa: BLE001 - the whole message was read: the next one is intact
+            _send(conn, pickle.dumps(("refused", f"{type(exc).__name__}: {exc}")))
+            continue
         kind = request[0]
         if kind == "hello":
             WORKER_PID = request[1]
@@ -174,69 +182,86 @@ def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
             _, run, spec, timeout = request
             supervise.reap()  # the earlier runs' children that have exited (a zombie costs nothing meanwhile)
             reply = execute(run, spec, timeout)
-        _send(conn, pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL))
+        _send(conn, pickle.dumps(("ok", reply), protocol=pickle.HIGHEST_PROTOCOL))
 
 
 # -- in the Dask worker ----------------------------------------------------------------------------------
+class _Link:
+    """A worker thread's connection to its zygote; ``lock`` held while a request is answered."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock, self.lock = sock, threading.Lock()
+
+    def ask(self, payload: bytes) -> Any:
+        """Send one request and return its reply's ``(kind, value)``."""
+        with self.lock:
+            _send(self.sock, payload)
+            return _recv(self.sock)
+
+
 def run_in_zygote(run: Any, spec: Any, timeout: float | None = None) -> dict[str, Any]:
     """A campaign run's Dask task: the run's ``execute`` in this worker thread's zygote; its record.
 
-    Without a zygote server (a cluster not started by ``local_cluster``, or its server gone) the run is
-    executed here, as before. A zygote that dies under the run gives a ``failed`` record.
+    Without a zygote server (a cluster not started by ``local_cluster``, or its server gone), or for a run the
+    zygote cannot read, the run is executed here, as before. A zygote that dies under the run gives a ``failed``
+    record (the next run gets a new zygote).
     """
     from feeddrive.cosim.campaign.execute import _lost, execute
 
-    conn = _connection()
-    if conn is None:
+    link = _link()
+    if link is None:
         return execute(run, spec, timeout)
     import cloudpickle  # a dependency of distributed: a run function of __main__ travels by value
 
     try:
-        _send(conn, cloudpickle.dumps(("run", run, spec, timeout), protocol=pickle.HIGHEST_PROTOCOL))
-        return _recv(conn)
+        kind, value = link.ask(cloudpickle.dumps(("run", run, spec, timeout), protocol=pickle.HIGHEST_PROTOCOL))
     except (OSError, EOFError) as exc:
-        _drop(conn)
+        _drop(link)
         return _lost(spec, f"crashed: its zygote process died ({exc or type(exc).__name__}); not retried")
+    return value if kind == "ok" else execute(run, spec, timeout)
 
 
 def zygote_cpu() -> tuple[float, float]:
-    """CPU seconds of this worker's zygotes (user + system): their own and their finished runs'."""
+    """CPU seconds of this worker's zygotes (user + system): their own and their finished runs' (a zygote busy
+    with a run now is left out)."""
     own = children = 0.0
-    for conn in list(_CONNECTIONS.values()):
+    for link in list(_LINKS.values()):
+        if not link.lock.acquire(blocking=False):
+            continue
+        link.lock.release()
         try:
-            _send(conn, pickle.dumps(("cpu",)))
-            a, b = _recv(conn)
+            kind, value = link.ask(pickle.dumps(("cpu",)))
         except (OSError, EOFError):
             continue
-        own, children = own + a, children + b
+        own, children = own + value[0], children + value[1]
     return own, children
 
 
-def _connection() -> socket.socket | None:
+def _link() -> _Link | None:
     """This thread's connection to its zygote (made now on its first run), None without a server."""
     address = ADDRESS
     if address is None or address[0] == os.getpid():
         return None
     key = threading.get_ident()
-    conn = _CONNECTIONS.get(key)
-    if conn is not None:
-        return conn
-    conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    link = _LINKS.get(key)
+    if link is not None:
+        return link
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
-        conn.connect(address[1])
-        _send(conn, pickle.dumps(("hello", os.getpid())))
-        _recv(conn)
+        sock.connect(address[1])
+        link = _Link(sock)
+        link.ask(pickle.dumps(("hello", os.getpid())))
     except (OSError, EOFError):  # the server is gone: the runs are executed here
-        conn.close()
+        sock.close()
         return None
     with _LOCK:
-        _CONNECTIONS[key] = conn
-    return conn
+        _LINKS[key] = link
+    return link
 
 
-def _drop(conn: socket.socket) -> None:
+def _drop(link: _Link) -> None:
     with _LOCK:
-        for key, c in list(_CONNECTIONS.items()):
-            if c is conn:
-                del _CONNECTIONS[key]
-    conn.close()
+        for key, other in list(_LINKS.items()):
+            if other is link:
+                del _LINKS[key]
+    link.sock.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from pathlib import Path
 
 from feeddrive.cosim.campaign import Campaign, local_cluster, run_campaign
@@ -32,6 +33,10 @@ def kill_my_zygote(spec):
     return where_am_i(spec)
 
 
+def _add_path(path: str) -> None:
+    sys.path.insert(0, path)
+
+
 def check_runs_forked_from_zygotes(cluster, client, tmp_path) -> None:
     """8 runs on the ``local_cluster`` of ``client`` (2 workers): each run's parent is a one-thread process forked by
     the cluster's zygote server, neither a Dask worker (which has several threads) nor this process; one zygote
@@ -47,6 +52,21 @@ def check_runs_forked_from_zygotes(cluster, client, tmp_path) -> None:
     assert len(parents) == len(workers) == 2 and not parents & (set(workers.values()) | {os.getpid()})
     assert [r["result"]["parent_status"] for r in res.records] == [{"Threads": 1, "PPid": server.pid}] * 8
     assert min(worker_threads.values()) > 1  # what the runs were forked from before
+    # a run function the zygotes cannot load (its module is only on the workers' path, as client.upload_file
+    # leaves it): its runs are forked from the workers, as without zygotes
+    late = tmp_path / "late"
+    late.mkdir()
+    (late / "late_zygote_run.py").write_text("import os\n\ndef run(spec):\n    return {'truth': {}, 'injected': "
+                                             "{'plant': {}, 'sensors': {}}, 'motions': [], 'parent': os.getppid()}\n")
+    client.run(_add_path, str(late))
+    sys.path.insert(0, str(late))
+    try:
+        from late_zygote_run import run
+    finally:
+        sys.path.remove(str(late))
+    res = run_campaign(c, tmp_path / "late-runs", scheduler=cluster.scheduler_address, run=run, plots=False)
+    assert [r["status"] for r in res.records] == ["ok"] * 8
+    assert {r["result"]["parent"] for r in res.records} <= set(workers.values())
 
 
 def check_server_closed(server, pid: int) -> None:
