@@ -83,3 +83,13 @@ def test_a_zygote_killed_under_a_run_fails_that_run_only(tmp_path):
     assert [r["status"] for r in res.records] == ["ok", "failed", "ok"]
     assert res.records[1]["reason"].startswith("crashed: its zygote process died")
     assert res.records[0]["result"]["parent"] != res.records[2]["result"]["parent"]
+
+
+def test_records_come_straight_from_the_workers_of_a_scheduler_on_loopback_only():
+    """The client fetches the records from the workers themselves (not through the scheduler) only when the
+    scheduler listens on loopback, where its workers are on this machine too (cosim/campaign/execute.py)."""
+    from feeddrive.cosim.campaign.execute import _loopback
+
+    local = ["tcp://127.0.0.1:8786", "tcp://localhost:8786", "tcp://[::1]:8786", "tls://127.0.0.2:1", "inproc://x/1/2"]
+    remote = ["tcp://10.0.0.2:8786", "tcp://host.example:8786", "tcp://0.0.0.0:8786", "not an address"]
+    assert [_loopback(a) for a in local] == [True] * 5 and [_loopback(a) for a in remote] == [False] * 4
