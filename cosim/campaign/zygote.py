@@ -159,7 +159,7 @@ def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
     """
     global WORKER_PID
     from feeddrive.cosim import supervise
-    from feeddrive.cosim.campaign.execute import execute
+    from feeddrive.cosim.campaign.runner import execute
 
     supervise.REAP_IN_THREAD = False  # no thread, ever: every run's fork is from a single-threaded process
     while True:
@@ -206,7 +206,7 @@ def run_in_zygote(run: Any, spec: Any, timeout: float | None = None) -> dict[str
     zygote cannot read, the run is executed here, as before. A zygote that dies under the run gives a ``failed``
     record (the next run gets a new zygote).
     """
-    from feeddrive.cosim.campaign.execute import _lost, execute
+    from feeddrive.cosim.campaign.runner import _lost, execute
 
     link = _link()
     if link is None:
