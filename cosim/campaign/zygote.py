@@ -123,6 +123,14 @@ def _serve(listener: socket.socket, parent: int) -> None:  # pragma: no cover - 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the campaign, which closes the cluster and this
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     gc.freeze()  # the zygotes share these pages: the collector's passes would copy them
+    try:
+        _accept(listener, parent)
+    finally:  # its parent gone without closing it (killed): the socket's directory goes with this process
+        shutil.rmtree(os.path.dirname(listener.getsockname()), ignore_errors=True)
+
+
+def _accept(listener: socket.socket, parent: int) -> None:  # pragma: no cover - runs in the server
+    """Fork a zygote for each connection until ``parent`` is gone."""
     while os.getppid() == parent:
         ready, _, _ = select.select([listener], [], [], 1.0)
         _reap()
