@@ -7,7 +7,8 @@ the same invocation. The aggregates of the three must be identical (checked).
 
 On a shared machine the wall-time speed-up says more about the other users than about the campaign, so
 each mode's CPU time is measured too (``getrusage``: this process and the processes it waited for, the
-pool's workers and the runs they forked; for Dask, read in each worker), and the speed-up the mode would
+pool's workers and the runs they forked; for Dask, read in each worker, with its zygotes' and their runs' for a
+``local_cluster``, cosim/campaign/zygote.py), and the speed-up the mode would
 have on ``--workers`` free cores is estimated as ``serial CPU / (this process's CPU + the workers' CPU /
 workers)`` (the runs spread evenly over the workers). The pool's workers are forked from this process
 once the run's imports are done; a fresh LocalCluster's workers import the stack with their first run
@@ -65,6 +66,14 @@ def _cpu() -> tuple[float, float]:
     """CPU seconds (user + system) of this process, and of the child processes it has waited for."""
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
+
+
+def _worker_cpu() -> float:
+    """In a Dask worker: its CPU seconds and its runs', with those of its zygotes (cosim/campaign/zygote.py), which
+    fork the runs of a ``local_cluster`` and have not exited (their CPU is in no process's children yet)."""
+    from feeddrive.cosim.campaign.zygote import zygote_cpu
+
+    return sum(_cpu()) + sum(zygote_cpu())
 
 
 def _late_imports(run, spec) -> list[str]:
@@ -135,12 +144,12 @@ def _measure(mode: str, campaign: Campaign, out: Path, workers: int) -> dict:
                 run_campaign(campaign.model_copy(update={"seed": 2}), Path(f"{out}-warm-up"),
                              scheduler=cluster.scheduler_address, plots=False)
             # the cluster's start-up is not the campaign's; the workers' CPU is read in the workers
-            own, before = _cpu()[0], sum(map(sum, client.run(_cpu).values()))
+            own, before = _cpu()[0], sum(client.run(_worker_cpu).values())
             t = time.perf_counter()
             res = run_campaign(campaign, out, scheduler=cluster.scheduler_address, plots=False)
             wall = time.perf_counter() - t
             time.sleep(SETTLE_S)
-            own, children = _cpu()[0] - own, sum(map(sum, client.run(_cpu).values())) - before
+            own, children = _cpu()[0] - own, sum(client.run(_worker_cpu).values()) - before
     else:
         t = time.perf_counter()
         res = run_campaign(campaign, out, workers=1 if mode == "serial" else workers, plots=False)

@@ -45,6 +45,11 @@ from feeddrive.cosim.errors import InputError, SimulationError
 
 #: how often the parent looks at the child's record [s]
 POLL_S = 0.05
+#: reap a child that sent its result in a background thread (True), or leave it to ``reap`` (False: a
+#: process that forks runs must stay single-threaded, cosim/campaign/zygote.py)
+REAP_IN_THREAD = True
+#: children that sent their result and were not reaped yet (``REAP_IN_THREAD`` False)
+_UNREAPED: list[int] = []
 LOG_FILE = "run.log"
 
 
@@ -213,7 +218,10 @@ def _watch(pid: int, fd: int, records: Any, timeout: float | None) -> Outcome:
         except Exception:  # noqa: BLE001 - a truncated result: the exit status says what happened
             pass
         else:  # a complete result: reap the exiting child in the background (its teardown takes ~20 ms)
-            threading.Thread(target=os.waitpid, args=(pid, 0), daemon=True).start()
+            if REAP_IN_THREAD:
+                threading.Thread(target=os.waitpid, args=(pid, 0), daemon=True).start()
+            else:
+                _UNREAPED.append(pid)
             return Outcome("ok", value=value) if kind == "ok" else Outcome("error", error=value)
     _, status = os.waitpid(pid, 0)
     rec = fmi_progress.current(records)
@@ -232,6 +240,17 @@ def _watch(pid: int, fd: int, records: Any, timeout: float | None) -> Outcome:
     if os.WIFSIGNALED(status):
         return Outcome("crashed", signal=signal.Signals(os.WTERMSIG(status)).name, **where)
     return Outcome("crashed", exit_code=os.waitstatus_to_exitcode(status), **where)
+
+
+def reap(block: bool = False) -> None:
+    """Reap the children left to it (``REAP_IN_THREAD`` False) that have exited; all of them if ``block``."""
+    for pid in list(_UNREAPED):
+        try:
+            done = os.waitpid(pid, 0 if block else os.WNOHANG)[0]
+        except ChildProcessError:
+            done = pid
+        if done:
+            _UNREAPED.remove(pid)
 
 
 def _kill(pid: int) -> None:

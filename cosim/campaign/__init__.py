@@ -5,7 +5,9 @@ The parts, in the order a campaign uses them:
 - :mod:`.schema`: the campaign file (``load_campaign``) and its expansion into runs (``expand``);
 - :mod:`.execute`: running them in this process, on a local pool or on Dask, into a resumable store
   (``run_campaign``);
+- :mod:`.runner`: one run, supervised in a forked child, and its record (``execute``);
 - :mod:`.cluster`: a local Dask cluster whose workers are forked warm (``local_cluster``);
+- :mod:`.zygote`: the single-threaded processes a ``local_cluster``'s runs are forked from;
 - :mod:`.cosim_run`: the default run function, one co-simulation with its monitor (``run_cosim``);
 - :mod:`.aggregate`: detection and estimation tables and plots (``aggregate``).
 

@@ -6,30 +6,43 @@ Dask spawns a LocalCluster's workers by default: each starts a new interpreter a
 at load) with its first run, which kept a fresh cluster of 2 workers well below 2 times one process
 (issue 26). Forked (``distributed.worker.multiprocessing-method: fork``), the workers inherit this process's
 imports, as the local pool's workers do (cosim/campaign/execute.py), and the cluster starts in a fraction of
-the time. The cluster leaves out Dask's diagnostics that cost CPU (``QUIET``). A cluster started elsewhere
-(``--scheduler``) cannot be forked from here; its workers run ``prepare`` once each, as their first task.
+the time. The cluster leaves out Dask's diagnostics that cost CPU (``QUIET``). Its workers do not fork the
+runs themselves: a zygote server forked from here before the cluster's threads start forks each worker a
+single-threaded zygote, which forks the worker's runs (cosim/campaign/zygote.py). A cluster started elsewhere
+(``--scheduler``) cannot be forked from here; its workers run ``prepare`` once each, as their first task, and
+fork the runs themselves.
 """
 from __future__ import annotations
 
+import socket
+import weakref
 from collections.abc import Callable
 from multiprocessing import get_all_start_methods
 from typing import Any
 
-#: Dask's diagnostics that cost CPU for nothing a campaign reads: the workers' statistical profiler (a thread
-#: sampling every thread's stack every 10 ms: ~9 % of the workers' CPU on bench_campaign), the event loops'
-#: tick every 20 ms and the system monitor every 0.5 s in each process, the scheduler's work stealing every
-#: 100 ms (runs wait on the scheduler until a worker is free: nothing to steal); together ~0.5 s of this
-#: process's CPU (the scheduler and the nannies of a LocalCluster run here) per 8 runs. A worker-saturation
-#: of 1: the scheduler queues a campaign's runs and sends each worker one per thread, the next as soon as it
-#: is done (cosim/campaign/execute.py ``_dask``), where the default 1.1 sends a one-thread worker two
+from feeddrive.cosim.campaign.zygote import ZygoteServer
+
+#: Dask's diagnostics and housekeeping that cost CPU for nothing a campaign reads: the workers' statistical
+#: profiler (a thread sampling every thread's stack every 10 ms: ~9 % of the workers' CPU on bench_campaign),
+#: the event loops' tick every 20 ms and the system monitor every 0.5 s in each process, the scheduler's work
+#: stealing every 100 ms (runs wait on the scheduler until a worker is free: nothing to steal), the memory
+#: monitor of each worker and of its nanny every 100 ms (1 s still stops a runaway worker in time: a run's
+#: memory grows with its process, not within a tenth of a second) and the active memory manager every 2 s
+#: (a campaign's results are small and never replicated). An idle cluster of 2 workers then costs this process
+#: (where the scheduler and the nannies run) 11 ms of CPU a second instead of 26, and each worker 5 instead
+#: of 10 (getrusage over 10 s of an idle ``local_cluster(2)`` with a client, loaded machine): CPU the runs,
+#: which share the cores with them, no longer lose. A worker-saturation of 1: the scheduler queues a campaign's runs and sends each worker one per
+#: thread, the next as soon as it is done (cosim/campaign/execute.py ``_dask``), where the default 1.1 sends a
+#: one-thread worker two
 QUIET = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
          "distributed.admin.system-monitor.interval": "5s", "distributed.scheduler.work-stealing": False,
-         "distributed.scheduler.worker-saturation": 1.0}
+         "distributed.scheduler.worker-saturation": 1.0, "distributed.worker.memory.monitor-interval": "1s",
+         "distributed.scheduler.active-memory-manager.start": False}
 
 
 def local_cluster(workers: int, run: str | Callable | None = None, **options: Any) -> Any:
     """A ``distributed.LocalCluster`` of ``workers`` worker processes (one thread each) forked warm, without
-    the diagnostics of ``QUIET``.
+    the diagnostics of ``QUIET``, whose runs are forked from a zygote per worker (``zygote_server``).
 
     Parameters
     ----------
@@ -44,10 +57,10 @@ def local_cluster(workers: int, run: str | Callable | None = None, **options: An
     Returns
     -------
     distributed.LocalCluster
-        Close it (``with local_cluster(2) as cluster: run_campaign(..., scheduler=cluster.scheduler_address)``).
+        With ``zygote_server`` (None where processes cannot fork). Close it (``with local_cluster(2) as cluster: run_campaign(..., scheduler=cluster.scheduler_address)``).
     """
     import dask
-    from distributed import LocalCluster
+    import distributed  # noqa: F401 - its config defaults now: loaded inside dask.config.set they would go with it
 
     from feeddrive.cosim.campaign.execute import resolve_function
     from feeddrive.cosim.campaign.schema import CampaignError
@@ -61,16 +74,50 @@ def local_cluster(workers: int, run: str | Callable | None = None, **options: An
     if callable(prepare):
         prepare()
     method = "fork" if "fork" in get_all_start_methods() else "spawn"
-    with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
-        return LocalCluster(**({"n_workers": workers, "threads_per_worker": 1, "processes": True,
-                                "dashboard_address": None, "worker_class": _nanny(method)} | options))
+    # forked now, before the cluster starts its event loop's thread: the zygotes the runs are forked from
+    # (cosim/campaign/zygote.py) descend from this thread alone
+    server = ZygoteServer() if method == "fork" and hasattr(socket, "AF_UNIX") else None
+    try:
+        with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
+            cluster = _cluster_class()(**({"n_workers": workers, "threads_per_worker": 1, "processes": True,
+                                           "dashboard_address": None, "worker_class": _nanny(method)} | options))
+    except BaseException:
+        if server is not None:
+            server.close()
+        raise
+    cluster.zygote_server = server
+    if server is not None:  # also when the cluster is dropped without being closed
+        weakref.finalize(cluster, server.close)
+    return cluster
+
+
+_CLUSTER: list[type] = []
+
+
+def _cluster_class() -> type:
+    """A ``LocalCluster`` that stops its zygote server (``zygote_server``) when it closes."""
+    if not _CLUSTER:
+        from distributed import LocalCluster
+
+        class CampaignCluster(LocalCluster):
+            zygote_server: ZygoteServer | None = None
+
+            async def _close(self) -> Any:
+                try:
+                    return await super()._close()
+                finally:
+                    if self.zygote_server is not None:
+                        self.zygote_server.close()
+
+        _CLUSTER.append(CampaignCluster)
+    return _CLUSTER[0]
 
 
 _NANNIES: dict[str, type] = {}
 
 
 def _nanny(method: str) -> type:
-    """A ``distributed.Nanny`` that starts its worker process with ``method`` every time.
+    """A ``distributed.Nanny`` that starts its worker process with ``method`` (and ``QUIET``) every time.
 
     The nanny reads ``distributed.worker.multiprocessing-method`` when it starts a worker, and again when it
     restarts one that died (a run killed it, or the OOM killer): by then the setting in force was the
@@ -83,7 +130,7 @@ def _nanny(method: str) -> type:
 
         class CampaignNanny(Nanny):
             async def instantiate(self) -> Any:
-                with dask.config.set({"distributed.worker.multiprocessing-method": method}):
+                with dask.config.set(QUIET | {"distributed.worker.multiprocessing-method": method}):
                     return await super().instantiate()
 
         _NANNIES[method] = CampaignNanny

@@ -200,9 +200,11 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
     """``local_cluster``: worker processes (not threads) forked from this process after the run's prepare hook
     ran here, so they start with its imports; the campaign's records are the serial run's. Its scheduler
     keeps the runs (all 12 submitted at once, more than twice its 2 threads) and gives each worker one at a
-    time: no worker ever holds a second run behind the one it runs (cosim/campaign/execute.py ``_dask``)."""
+    time: no worker ever holds a second run behind the one it runs (cosim/campaign/execute.py ``_dask``). The runs
+    are forked from a single-threaded zygote per worker (test_campaign_zygote.py)."""
     from distributed import Client
     from distributed.diagnostics.plugin import SchedulerPlugin
+    from test_campaign_zygote import check_runs_forked_from_zygotes, check_server_closed
 
     from feeddrive.cosim.campaign import local_cluster
 
@@ -214,10 +216,14 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
         cluster.scheduler.add_plugin(type("Dispatch", (_Dispatch, SchedulerPlugin), {})(cluster.scheduler))
         seen = client.run(lambda: (os.getpid(), list(PREPARED)))
         dask = run_campaign(c, tmp_path / "dask", scheduler=cluster.scheduler_address, run=warm_toy_run, plots=False)
+        dispatch = list(DISPATCH)  # this campaign's runs
+        server, server_pid = cluster.zygote_server, cluster.zygote_server.pid
+        check_runs_forked_from_zygotes(cluster, client, tmp_path)  # on this cluster: its start is the test's time
+    check_server_closed(server, server_pid)
     assert len(seen) == 2 and all(pid != os.getpid() and prepared == [os.getpid()] for pid, prepared in seen.values())
-    processing = [n for _, state, n in DISPATCH if state == "processing"]
+    processing = [n for _, state, n in dispatch if state == "processing"]
     assert len(processing) == 12 and max(processing) == 1
-    assert sum(state == "queued" for _, state, _ in DISPATCH) >= 10  # all but the first run of each worker
+    assert sum(state == "queued" for _, state, _ in dispatch) >= 10  # all but the first run of each worker
     assert dask.aggregates == serial.aggregates
     assert [(r["id"], r["status"], r["result"]) for r in dask.records] == \
            [(r["id"], r["status"], r["result"]) for r in serial.records]

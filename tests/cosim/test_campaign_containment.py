@@ -93,12 +93,15 @@ def test_cli_prints_the_failures_and_exits_0(tmp_path, faulty_campaign, capsys):
 
 def kill_my_worker(spec):
     """A run function that kills the process running it from outside its containment: the Dask worker
-    (the supervised child's parent), as the kernel's OOM killer would."""
+    (which sent the run to the zygote that forked it, cosim/campaign/zygote.py), as the kernel's OOM killer
+    would."""
     import os
     import signal
 
+    from feeddrive.cosim.campaign import zygote
+
     if spec.index == 1:
-        os.kill(os.getppid(), signal.SIGKILL)
+        os.kill(zygote.WORKER_PID or os.getppid(), signal.SIGKILL)
     return {"truth": {}, "injected": {"plant": {}, "sensors": {}}, "motions": [], "forked_from": FORKED_FROM}
 
 

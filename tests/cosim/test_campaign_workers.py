@@ -12,7 +12,7 @@ import time
 
 from feeddrive.cosim import fmu_inspect
 from feeddrive.cosim.campaign import Campaign, cosim_run, expand
-from feeddrive.cosim.campaign.execute import _call, execute
+from feeddrive.cosim.campaign.runner import _call, execute
 from feeddrive.cosim.run import run_scenario  # here, not in each run's child
 from feeddrive.cosim.supervise import supervise
 

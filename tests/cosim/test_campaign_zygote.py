@@ -1,0 +1,95 @@
+"""Campaign runs on a ``local_cluster`` are forked from a single-threaded zygote process per worker, not from the
+multi-threaded Dask worker (cosim/campaign/zygote.py): a lock another thread of the worker held at the fork
+could stay held for ever in the run's process, and the fork of the larger process cost ~20 ms a run."""
+from __future__ import annotations
+
+import os
+import re
+import sys
+from pathlib import Path
+
+from feeddrive.cosim.campaign import Campaign, local_cluster, run_campaign
+
+
+def _status(pid: int) -> dict[str, int]:
+    """Threads and parent of the process ``pid`` (Linux /proc)."""
+    text = Path(f"/proc/{pid}/status").read_text()
+    return {key: int(re.search(rf"^{key}:\s+(\d+)", text, re.M).group(1)) for key in ("Threads", "PPid")}
+
+
+def where_am_i(spec):
+    """A run function reporting the process its run was forked from: its pid, threads and parent."""
+    parent = os.getppid()
+    return {"truth": {}, "injected": {"plant": {}, "sensors": {}}, "motions": [], "parent": parent,
+            "parent_status": _status(parent)}
+
+
+def kill_my_zygote(spec):
+    """Run 1 kills the process it was forked from (its zygote), from outside its containment."""
+    import signal
+
+    if spec.index == 1:
+        os.kill(os.getppid(), signal.SIGKILL)
+    return where_am_i(spec)
+
+
+def _add_path(path: str) -> None:
+    sys.path.insert(0, path)
+
+
+def check_runs_forked_from_zygotes(cluster, client, tmp_path) -> None:
+    """8 runs on the ``local_cluster`` of ``client`` (2 workers): each run's parent is a one-thread process forked by
+    the cluster's zygote server, neither a Dask worker (which has several threads) nor this process; one zygote
+    per worker, kept from one run to the next. Called by test_campaign.py's ``local_cluster`` test, whose
+    cluster it uses (a cluster's start is most of such a test's time), which then checks ``check_server_closed``."""
+    server = cluster.zygote_server
+    workers = client.run(os.getpid)
+    worker_threads = {pid: _status(pid)["Threads"] for pid in workers.values()}
+    c = Campaign(name="z", base={"name": "s"}, run="test_campaign_zygote:where_am_i", repetitions=8)
+    res = run_campaign(c, tmp_path / "zygotes", scheduler=cluster.scheduler_address, plots=False)
+    assert [r["status"] for r in res.records] == ["ok"] * 8
+    parents = {r["result"]["parent"] for r in res.records}
+    assert len(parents) == len(workers) == 2 and not parents & (set(workers.values()) | {os.getpid()})
+    assert [r["result"]["parent_status"] for r in res.records] == [{"Threads": 1, "PPid": server.pid}] * 8
+    assert min(worker_threads.values()) > 1  # what the runs were forked from before
+    # a run function the zygotes cannot load (its module is only on the workers' path, as client.upload_file
+    # leaves it): its runs are forked from the workers, as without zygotes
+    late = tmp_path / "late"
+    late.mkdir()
+    (late / "late_zygote_run.py").write_text("import os\n\ndef run(spec):\n    return {'truth': {}, 'injected': "
+                                             "{'plant': {}, 'sensors': {}}, 'motions': [], 'parent': os.getppid()}\n")
+    client.run(_add_path, str(late))
+    sys.path.insert(0, str(late))
+    try:
+        from late_zygote_run import run
+    finally:
+        sys.path.remove(str(late))
+    res = run_campaign(c, tmp_path / "late-runs", scheduler=cluster.scheduler_address, run=run, plots=False)
+    assert [r["status"] for r in res.records] == ["ok"] * 8
+    assert {r["result"]["parent"] for r in res.records} <= set(workers.values())
+
+
+def check_server_closed(server, pid: int) -> None:
+    """The closed cluster's zygote server is stopped and reaped, its socket removed."""
+    assert server.pid is None and not Path(server.address).exists() and not Path(f"/proc/{pid}").exists()
+
+
+def test_a_zygote_killed_under_a_run_fails_that_run_only(tmp_path):
+    """Run 1 kills its zygote: it is recorded failed with the reason; runs 0 and 2 are ok, run 2 in a new zygote
+    of the same worker."""
+    c = Campaign(name="k", base={"name": "s"}, run="test_campaign_zygote:kill_my_zygote", repetitions=3)
+    with local_cluster(1, run=kill_my_zygote) as cluster:
+        res = run_campaign(c, tmp_path / "out", scheduler=cluster.scheduler_address, plots=False)
+    assert [r["status"] for r in res.records] == ["ok", "failed", "ok"]
+    assert res.records[1]["reason"].startswith("crashed: its zygote process died")
+    assert res.records[0]["result"]["parent"] != res.records[2]["result"]["parent"]
+
+
+def test_records_come_straight_from_the_workers_of_a_scheduler_on_loopback_only():
+    """The client fetches the records from the workers themselves (not through the scheduler) only when the
+    scheduler listens on loopback, where its workers are on this machine too (cosim/campaign/execute.py)."""
+    from feeddrive.cosim.campaign.execute import _loopback
+
+    local = ["tcp://127.0.0.1:8786", "tcp://localhost:8786", "tcp://[::1]:8786", "tls://127.0.0.2:1", "inproc://x/1/2"]
+    remote = ["tcp://10.0.0.2:8786", "tcp://host.example:8786", "tcp://0.0.0.0:8786", "not an address"]
+    assert [_loopback(a) for a in local] == [True] * 5 and [_loopback(a) for a in remote] == [False] * 4
