@@ -167,6 +167,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
             # report.html's template is loaded while the workers draw (its imports were made during the loop)
             paths["plots"] = workers.draw(plot_jobs(master, recorder.time, signals, out_dir / "plots", scenario.name),
                                           meanwhile=_prepare_page if page else None)
+            workers.close(wait=False)  # idle now: they exit while report.json and report.html are written
     except BaseException as exc:
         rec = master.recorder
         report |= {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
