@@ -153,8 +153,9 @@ def write_png(fig: plt.Figure, path: Path, dpi: float = DPI, layout: bool = True
     the parent folder made); the figure is closed. Returns ``path``.
 
     ``tight_layout`` leaves a placeholder layout engine on the figure, for which ``savefig`` lays every artist out
-    once more (ticks, texts, legends: a third of a figure's time) before drawing it, to the same pixels: the
-    engine is dropped first.
+    once more (ticks, texts, legends) before drawing it, to the same pixels: the engine is dropped first. With
+    :data:`DPI`, the 5 figures of examples/tool_change.yaml took 22 % less CPU time (2.83 -> 2.20 s, best of 6,
+    each drawn once in a fresh drawing process).
     """
     from matplotlib.layout_engine import PlaceHolderLayoutEngine
 

@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     status = _main(sys.argv[1:] if argv is None else list(argv))
     if argv is None:
         # the program ends now: the objects alive are left out of the interpreter's last garbage collection,
-        # which walks each of them (numpy, fmpy, casadi, pydantic...: 0.2 s of `cosim run`'s wall time) and
+        # which walks each of them (numpy, fmpy, casadi, pydantic...: 0.2 to 0.35 s of a command's wall time) and
         # frees nothing the end of the process does not
         gc.freeze()
     return status
