@@ -343,7 +343,13 @@ def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - 
     for _, theirs in pipes:
         if theirs is not conn:
             theirs.close()
+    # a figure's garbage (5 000 to 18 000 objects) is collected once it is drawn, when no job waits, not by the
+    # collector's passes during the drawing: 9 % of the figures' time (5 figures of a tool change: 2.11 -> 1.92 s
+    # of CPU, best of 6), for 5 to 23 ms per figure of collection
+    gc.disable()
     while True:
+        if not conn.poll():
+            gc.collect()
         try:
             job = conn.recv()
         except (EOFError, OSError):
