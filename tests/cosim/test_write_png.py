@@ -1,7 +1,8 @@
 """What the figures' speed-ups must not change (issue 23, item 5): ``cosim.plots.write_png`` writes the pixels of
 matplotlib's own ``tight_layout`` + ``savefig`` without the second layout pass savefig made for tight_layout's
 placeholder engine, whatever the rc settings; and ``cosim``'s exit shortcut (the objects frozen out of the last
-garbage collection) is the program's only, never an in-process caller's."""
+garbage collection) is the program's only, never an in-process caller's, and the collector paused by
+``cosim run`` is given back as it was."""
 from __future__ import annotations
 
 import gc
@@ -74,3 +75,18 @@ def test_cli_freezes_the_heap_only_when_it_is_the_program(tmp_path, capsys):
     assert main(["history", "--axis", "X", "--db", str(missing)]) == 2  # the status, returned to the caller
     assert f"{missing} does not exist" in capsys.readouterr().err
     assert gc.get_freeze_count() == before
+
+
+@pytest.mark.parametrize("collecting", [True, False])
+def test_cosim_run_gives_the_collector_back_as_it_found_it(tmp_path, capsys, collecting):
+    """``cosim run`` turns the collector off while it imports and loads the scenario: its state is the caller's
+    again afterwards, also when the scenario is bad (exit 2)."""
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: bad\nstep: -1\nnc: {program: []}\n")
+    (gc.enable if collecting else gc.disable)()
+    try:
+        assert main(["run", str(path), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+        assert gc.isenabled() is collecting
+    finally:
+        gc.enable()
+    assert "step: Input should be greater than 0" in capsys.readouterr().err
