@@ -372,6 +372,8 @@ def _warm_up(preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a 
     the font cache and the Agg renderer's first text (a figure drawn into memory and dropped)."""
     import io
 
+    gc.disable()  # matplotlib's import makes long-lived objects only: collected once, below, then frozen
+
     import matplotlib
 
     matplotlib.use("Agg")
