@@ -18,9 +18,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from feeddrive.cosim.figure_data import PNG, motion_figure  # noqa: E402
+from feeddrive.cosim.figure_data import motion_figure  # noqa: E402
 from feeddrive.cosim.plot_workers import monitor_figure_jobs  # noqa: E402
-from feeddrive.cosim.plots import draw_concurrently  # noqa: E402
+from feeddrive.cosim.plots import DPI, draw_concurrently, write_png  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
 
@@ -34,7 +34,7 @@ def plot_motion(trace, path: Path) -> Path:
     lines, mm = shown.lines, shown.mismatch
     generic = mm is not None and "current" not in mm.checks  # a model's own equations (the PMSM's i_q, i_d, w)
     panels = 1 + (mm is not None) * (len(mm.checks) if generic else 3)
-    fig, axes = plt.subplots(panels, 1, figsize=(9, 2.4 * panels), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(panels, 1, figsize=(9, 2.4 * panels), sharex=True, squeeze=False, dpi=DPI)
     axes = axes[:, 0]
     if "r" in lines:
         axes[0].plot(*lines["r"], lw=0.3, color="0.6", label="r = Im1 - Im2")
@@ -75,10 +75,7 @@ def plot_motion(trace, path: Path) -> Path:
     from feeddrive.cosim.report.verdict import verdict_line
 
     fig.suptitle(f"motion {shown.motion}: {verdict_line(shown.result)}", fontsize=10, wrap=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, pil_kwargs=dict(PNG))
-    plt.close(fig)
-    return path
+    return write_png(fig, path)
 
 
 def _plot_equations(axes, lines: dict, mm, result: dict) -> None:  # noqa: ANN001 - MismatchResult
@@ -134,7 +131,7 @@ def plot_correlation(trace, path: Path) -> Path:
     :func:`plot_motion`."""
     trace = motion_figure(trace)
     mm = trace.mismatch
-    fig, axes = plt.subplots(1, len(mm.checks), figsize=(10, 3.2), squeeze=False)
+    fig, axes = plt.subplots(1, len(mm.checks), figsize=(10, 3.2), squeeze=False, dpi=DPI)
     for ax, (name, check) in zip(axes[0], mm.checks.items()):
         lags = np.arange(check.correlation.shape[0])
         for j, x in enumerate(check.inputs):  # a model's own check: 1, 2, ...
@@ -151,10 +148,7 @@ def plot_correlation(trace, path: Path) -> Path:
         _legend_outside(ax)
     axes[0, 0].set_ylabel("correlation")
     fig.suptitle(f"motion {trace.motion}: residue-input correlation", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, pil_kwargs=dict(PNG))
-    plt.close(fig)
-    return path
+    return write_png(fig, path)
 
 
 def plot_trends(motions: Sequence[dict], path: Path, title: str = "", thresholds: dict | None = None,

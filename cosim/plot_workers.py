@@ -23,6 +23,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -255,9 +256,25 @@ class PlotWorkers:
             results[j] = list(jobs[j]())
         return [path for j in range(len(jobs)) for path in results[j]]
 
-    def close(self) -> None:
+    def close(self, wait: bool = True) -> None:
         """End the workers: each finishes its figure and exits; this waits for them (10 s at most, then the
-        first worker, whose exit ends the others, is killed)."""
+        first worker, whose exit ends the others, is killed).
+
+        ``wait=False`` (the workers are idle: :meth:`draw` has returned): they are told to exit and a background
+        thread reaps them. A worker's pipe closes only once the kernel has torn its memory down: waiting for
+        that was 50 to 190 ms at the end of every run."""
+        if not wait and self._pid is not None:
+            for conn in self._conns:
+                try:
+                    conn.send(None)
+                except OSError:
+                    pass
+                conn.close()
+            self._conns = []
+            # the thread only waits in the kernel: a fork meanwhile (the next run's workers) inherits no lock of it
+            threading.Thread(target=_reap, args=(self._pid,), name="feeddrive-plot-reaper", daemon=True).start()
+            self._pid = None
+            return
         for conn in self._conns:
             try:
                 conn.send(None)
@@ -277,6 +294,13 @@ class PlotWorkers:
                 _kill(self._pid)
             os.waitpid(self._pid, 0)
             self._pid = None
+
+
+def _reap(pid: int) -> None:
+    try:
+        os.waitpid(pid, 0)
+    except ChildProcessError:  # reaped already
+        pass
 
 
 def _kill(pid: int) -> None:
@@ -319,7 +343,13 @@ def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - 
     for _, theirs in pipes:
         if theirs is not conn:
             theirs.close()
+    # a figure's garbage (5 000 to 18 000 objects) is collected once it is drawn, when no job waits, not by the
+    # collector's passes during the drawing: 9 % of the figures' time (5 figures of a tool change: 2.11 -> 1.92 s
+    # of CPU, best of 6), for 5 to 23 ms per figure of collection
+    gc.disable()
     while True:
+        if not conn.poll():
+            gc.collect()
         try:
             job = conn.recv()
         except (EOFError, OSError):
@@ -341,6 +371,8 @@ def _warm_up(preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a 
     """What every figure needs once per process, done before the first one is asked for: the imports,
     the font cache and the Agg renderer's first text (a figure drawn into memory and dropped)."""
     import io
+
+    gc.disable()  # matplotlib's import makes long-lived objects only: collected once, below, then frozen
 
     import matplotlib
 

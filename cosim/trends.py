@@ -128,15 +128,10 @@ def _steps(x: np.ndarray, y: np.ndarray, pad: float) -> tuple[np.ndarray, np.nda
 def plot_trends(motions: Sequence[Mapping], path: Path, title: str = "", thresholds: Mapping | None = None,
                 x: str = "auto", units: Mapping[str, str] | None = None) -> Path:
     """Draw ``trend_figure`` into ``path`` (PNG); returns ``path``."""
-    import matplotlib.pyplot as plt
+    from feeddrive.cosim.plots import write_png
 
-    from feeddrive.cosim.figure_data import PNG
-
-    fig = trend_figure(motions, title, thresholds, x, units)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100, pil_kwargs=dict(PNG))
-    plt.close(fig)
-    return path
+    # drawn at the figure's own 100 dpi: the layout's renderer is the PNG's
+    return write_png(trend_figure(motions, title, thresholds, x, units), path, dpi=100, layout=False)
 
 
 def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mapping | None = None,

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import gc
 import logging
 import os
 import sys
@@ -47,12 +48,20 @@ def main(args: argparse.Namespace) -> int:
     handler.addFilter(_ReportedElsewhere())
     handler.setFormatter(logging.Formatter("cosim run: %(name)s: %(levelname)s: %(message)s"))
     logging.basicConfig(level=logging.WARNING, handlers=[handler])
-    from feeddrive.cosim.progress import enabled
-    from feeddrive.cosim.run import with_history
-    from feeddrive.cosim.scenario import load_scenario
-    from feeddrive.cosim.supervise import run_supervised
+    # the collector is off while the run's modules are imported and the scenario is loaded: what they make lives
+    # as long as the run, and the collector's passes over it were 15 % of that time (0.70 -> 0.60 s CPU, best of 7)
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        from feeddrive.cosim.progress import enabled
+        from feeddrive.cosim.run import with_history
+        from feeddrive.cosim.scenario import load_scenario
+        from feeddrive.cosim.supervise import run_supervised
 
-    scenario = load_scenario(args.scenario)
+        scenario = load_scenario(args.scenario)
+    finally:
+        if collecting:
+            gc.enable()
     for note in scenario.unit_notes:  # a unit taken on trust is said, once
         print(f"plant.map: {note}")
     if args.db is not None:

@@ -7,6 +7,7 @@ import multiprocessing
 import os
 import pickle
 import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -63,6 +64,36 @@ def test_workers_draw_in_order_in_other_processes_and_leave_nothing_behind(tmp_p
     pids = {int((tmp_path / f"f{k}.txt").read_text()) for k in range(5)}
     assert os.getpid() not in pids and 1 <= len(pids) <= 2
     assert _children(os.getpid()) == before  # the first worker was waited for, the others were its children
+
+
+def _all_children(pid: int) -> set[int]:
+    """Processes whose parent is ``pid``, zombies (exited, not yet waited for) included."""
+    out = set()
+    for entry in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            if int(entry.read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                out.add(int(entry.parent.name))
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+@needs_fork
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="no /proc: the children cannot be listed")
+def test_idle_workers_closed_without_waiting_exit_and_are_reaped(tmp_path):
+    """The run's end (``close(wait=False)``): the idle workers are told to exit and reaped in the background,
+    none is left running or as a zombie."""
+    before = _all_children(os.getpid())
+    workers = PlotWorkers(processes=2, warm=False)
+    paths = workers.draw([FigureJob(__name__, "write_pid", (tmp_path / f"f{k}.txt",)) for k in range(3)])
+    workers.close(wait=False)
+    workers.close()  # then nothing is left to close (the run's finally)
+    assert paths == [tmp_path / f"f{k}.txt" for k in range(3)]
+    assert os.getpid() not in {int(path.read_text()) for path in paths}
+    deadline = time.monotonic() + 30
+    while _all_children(os.getpid()) - before and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert _all_children(os.getpid()) - before == set()
 
 
 @needs_fork

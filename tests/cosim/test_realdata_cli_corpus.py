@@ -126,6 +126,8 @@ def test_monitor_exits_cleanly_on_whatever_sensors_the_recording_has(name: str, 
         if code == 0:
             report = json.loads((tmp_path / f"out{k}" / "report.json").read_text())
             text = (tmp_path / f"out{k}" / "report.html").read_text()
+            # the figures' base64 data is no text: "+NaN/" occurs in a PNG's bytes by chance
+            text = re.sub(r"data:image/[a-z]+;base64,[A-Za-z0-9+/=]+", "", text)
             assert not NAN.search(text), f"monitor {f}: nan in report.html"
             for m in report["motions"]:
                 assert m["verdict"], f"monitor {f}: a motion without a verdict"

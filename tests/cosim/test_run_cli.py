@@ -1,6 +1,7 @@
 """``cosim run`` and ``cosim info`` end to end: files, physics of the example, exit codes, one-line errors."""
 from __future__ import annotations
 
+import gc
 import json
 from pathlib import Path
 
@@ -32,6 +33,7 @@ def read_csv(path: Path) -> dict[str, np.ndarray]:
 def test_tool_change_example_runs_end_to_end(tmp_path, feeddrive_fmu, capsys):
     out = tmp_path / "run"
     assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--out", str(out), "--no-progress"]) == 0
+    assert gc.isenabled()  # paused for the imports and the monitor's construction only
     summary = capsys.readouterr().out
     assert summary.startswith("tool-change: ") and "position:" in summary
     s = read_csv(out / "signals.csv")

@@ -1,0 +1,92 @@
+"""What the figures' speed-ups must not change (issue 23, item 5): ``cosim.plots.write_png`` writes the pixels of
+matplotlib's own ``tight_layout`` + ``savefig`` without the second layout pass savefig made for tight_layout's
+placeholder engine, whatever the rc settings; and ``cosim``'s exit shortcut (the objects frozen out of the last
+garbage collection) is the program's only, never an in-process caller's, and the collector paused by
+``cosim run`` is given back as it was."""
+from __future__ import annotations
+
+import gc
+
+import matplotlib
+import numpy as np
+import pytest
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from PIL import Image  # noqa: E402
+
+from feeddrive.cosim.cli import main  # noqa: E402
+from feeddrive.cosim.plots import DPI, write_png  # noqa: E402
+
+
+def _figure() -> plt.Figure:
+    """Two panels with long tick labels, a legend outside and a wrapped title: what tight_layout moves."""
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(4, 3), dpi=DPI)
+    t = np.linspace(0.0, 3.5, 50)
+    axes[0].plot(t, 1e4 * np.sin(7 * t), label="current [A]")
+    axes[1].plot(t, 1e-3 * np.cos(3 * t), label="speed [rad/s]")
+    for ax in axes:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=7, frameon=False)
+        ax.set_ylabel("a long label [unit]")
+    axes[1].set_title("passed: current independence F = 1.08, Bonferroni-adjusted p = 1 >= alpha = 0.01 (5 tests)",
+                      fontsize=8, wrap=True)
+    fig.suptitle("motion 1: healthy: validated, no drift")
+    return fig
+
+
+def _pixels(path) -> np.ndarray:
+    return np.asarray(Image.open(path).convert("RGBA"))
+
+
+@pytest.mark.parametrize("rc", [{}, {"figure.autolayout": True}])
+def test_write_png_draws_the_pixels_of_tight_layout_and_savefig(tmp_path, rc):
+    with matplotlib.rc_context(rc):
+        reference = _figure()
+        reference.tight_layout()
+        reference.savefig(tmp_path / "reference.png", dpi=DPI)
+        plt.close(reference)
+        fig = _figure()
+        path = write_png(fig, tmp_path / "sub" / "fast.png")
+    assert path == tmp_path / "sub" / "fast.png"
+    if not rc:  # no layout pass at savefig (with autolayout, savefig itself sets the tight engine again)
+        assert fig.get_layout_engine() is None
+    assert not plt.fignum_exists(fig.number)  # closed
+    a, b = _pixels(tmp_path / "reference.png"), _pixels(path)
+    assert a.shape == b.shape == (3 * DPI, 4 * DPI, 4)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_write_png_keeps_a_layout_made_by_the_caller(tmp_path):
+    """``layout=False`` (cosim.trends: tight_layout with a rect for the figure legend) keeps the caller's layout."""
+    fig = _figure()
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
+    bottom = fig.subplotpars.bottom
+    write_png(fig, tmp_path / "trends.png", dpi=100, layout=False)
+    assert fig.subplotpars.bottom == bottom and bottom > 0.1
+    assert _pixels(tmp_path / "trends.png").shape == (300, 400, 4)
+
+
+def test_cli_freezes_the_heap_only_when_it_is_the_program(tmp_path, capsys):
+    before = gc.get_freeze_count()
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and "cosim" in capsys.readouterr().out
+    missing = tmp_path / "none.sqlite"
+    assert main(["history", "--axis", "X", "--db", str(missing)]) == 2  # the status, returned to the caller
+    assert f"{missing} does not exist" in capsys.readouterr().err
+    assert gc.get_freeze_count() == before
+
+
+@pytest.mark.parametrize("collecting", [True, False])
+def test_cosim_run_gives_the_collector_back_as_it_found_it(tmp_path, capsys, collecting):
+    """``cosim run`` turns the collector off while it imports and loads the scenario: its state is the caller's
+    again afterwards, also when the scenario is bad (exit 2)."""
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: bad\nstep: -1\nnc: {program: []}\n")
+    (gc.enable if collecting else gc.disable)()
+    try:
+        assert main(["run", str(path), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+        assert gc.isenabled() is collecting
+    finally:
+        gc.enable()
+    assert "step: Input should be greater than 0" in capsys.readouterr().err
