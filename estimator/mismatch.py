@@ -69,12 +69,11 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from scipy import ndimage
 
 from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
-from feeddrive.estimator.kernels import bilinear_first_order, erode
+from feeddrive.estimator.kernels import bilinear_first_order, erode, label_runs, label_slices
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.estimator.validation import MeasurementValidation, model_reference, noise_std
@@ -203,12 +202,12 @@ def speed_segments(w: np.ndarray, threshold: float, h: float, margin: int = 0) -
     fast = np.abs(w) > threshold
     if margin > 0:
         fast = erode(fast, margin, border=False)
-    labels, n = ndimage.label(fast)
+    labels, n = label_runs(fast)
     sizes = np.bincount(labels.ravel(), minlength=n + 1)
     short = sizes < MIN_SEGMENT_S / h
     short[0] = True
     labels[short[labels]] = 0
-    return ndimage.label(labels > 0)
+    return label_runs(labels > 0)
 
 
 def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: Mapping[str, float],
@@ -221,7 +220,7 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     T0 = float(params.get("T0", 0.0))
     b, a = bilinear_first_order(Jt, ft, h)
     out = np.full(w.size, np.nan)
-    for sl in ndimage.find_objects(labels):
+    for sl in label_slices(labels):
         drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
         # transposed direct form: y[0] = b0 x[0] + z[0], so z[0] = w0 - b0 x[0] starts the output at w0
         out[sl] = lti.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
@@ -236,7 +235,7 @@ def free_responses(labels: np.ndarray, params: Mapping[str, float], h: float) ->
     b, a = bilinear_first_order(float(params["Jt"]), float(params["ft"]), h)
     pole = -float(np.ravel(a)[1])
     cols = []
-    for sl in ndimage.find_objects(labels):
+    for sl in label_slices(labels):
         col = np.zeros(labels.size)
         col[sl] = pole ** np.arange(sl[0].stop - sl[0].start)
         cols.append(col)

@@ -28,11 +28,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from scipy import ndimage
 
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
-from feeddrive.estimator.kernels import equation_parameters_of, residual_symbols
+from feeddrive.estimator.kernels import equation_parameters_of, label_slices, residual_symbols
 from feeddrive.estimator.mismatch import (
     MIN_SEGMENT_S,
     MismatchResult,
@@ -202,7 +201,7 @@ def check_model_equations(signals: Mapping[str, np.ndarray], h: float, parameter
         state, ins = eq.solves_for, _inputs(model, eq.name)
         segmented = "sgn_w" in {x for x in residual_symbols(model, eq.name)}
         lab = labels if segmented else whole
-        parts = ndimage.find_objects(lab)
+        parts = label_slices(lab)
 
         def run(p: Mapping[str, float], s: Mapping[str, np.ndarray], start: float = 0.0, eq=eq, state=state,
                 ins=ins, parts=parts) -> np.ndarray:

@@ -11,7 +11,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.motion import ORDER, MethodResult
@@ -109,6 +108,8 @@ def bounded_fit(p, known: Mapping[str, float], bounds: Bounds, names: list[str])
         lim = np.array([_limits(n, bounds) for n in reg.names]).T / scale_by * col
         if np.any(lim[0] > lim[1]):
             return {}
+        from scipy.optimize import lsq_linear  # here: scipy.optimize takes ~0.25 s to import
+
         fit = lsq_linear(X / col, y, bounds=(lim[0], lim[1]))
         if not fit.success or not np.all(np.isfinite(fit.x)):
             return {}

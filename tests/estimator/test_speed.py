@@ -14,7 +14,7 @@ from scipy import ndimage, signal
 
 from feeddrive.estimator import lti, simulation
 from feeddrive.estimator.filtering import FilterSpec
-from feeddrive.estimator.kernels import ar_order_bic, erode, toeplitz_score_covariance
+from feeddrive.estimator.kernels import ar_order_bic, erode, label_runs, label_slices, toeplitz_score_covariance
 
 PARAMS = {"R": 0.6, "L": 4e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
 
@@ -29,6 +29,22 @@ def test_erode_is_scipy_binary_erosion(border: bool) -> None:
         window = ndimage.binary_erosion(mask, np.ones(2 * radius + 1, dtype=bool), border_value=border)
         np.testing.assert_array_equal(erode(mask, radius, border), iterated)
         np.testing.assert_array_equal(erode(mask, radius, border), window)
+
+
+def test_run_labels_and_their_slices_are_scipy_label_and_find_objects() -> None:
+    rng = np.random.default_rng(5)
+    for _ in range(400):
+        n = int(rng.integers(1, 120))
+        mask = rng.random(n) < rng.uniform(0.0, 1.0)
+        labels, count = label_runs(mask)
+        want, want_count = ndimage.label(mask)
+        assert labels.dtype == want.dtype and count == want_count
+        np.testing.assert_array_equal(labels, want)
+        assert label_slices(labels) == ndimage.find_objects(want)
+        holes = np.where(np.isin(labels, [1, 3]), 0, labels)  # absent labels and bounding boxes of any labels
+        scattered = np.where(rng.random(n) < 0.5, holes, holes[::-1])
+        assert label_slices(scattered) == ndimage.find_objects(scattered)
+    assert label_runs(np.zeros(0, bool))[1] == 0 and label_slices(np.zeros(0, np.int32)) == []
 
 
 def test_filter_in_one_call_is_one_call_per_signal() -> None:
