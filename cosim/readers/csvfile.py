@@ -5,6 +5,7 @@ column may hold ISO 8601 time stamps (``2024-03-01T10:00:00.004``) instead of se
 """
 from __future__ import annotations
 
+import codecs
 import csv
 import datetime as _dt
 import io
@@ -69,13 +70,21 @@ def dialect(text: str, delimiter: str | None, decimal: str | None, path: Path) -
 
 def read_text(path: Path, what: str, max_bytes: int | None = None) -> str:
     """The file as UTF-8 text (a byte-order mark dropped), refusing files over ``max_bytes`` (MAX_BYTES)."""
+    return read_utf8(path, what, max_bytes)[0]
+
+
+def read_utf8(path: Path, what: str, max_bytes: int | None = None) -> tuple[str, bytes]:
+    """The file as UTF-8 text and as its bytes, both without a byte-order mark, refusing files over
+    ``max_bytes`` (MAX_BYTES)."""
     size, limit = path.stat().st_size, MAX_BYTES if max_bytes is None else max_bytes
     if size > limit:
         raise DataError(f"{path}: {size} bytes; expected a {what} file of at most {limit} bytes "
                         "(split the recording)")
     raw = path.read_bytes()
-    try:  # utf-8-sig: a byte-order mark (spreadsheet exports) must not end up in the first header
-        return raw.decode("utf-8-sig")
+    if raw.startswith(codecs.BOM_UTF8):  # spreadsheet exports: it must not end up in the first header
+        raw = raw[len(codecs.BOM_UTF8):]
+    try:
+        return raw.decode("utf-8"), raw
     except UnicodeDecodeError as exc:
         line = raw[:exc.start].count(b"\n") + 1
         raise DataError(f"{path}: line {line}: byte 0x{exc.object[exc.start]:02x} is not UTF-8; "
@@ -91,8 +100,8 @@ def iso_time(cell: str) -> _dt.datetime | None:
     return t if t.tzinfo is not None else t.replace(tzinfo=_dt.timezone.utc)
 
 
-def arrow_numbers(text: str, sep: str, dec: str) -> tuple[int, dict[int, np.ndarray]] | None:
-    """The number of data rows and the numeric columns, by index, of a CSV text, by Arrow's C++ reader.
+def arrow_numbers(raw: bytes, sep: str, dec: str) -> tuple[int, dict[int, np.ndarray]] | None:
+    """The number of data rows and the numeric columns, by index, of a CSV file's UTF-8 bytes, by Arrow's C++ reader.
 
     Only columns whose every cell Arrow read as a number (float64 or int64: correctly rounded, so the same
     values as ``float(cell)``) are returned; the others (text, time stamps, an empty cell, ``-0``, ...) are
@@ -106,7 +115,7 @@ def arrow_numbers(text: str, sep: str, dec: str) -> tuple[int, dict[int, np.ndar
 
     try:
         table = pcsv.read_csv(
-            pa.BufferReader(text.encode("utf-8")),
+            pa.BufferReader(raw),
             read_options=pcsv.ReadOptions(use_threads=False),
             parse_options=pcsv.ParseOptions(delimiter=sep, ignore_empty_lines=False),
             convert_options=pcsv.ConvertOptions(null_values=[], strings_can_be_null=False, decimal_point=dec))
@@ -125,11 +134,11 @@ class CsvSource(Source):
     def __init__(self, path: Path, delimiter: str | None = None, decimal: str | None = None,
                  max_bytes: int | None = None) -> None:
         self.path = path
-        self._text = read_text(path, "CSV", max_bytes)
+        self._text, raw = read_utf8(path, "CSV", max_bytes)
         self.sep, self.dec = dialect(self._text, delimiter, decimal, path)
         self._rows: list[list[str]] | None = None
         #: the columns Arrow's reader parsed as numbers, by index (None: it could not read the file)
-        arrow = arrow_numbers(self._text, self.sep, self.dec)
+        arrow = arrow_numbers(raw, self.sep, self.dec)
         self._numbers = None if arrow is None else arrow[1]
         if arrow is None:
             header = self._read_rows()  # the csv module names the line of whatever stopped Arrow
