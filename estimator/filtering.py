@@ -171,7 +171,9 @@ def check_rate_factor(cutoff_hz: float, h: float, n: int, requested: int | str =
         d = max(1, min(d, n // MIN_DECIMATED_SAMPLES))
     else:
         d = int(requested)
-    block = max(1, int(round(1.0 / (rate_hz * h))))  # residue_tests.block_samples
+    from feeddrive.estimator.residue_tests import block_samples  # here: it imports scipy.linalg
+
+    block = block_samples(rate_hz, h)
     while d > 1 and block % d:
         d -= 1
     return d
