@@ -128,7 +128,8 @@ def check_model_equations(signals: Mapping[str, np.ndarray], h: float, parameter
                           noise_dof: float = np.inf, speed_threshold: float | None = None,
                           speed_fraction: float = 0.03, rate_hz: float = 50.0, lags: int = 10,
                           ar_order: int | None = None,
-                          instruments: Mapping[str, np.ndarray] | None = None) -> MismatchResult:
+                          instruments: Mapping[str, np.ndarray] | None = None,
+                          undetermined: Sequence[str] = ()) -> MismatchResult:
     """Simulate each equation of the fitted ``model`` from the measured signals and test the residues.
 
     Parameters
@@ -154,6 +155,9 @@ def check_model_equations(signals: Mapping[str, np.ndarray], h: float, parameter
         As ``mismatch.check_model``.
     instruments : mapping of str to ndarray, optional
         A second measurement of an input (same name), with noise independent of the first's.
+    undetermined : sequence of str
+        Parameters the fit held at a value because the motion could not determine them (as
+        ``mismatch.check_model``): nuisance directions too.
 
     Returns
     -------
@@ -220,7 +224,7 @@ def check_model_equations(signals: Mapping[str, np.ndarray], h: float, parameter
         simulated = run(params, f)
         base = simulated if fi is f else run(params, fi)
         D = sensitivity_directions(lambda p: run(p, fi)[k], params, names, covariance,
-                                   equation_parameters_of(model, eq.name), base[k])
+                                   equation_parameters_of(model, eq.name), base[k], undetermined)
         # the start is one noisy (filtered) sample: its error's response, per segment, is a nuisance
         scale = max(float(np.std(f[state][k])), 1e-12) * 1e-3
         free = (run(params, fi, scale) - base) / scale
