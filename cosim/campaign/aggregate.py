@@ -48,6 +48,11 @@ def _onset(truths: list[dict[str, float]]) -> tuple[int, set[str]]:
     return onset, changed
 
 
+def _mismatch(motion: Mapping[str, Any]) -> bool:
+    """The motion's model check rejected the model (its verdict, or the check's own record)."""
+    return motion.get("verdict") == "model mismatch" or (motion.get("mismatch") or {}).get("passed") is False
+
+
 def _run_outcome(result: Mapping[str, Any]) -> dict[str, Any]:
     """Per-run detection facts; see ``aggregate`` for the definitions."""
     injected = result.get("injected") or {}
@@ -55,7 +60,8 @@ def _run_outcome(result: Mapping[str, Any]) -> dict[str, Any]:
     onset, drifting = _onset(_truths(result))
     plant = set(injected.get("plant") or ()) | drifting
     sensors = set(injected.get("sensors") or ())
-    alarms = [bool(m.get("diagnosis")) or bool(m.get("sensor_faults")) for m in motions]
+    # a model mismatch is an alarm too: the motion is red on the report and its parameters are not validated
+    alarms = [bool(m.get("diagnosis")) or bool(m.get("sensor_faults")) or _mismatch(m) for m in motions]
     hits = [_isolates(m.get("diagnosis") or [], plant) for m in motions]
     sensor_hits = [{f.get("sensor") for f in m.get("sensor_faults") or ()} == sensors if sensors else False
                    for m in motions]
@@ -63,8 +69,8 @@ def _run_outcome(result: Mapping[str, Any]) -> dict[str, Any]:
     if cls == "healthy":
         return {"class": cls, "false_alarm": any(alarms)}
     detected_at = next((k for k in range(onset, len(motions))
-                        if (plant and motions[k].get("diagnosis")) or (sensors and motions[k].get("sensor_faults"))),
-                       None)
+                        if (plant and (motions[k].get("diagnosis") or _mismatch(motions[k])))
+                        or (sensors and motions[k].get("sensor_faults"))), None)
     return {"class": cls, "detected": detected_at is not None,
             "isolated": any(h or s for h, s in zip(hits[onset:], sensor_hits[onset:])),
             "delay": None if detected_at is None else detected_at - onset,
@@ -111,14 +117,14 @@ def aggregate(records: list[dict]) -> Aggregates:
     Detection (per fault class, ``fault_class`` of the injected faults and of the parameters that
     drift over the motions):
 
-    * a run detects its fault when a motion at or after the fault's onset has a diagnosis (plant
-      fault) or a sensor fault (sensor fault);
+    * a run detects its fault when a motion at or after the fault's onset has a diagnosis or a model
+      mismatch (plant fault: backlash is seen by the model check only) or a sensor fault (sensor fault);
     * it isolates it when such a motion names the right faults: Table I faults whose sensitive
       parameters together hold every faulty parameter, none of them foreign to the faulty parameters
       (several faults of one drift, e.g. wear and brush wear, need several diagnoses), or exactly the
       faulty sensors;
-    * ``false_alarm_rate``: on healthy runs, the fraction with any diagnosis or sensor fault; on
-      drifting runs, the fraction with an alarm before the onset;
+    * ``false_alarm_rate``: on healthy runs, the fraction with any diagnosis, sensor fault or model
+      mismatch (a red motion); on drifting runs, the fraction with such an alarm before the onset;
     * ``mean_delay_motions``: motions from the onset to the first detection (0 for a fault present
       from the first motion), over the detecting runs.
 

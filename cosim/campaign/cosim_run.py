@@ -5,7 +5,7 @@ import copy
 import json
 import math
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -23,9 +23,15 @@ MONITOR_KEYS = ("validated", "measurements_valid", "method", "parameters", "sens
                 "diagnosis", "processing_s", "error", "verdict")
 
 
-def _injected(scenario: Any, truth: Mapping[str, float], nominal: Mapping[str, float]) -> dict[str, Any]:
-    """Faults a scenario injects: plant parameters off nominal (static or by event), sensors off gain 1 / offset 0."""
+def _injected(scenario: Any, truth: Mapping[str, float], nominal: Mapping[str, float],
+              known: Collection[str] = ()) -> dict[str, Any]:
+    """Faults a scenario injects: plant parameters off nominal (static or by event, their relative change), a
+    plant parameter the monitor's model lacks (not in ``known``, its variables) set to a non-zero value
+    (backlash [rad], its value: the model has no nominal for it), sensors off gain 1 / offset 0."""
     plant = {p: v / nominal[p] - 1 for p, v in truth.items() if not math.isclose(v, nominal[p], rel_tol=1e-9)}
+    lacks = [(p, v) for p, v in scenario.plant.parameters.items()] + [
+        (e.target.partition(".")[2], e.value) for e in scenario.events if e.target.startswith("plant.")]
+    plant |= {p: float(v) for p, v in lacks if p not in nominal and p not in known and v != 0}
     sensors = {name: {"gain": ch.gain, "offset": ch.offset}
                for name, ch in scenario.sensors.channels().items() if ch.gain != 1 or ch.offset != 0}
     for e in scenario.events:
@@ -152,12 +158,14 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
     config = scenario.monitor.config if isinstance(getattr(scenario.monitor, "config", None), MonitorConfig) \
         else MonitorConfig()
     if config.drive == "dc":
-        nominal = feed_drive().nominal(("physical",))
+        model = feed_drive()
+        nominal = model.nominal(("physical",))
         nominal = {p: nominal[p] for p in PHYSICAL}
     else:  # a PMSM axis: its model's parameters (R, L_d, L_q, psi_f, Jt, ft, Cd)
         from feeddrive.models.drives import drive_model
 
-        nominal = {k: v for k, v in drive_model(config.drive).nominal(("physical",)).items() if k != "T0"}
+        model = drive_model(config.drive)
+        nominal = {k: v for k, v in model.nominal(("physical",)).items() if k != "T0"}
     truth0 = nominal | {k: float(v) for k, v in scenario.plant.parameters.items() if k in nominal}
     t0 = float(res.time[0])
     # (step at which the event applies, parameter, value), the master's rule
@@ -165,7 +173,7 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
                     for e in scenario.events
                     if e.target.startswith("plant.") and e.target.partition(".")[2] in nominal)
     final = truth0 | {p: v for _, p, v in events}
-    injected = _injected(scenario, final, nominal)
+    injected = _injected(scenario, final, nominal, model.variables)
     missing = [k for k in ("nc.state", "nc.motion") + tuple(f"sensors.{c}" for c in RECORDED) if k not in res.signals]
     if missing:
         raise CampaignError(f"run {spec.id}: the scenario does not record {missing} (use record: all)")

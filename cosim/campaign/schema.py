@@ -37,7 +37,8 @@ as ``failed`` with its reason and the campaign goes on.
 Run function protocol: ``fn(spec: RunSpec) -> dict`` (JSON-serialisable), shaped as::
 
     {"truth": {"R": 0.6, ...},                        # plant parameters of the run
-     "injected": {"plant": {"Cd": 0.25},              # relative change of each faulty parameter
+     "injected": {"plant": {"Cd": 0.25},              # relative change of each faulty parameter (a parameter
+                                                      # the model lacks, e.g. backlash: its value)
                   "sensors": {"Im1": {"gain": 1.03, "offset": 0.0}}},
      "motions": [{"truth": {...},                     # optional: parameters at this motion (drifts)
                   "validated": true,
