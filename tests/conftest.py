@@ -25,6 +25,30 @@ def pytest_configure(config: pytest.Config) -> None:
         compileall.compile_dir(root / folder, quiet=2)
 
 
+def _module_seconds() -> dict[str, float]:
+    """tests/module_seconds.txt: test module (path from the repository root) -> seconds of a full run."""
+    out = {}
+    for line in (Path(__file__).parent / "module_seconds.txt").read_text(encoding="utf-8").splitlines():
+        if line.strip() and not line.startswith("#"):
+            seconds, module = line.split()
+            out[module] = float(seconds)
+    return out
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The slowest modules first (tests/module_seconds.txt), each module's tests together and in their order.
+
+    With two xdist workers the run's end is what costs: in collection order a long module could start last
+    and leave one core idle while it finished. pyproject's ``--dist loadscope`` gives whole modules to the
+    workers in this order (a module's fixtures set up once, on one worker), so both start on the long ones
+    and finish on short ones. Every worker sorts its collection alike, as xdist requires."""
+    seconds = _module_seconds()
+    first: dict[str, int] = {}
+    for k, item in enumerate(items):
+        first.setdefault(item.nodeid.split("::")[0], k)
+    items.sort(key=lambda item: (-seconds.get(item.nodeid.split("::")[0], 0.0), first[item.nodeid.split("::")[0]]))
+
+
 # pytest rewrites the asserts of every test module it imports (parse, rewrite, compile: ~8 s of CPU per process
 # for this suite's ~220 modules, each xdist worker again) and caches the result in tests/**/__pycache__ only when
 # bytecode may be written: with PYTHONDONTWRITEBYTECODE set (as on this machine and in CI) it redid the work in
