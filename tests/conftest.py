@@ -131,7 +131,7 @@ def example_runs(feeddrive_fmu: Path, tmp_path_factory: pytest.TempPathFactory) 
 
     Returns ``{"work": folder, "out": {name: run folder}, "stdout": {name: what the command printed}}``.
     Read only: a test that continues the history copies ``work`` first, a test that writes next to a page
-    copies the page. Each run draws its figures (~3 s of a run's 3.5 s of CPU), and five modules read these
+    copies the page. Each run draws its figures (~3 s of a run's 3.5 s of CPU), and four modules read these
     runs (the report page, the browser, the baseline's CLI sequence, the summary of a sensor fault): they are
     made once for the whole test run; under xdist the first worker to need them makes them in the run's
     common temporary root, the other waits for it (a lock file) and reads them."""
