@@ -25,6 +25,30 @@ def pytest_configure(config: pytest.Config) -> None:
         compileall.compile_dir(root / folder, quiet=2)
 
 
+def _module_seconds() -> dict[str, float]:
+    """tests/module_seconds.txt: test module (path from the repository root) -> seconds of a full run."""
+    out = {}
+    for line in (Path(__file__).parent / "module_seconds.txt").read_text(encoding="utf-8").splitlines():
+        if line.strip() and not line.startswith("#"):
+            seconds, module = line.split()
+            out[module] = float(seconds)
+    return out
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The slowest modules first (tests/module_seconds.txt), each module's tests together and in their order.
+
+    With two xdist workers the run's end is what costs: in collection order a long module could start last
+    and leave one core idle while it finished. pyproject's ``--dist loadscope`` gives whole modules to the
+    workers in this order (a module's fixtures set up once, on one worker), so both start on the long ones
+    and finish on short ones. Every worker sorts its collection alike, as xdist requires."""
+    seconds = _module_seconds()
+    first: dict[str, int] = {}
+    for k, item in enumerate(items):
+        first.setdefault(item.nodeid.split("::")[0], k)
+    items.sort(key=lambda item: (-seconds.get(item.nodeid.split("::")[0], 0.0), first[item.nodeid.split("::")[0]]))
+
+
 # pytest rewrites the asserts of every test module it imports (parse, rewrite, compile: ~8 s of CPU per process
 # for this suite's ~220 modules, each xdist worker again) and caches the result in tests/**/__pycache__ only when
 # bytecode may be written: with PYTHONDONTWRITEBYTECODE set (as on this machine and in CI) it redid the work in
@@ -93,6 +117,57 @@ def vendor_pmsm_fmu(fmu_cache_dir: Path) -> Path:
             except OSError:  # another worker put its copy there first
                 pass
     return target / f"{MODEL}.fmu"
+
+
+#: the examples that several modules run through ``cosim run`` as a user does (tests/conftest.py example_runs)
+EXAMPLE_RUNS = ("tool_change", "worn_axis", "current_sensor_fault")
+
+
+@pytest.fixture(scope="session")
+def example_runs(feeddrive_fmu: Path, tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """``cosim run examples/<name>.yaml`` of each of ``EXAMPLE_RUNS``, in that order, in one working folder:
+    the default output folders (``runs/<scenario>-<time>``) and the default history ``runs/history.sqlite``,
+    which then holds one motion of axis X, worn-X and sensor-X (each example its own axis).
+
+    Returns ``{"work": folder, "out": {name: run folder}, "stdout": {name: what the command printed}}``.
+    Read only: a test that continues the history copies ``work`` first, a test that writes next to a page
+    copies the page. Each run draws its figures (~3 s of a run's 3.5 s of CPU), and four modules read these
+    runs (the report page, the browser, the baseline's CLI sequence, the summary of a sensor fault): they are
+    made once for the whole test run; under xdist the first worker to need them makes them in the run's
+    common temporary root, the other waits for it (a lock file) and reads them."""
+    import contextlib
+    import fcntl
+    import io
+    import json
+
+    from feeddrive.cosim.cli import main
+
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        work = tmp_path_factory.getbasetemp().parent / "example_runs"
+        work.mkdir(exist_ok=True)
+    else:
+        work = tmp_path_factory.mktemp("example_runs")
+    done = work / "example_runs.json"
+    with open(work / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            if not done.is_file():
+                printed, out = {}, {}
+                with pytest.MonkeyPatch.context() as mp:
+                    mp.chdir(work)
+                    for name in EXAMPLE_RUNS:
+                        before = set(Path("runs").glob("*/report.json"))
+                        buffer = io.StringIO()
+                        with contextlib.redirect_stdout(buffer):
+                            assert main(["run", str(examples / f"{name}.yaml"), "--no-progress"]) == 0
+                        (new,) = set(Path("runs").glob("*/report.json")) - before
+                        printed[name], out[name] = buffer.getvalue(), str(work / new.parent)
+                done.write_text(json.dumps({"stdout": printed, "out": out}), encoding="utf-8")
+        finally:  # explicitly: the runs' forked children share the lock's open file
+            fcntl.flock(lock, fcntl.LOCK_UN)
+    data = json.loads(done.read_text(encoding="utf-8"))
+    return {"work": work, "out": {k: Path(v) for k, v in data["out"].items()}, "stdout": data["stdout"]}
 
 
 # hypothesis profiles: the fuzz tests (tests/cosim/test_fuzz.py) run 500 examples each by default;

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -73,18 +74,22 @@ def test_worn_motion_during_baseline_is_diagnosed_and_kept_out(tmp_path):
 
 
 @pytest.mark.slow
-def test_cosim_run_tool_change_then_worn_axis_whatever_the_out_dir(tmp_path, monkeypatch, feeddrive_fmu, capsys):
-    """The README's sequence on the default history runs/history.sqlite: the worn axis is another axis
+def test_cosim_run_tool_change_then_worn_axis_whatever_the_out_dir(tmp_path, monkeypatch, example_runs, capsys):
+    """The README's runs on the default history runs/history.sqlite: the worn axis is another axis
     (worn-X), diagnosed on its own against the nominal parameters (``baseline: nominal``); axis X's
     history holds the two healthy tool changes only (the worn machine never mixes into it). Each run
-    names the history, its axis and the baseline's state."""
+    names the history, its axis and the baseline's state.
+
+    The first tool change and the worn axis are the session's ``cosim run`` of the examples (tests/conftest.py,
+    with the sensor-fault example's axis sensor-X on the same history), continued here in a copy of their folder."""
+    shutil.copytree(example_runs["work"], tmp_path, dirs_exist_ok=True)
     monkeypatch.chdir(tmp_path)
-    printed = []
+    printed = [next(ln for ln in example_runs["stdout"][name].splitlines() if ln.startswith("  history:"))
+               for name in ("worn_axis", "tool_change")]
     # the second tool change writes elsewhere (--out): the history stays runs/history.sqlite (on main, --out
     # elsewhere/run2 silently switched to elsewhere/history.sqlite)
-    for name, out in (("worn_axis", []), ("tool_change", []), ("tool_change", ["--out", "elsewhere/run2"])):
-        assert main(["run", str(EXAMPLES / f"{name}.yaml"), "--no-progress", *out]) == 0
-        printed.append(next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("  history:")))
+    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "elsewhere/run2"]) == 0
+    printed.append(next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("  history:")))
     assert not Path("elsewhere/history.sqlite").exists()
     assert printed[0] == ("  history: runs/history.sqlite, axis worn-X; healthy baseline: the nominal parameters "
                           "(monitor.baseline: nominal)")

@@ -111,11 +111,10 @@ def test_info_lists_variables_and_checks_a_map(tmp_path, feeddrive_fmu, capsys):
 
 
 @pytest.mark.slow
-def test_summary_names_the_sensor_fault(tmp_path, feeddrive_fmu, capsys):
-    """examples/current_sensor_fault.yaml: Im1 gain 1.03 and offset 0.2 A from the 2nd tool change."""
-    out = tmp_path / "run"
-    assert main(["run", str(EXAMPLES / "current_sensor_fault.yaml"), "--out", str(out), "--no-progress"]) == 0
-    lines = capsys.readouterr().out.splitlines()
+def test_summary_names_the_sensor_fault(example_runs):
+    """examples/current_sensor_fault.yaml: Im1 gain 1.03 and offset 0.2 A from the 2nd tool change (the session's
+    ``cosim run`` of the example, tests/conftest.py)."""
+    lines = example_runs["stdout"]["current_sensor_fault"].splitlines()
     faults = [ln.strip() for ln in lines if ln.strip().startswith("sensor fault:")]
     assert len(faults) == 1 and faults[0].startswith("sensor fault: Im1 gain+offset (gain 1.03, offset 0.2")
     # the motion's first line is its verdict, which names the fault

@@ -23,7 +23,6 @@ _here = Path(__file__).parent
 _spec = importlib.util.spec_from_file_location("report_browser", _here / "browser.py")
 browser = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(browser)
-EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 WIDTHS = (1280, 400)
 #: the page's colours (report.html.j2): a fault's red, the healthy green
 RED, GREEN = "rgb(248, 207, 207)", "rgb(216, 240, 216)"
@@ -40,17 +39,24 @@ def chromium():
 
 
 @pytest.fixture(scope="module")
-def pages(tmp_path_factory, feeddrive_fmu) -> dict[str, Path]:
-    """report.html of a healthy and of a sensor-fault run on one history, and the history's page."""
+def pages(tmp_path_factory, example_runs) -> dict[str, Path]:
+    """report.html of a healthy and of a sensor-fault run on one history, and the history's page.
+
+    The runs are the session's ``cosim run`` of the examples (tests/conftest.py), read only: their pages, their
+    report.json and their history are copied here, where the screenshots are written next to them."""
     work = tmp_path_factory.mktemp("browser")
+    for name, scenario in (("healthy", "tool_change"), ("sensor_fault", "current_sensor_fault")):
+        (work / "runs" / name).mkdir(parents=True)
+        for file in ("report.html", "report.json"):
+            shutil.copy(example_runs["out"][scenario] / file, work / "runs" / name / file)
+    # the history both runs wrote to, wherever the run put it
+    db = json.loads((work / "runs" / "sensor_fault" / "report.json").read_text())["components"]["monitor"]["db"]
+    for file in Path(db).parent.glob(Path(db).name + "*"):  # with its -wal file, if one was left
+        shutil.copy(file, work / file.name.replace(Path(db).name, "history.sqlite"))
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(work)
-        for name, scenario in (("healthy", "tool_change"), ("sensor_fault", "current_sensor_fault")):
-            assert main(["run", str(EXAMPLES / f"{scenario}.yaml"), "--no-progress", "--out", f"runs/{name}"]) == 0
-        # the history both runs wrote to, wherever the run put it
-        db = json.loads((work / "runs" / "sensor_fault" / "report.json").read_text())["components"]["monitor"]["db"]
         # the sensor-fault example is its own machine (axis sensor-X): its two motions, healthy then faulty
-        assert main(["history", "--db", db, "--axis", "sensor-X", "--html", "axis_X.html"]) == 0
+        assert main(["history", "--db", "history.sqlite", "--axis", "sensor-X", "--html", "axis_X.html"]) == 0
     return {"healthy": work / "runs" / "healthy" / "report.html",
             "sensor_fault": work / "runs" / "sensor_fault" / "report.html", "history": work / "axis_X.html"}
 

@@ -23,23 +23,16 @@ from feeddrive.cosim.trends import trend_figure, trend_series
 _spec = importlib.util.spec_from_file_location("page_checks", Path(__file__).with_name("page_checks.py"))
 checks = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(checks)
-EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 WEAR = {"bearing or slide-way wear", "lack or ageing of lubricating oil"}
 #: worn_axis.yaml against tool_change.yaml: Cd 1.8 / 1.2, ft 0.035 / 0.02
 TRUE_CHANGE = {"Cd": 0.5, "ft": 0.75}
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory, feeddrive_fmu) -> dict[str, Path]:
-    """``cosim run`` of tool_change.yaml then worn_axis.yaml into runs/ (one history, runs/history.sqlite)."""
-    work = tmp_path_factory.mktemp("runs")
-    out = {}
-    with pytest.MonkeyPatch.context() as mp:
-        mp.chdir(work)
-        for name in ("tool_change", "worn_axis"):
-            assert main(["run", str(EXAMPLES / f"{name}.yaml"), "--no-progress", "--out", f"runs/{name}"]) == 0
-            out[name] = work / "runs" / name
-    return out
+def runs(example_runs) -> dict[str, Path]:
+    """``cosim run`` of tool_change.yaml then worn_axis.yaml into runs/ (one history, runs/history.sqlite): the
+    session's runs of the examples (tests/conftest.py), read only."""
+    return {name: example_runs["out"][name] for name in ("tool_change", "worn_axis")}
 
 
 def load(run: Path) -> tuple[dict, object]:
