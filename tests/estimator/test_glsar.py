@@ -6,7 +6,6 @@ import warnings
 
 import numpy as np
 import pytest
-from statsmodels.regression.linear_model import GLSAR
 
 from feeddrive.estimator.glsar import glsar_fit
 from feeddrive.estimator.kernels import last_columns_f_test
@@ -34,6 +33,8 @@ def test_iterative_fit_is_statsmodels(seed, order):
     y, X = _data(seed, 90 + 20 * seed, 6, ((0.6,), (0.5, -0.3), (0.9,))[seed % 3], deficient)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # statsmodels' rank-deficiency warning (ours prints nothing)
+        from statsmodels.regression.linear_model import GLSAR  # imported here: ~1-2 s a collecting worker
+
         ref = GLSAR(y, X, rho=order).iterative_fit(maxiter=6)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # nothing printed, even for a rank-deficient design

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from statsmodels.regression.linear_model import OLS
-from statsmodels.stats.diagnostic import acorr_ljungbox
 
 from feeddrive.estimator.residue_tests import ljung_box, ols_f_test
 
 
 @pytest.mark.parametrize("seed", range(4))
 def test_ljung_box_and_f_test_agree_with_statsmodels(seed):
+    # imported here, not at collection: statsmodels and pandas are ~1-2 s of every xdist worker's collection
+    from statsmodels.regression.linear_model import OLS
+    from statsmodels.stats.diagnostic import acorr_ljungbox
+
     rng = np.random.default_rng(seed)
     n, p, q = 80, 7, 4
     X = rng.standard_normal((n, p))
