@@ -14,8 +14,8 @@ hook and before the cluster starts any thread: a process that never starts one. 
 to it through a Unix socket on its first run; the server forks it a zygote of its own (the server is
 single-threaded, so that fork is safe too) and the zygote runs the worker's runs one after the other: the
 run's ``execute`` (its ``prepare``, its scenario resolved and its FMU's description read once per zygote),
-each run forked from the zygote, single-threaded at every fork. The Dask task only sends the run and waits
-for its record (``run_in_zygote``).
+each run forked from the zygote, single-threaded at every fork. The Dask task (``run_batch``: a few runs, cosim/
+campaign/execute.py) only sends them one by one and waits for their records.
 
 A zygote that dies under a run (killed from outside its containment) makes that run ``failed`` and the next
 run gets a new zygote; a worker whose zygote server is gone runs its runs itself, as without zygotes. A
@@ -188,8 +188,13 @@ def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
             reply = (own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime)
         else:
             _, run, spec, timeout = request
+            try:
+                fn = _loaded(run)
+            except Exception as exc:  # noqa: BLE001 - e.g. a module the worker's parent imported after the fork
+                _send(conn, pickle.dumps(("refused", f"{type(exc).__name__}: {exc}")))
+                continue
             supervise.reap()  # the earlier runs' children that have exited (a zombie costs nothing meanwhile)
-            reply = execute(run, spec, timeout)
+            reply = execute(fn, spec, timeout)
         _send(conn, pickle.dumps(("ok", reply), protocol=pickle.HIGHEST_PROTOCOL))
 
 
@@ -207,26 +212,56 @@ class _Link:
             return _recv(self.sock)
 
 
-def run_in_zygote(run: Any, spec: Any, timeout: float | None = None) -> dict[str, Any]:
-    """A campaign run's Dask task: the run's ``execute`` in this worker thread's zygote; its record.
+def load_run(run: bytes | str) -> Any:
+    """The run function of a Dask task: ``package.module:function`` as it is (``execute`` imports it), or the
+    function from its pickle (``cloudpickle``: by reference to its module, by value for one of ``__main__``)."""
+    return run if isinstance(run, str) else pickle.loads(run)
 
-    Without a zygote server (a cluster not started by ``local_cluster``, or its server gone), or for a run the
-    zygote cannot read, the run is executed here, as before. A zygote that dies under the run gives a ``failed``
-    record (the next run gets a new zygote).
+
+#: in a zygote: the last run function unpickled, by its pickle (a campaign sends the same one every run)
+_LOADED: list[tuple[bytes | str, Any]] = []
+
+
+def _loaded(run: bytes | str) -> Any:  # pragma: no cover - runs in a zygote
+    if not _LOADED or _LOADED[0][0] != run:
+        _LOADED[:] = [(run, load_run(run))]
+    return _LOADED[0][1]
+
+
+def run_batch(run: bytes | str, specs: list, timeout: float | None = None) -> list[dict[str, Any]]:
+    """A campaign's Dask task: its runs one after the other, each ``execute``-d in this worker thread's zygote;
+    their records, in order.
+
+    The run function comes pickled (``load_run``) and is unpickled here, inside the task, not by the worker as
+    it reads the scheduler's message: a function the worker cannot import (its module only on the campaign's
+    machine) then fails these runs with one line, where the worker's connection to the scheduler broke on it
+    and the campaign waited for ever. Without a zygote server (a cluster not started by ``local_cluster`` nor
+    preloaded, or its server gone), or for a run the zygote cannot read, the run is executed here. A zygote
+    that dies under a run fails that run only (the next run gets a new zygote).
     """
     from feeddrive.cosim.campaign.runner import _lost, execute
 
-    link = _link()
-    if link is None:
-        return execute(run, spec, timeout)
-    import cloudpickle  # a dependency of distributed: a run function of __main__ travels by value
-
     try:
-        kind, value = link.ask(cloudpickle.dumps(("run", run, spec, timeout), protocol=pickle.HIGHEST_PROTOCOL))
-    except (OSError, EOFError) as exc:
-        _drop(link)
-        return _lost(spec, f"crashed: its zygote process died ({exc or type(exc).__name__}); not retried")
-    return value if kind == "ok" else execute(run, spec, timeout)
+        fn = load_run(run)
+    except Exception as exc:  # noqa: BLE001 - every run of the task fails with the reason, the campaign goes on
+        reason = (f"run: the Dask worker cannot load the run function ({type(exc).__name__}: "
+                  f"{' '.join(str(exc).split())}); name it 'package.module:function' of a module the workers can "
+                  "import (installed there, or sent with client.upload_file)")
+        return [_lost(spec, reason) for spec in specs]
+    records = []
+    for spec in specs:
+        link = _link()
+        if link is None:
+            records.append(execute(fn, spec, timeout))
+            continue
+        try:
+            kind, value = link.ask(pickle.dumps(("run", run, spec, timeout), protocol=pickle.HIGHEST_PROTOCOL))
+        except (OSError, EOFError) as exc:
+            _drop(link)
+            records.append(_lost(spec, f"crashed: its zygote process died ({exc or type(exc).__name__}); not retried"))
+            continue
+        records.append(value if kind == "ok" else execute(fn, spec, timeout))
+    return records
 
 
 def zygote_cpu() -> tuple[float, float]:

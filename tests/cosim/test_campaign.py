@@ -199,9 +199,9 @@ class _Dispatch:
 def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
     """``local_cluster``: worker processes (not threads) forked from this process after the run's prepare hook
     ran here, so they start with its imports; the campaign's records are the serial run's. Its scheduler
-    keeps the runs (all 12 submitted at once, more than twice its 2 threads) and gives each worker one at a
-    time: no worker ever holds a second run behind the one it runs (cosim/campaign/execute.py ``_dask``). The runs
-    are forked from a single-threaded zygote per worker (test_campaign_zygote.py)."""
+    keeps the tasks (the 12 runs in 7 tasks, all submitted at once, more than twice its 2 threads) and gives
+    each worker one at a time: no worker ever holds a second task behind the one it runs (cosim/campaign/
+    execute.py ``_dask``). The runs are forked from a single-threaded zygote per worker (test_campaign_zygote.py)."""
     from distributed import Client
     from distributed.diagnostics.plugin import SchedulerPlugin
     from test_campaign_zygote import check_runs_forked_from_zygotes, check_server_closed
@@ -221,9 +221,10 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
         check_runs_forked_from_zygotes(cluster, client, tmp_path)  # on this cluster: its start is the test's time
     check_server_closed(server, server_pid)
     assert len(seen) == 2 and all(pid != os.getpid() and prepared == [os.getpid()] for pid, prepared in seen.values())
+    # 12 runs in 7 tasks of 3, 3, 2, 1, 1, 1, 1 runs (execute.batches): never a second task queued on a worker
     processing = [n for _, state, n in dispatch if state == "processing"]
-    assert len(processing) == 12 and max(processing) == 1
-    assert sum(state == "queued" for _, state, _ in dispatch) >= 10  # all but the first run of each worker
+    assert len(processing) == 7 and max(processing) == 1
+    assert sum(state == "queued" for _, state, _ in dispatch) >= 5  # all but the first task of each worker
     assert dask.aggregates == serial.aggregates
     assert [(r["id"], r["status"], r["result"]) for r in dask.records] == \
            [(r["id"], r["status"], r["result"]) for r in serial.records]
@@ -365,3 +366,15 @@ def test_a_discarded_campaign_run_writes_no_signals_and_gives_the_same_results(t
     strip = ("processing_s", "processing_cpu_s", "time", "wall_time_s")
     assert [{k: v for k, v in m.items() if k not in strip} for m in lean.report["motions"]] == \
            [{k: v for k, v in m.items() if k not in strip} for m in full.report["motions"]]
+
+
+def test_dask_tasks_hold_fewer_runs_towards_the_campaigns_end():
+    """``batches``: the runs in order, cut into tasks of ceil(R / (2 x threads)) of the R runs left (at most 8), so
+    that the last tasks are single runs; every run in exactly one task."""
+    from feeddrive.cosim.campaign.execute import batches
+
+    specs = list(range(32))
+    cut = batches(specs, 2)
+    assert [len(b) for b in cut] == [8, 6, 5, 4, 3, 2, 1, 1, 1, 1] and sum(cut, []) == specs
+    assert [len(b) for b in batches(specs[:5], 2)] == [2, 1, 1, 1] and batches([], 2) == []
+    assert [len(b) for b in batches(list(range(200)), 4)] [:3] == [8, 8, 8] and sum(batches(specs, 1), []) == specs
