@@ -83,7 +83,7 @@ def _local(run, specs, workers, on_done, timeout=None) -> None:
         except Exception:  # noqa: BLE001 - each worker calls it again and records the failure with the run
             pass
     context = "fork" if "fork" in get_all_start_methods() else "spawn"
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context(context))
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context(context), initializer=_pool_worker)
     try:
         futures = {pool.submit(execute, run, spec, timeout): spec for spec in specs}
         for future in as_completed(futures):
@@ -93,6 +93,23 @@ def _local(run, specs, workers, on_done, timeout=None) -> None:
                 on_done(_lost(futures[future], f"crashed: its worker process died ({exc}); not retried"))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _pool_worker() -> None:
+    """A pool worker's start: it never starts a thread, and reaps its runs' children itself.
+
+    Each run's child is reaped by its worker before the worker's next run (``runner.execute``), and the last
+    ones as the worker exits (a ``multiprocessing`` finalizer), not by a thread per run (``supervise``'s
+    default): every run is then forked from a single-threaded process, as from a Dask worker's zygote, and
+    the runs' CPU is all in the worker's ``RUSAGE_CHILDREN`` when the pool is shut down (a reaper thread
+    still waiting as its worker exited left its run uncounted: bench_campaign's pool CPU came out short).
+    """
+    from multiprocessing.util import Finalize
+
+    from feeddrive.cosim import supervise
+
+    supervise.REAP_IN_THREAD = False
+    Finalize(None, supervise.reap, kwargs={"block": True}, exitpriority=0)
 
 
 def _check_scheduler(scheduler: str) -> None:

@@ -193,8 +193,7 @@ def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
             except Exception as exc:  # noqa: BLE001 - e.g. a module the worker's parent imported after the fork
                 _send(conn, pickle.dumps(("refused", f"{type(exc).__name__}: {exc}")))
                 continue
-            supervise.reap()  # the earlier runs' children that have exited (a zombie costs nothing meanwhile)
-            reply = execute(fn, spec, timeout)
+            reply = execute(fn, spec, timeout)  # which reaps the earlier runs' children that have exited
         _send(conn, pickle.dumps(("ok", reply), protocol=pickle.HIGHEST_PROTOCOL))
 
 
