@@ -39,8 +39,9 @@ import threading
 from typing import Any
 
 #: (pid of the process that started the zygote server, its socket's path); inherited by the workers that
-#: process forks. The process itself does not use it (its runs are not on a Dask worker)
-ADDRESS: tuple[int, str] | None = None
+#: process forks. The process itself does not use it (its runs are not on a Dask worker), unless the pid is
+#: None (a preloaded worker's own server)
+ADDRESS: tuple[int | None, str] | None = None
 #: in a zygote: the pid of the worker it serves
 WORKER_PID: int | None = None
 
@@ -75,12 +76,24 @@ def _read(sock: socket.socket, n: int) -> bytearray:
 class ZygoteServer:
     """The zygote server of a ``local_cluster``: forked from this process now, from the calling thread.
 
-    Call it before the cluster starts (its event loop's thread): the server then has no other thread, and
-    nor has any process it forks. ``close`` stops it (its zygotes end with their workers' connections).
+    Call it before the cluster starts (its event loop's thread). A forked process has only the forking thread,
+    and a lock another thread held at the fork stays held for ever in it (and in every run forked from it):
+    the threads this process's campaigns start are therefore stopped first (tqdm's monitor, which a progress
+    bar started and which takes tqdm's lock every 10 s; a new bar starts it again) or waited for
+    (``supervise``'s reapers, a few ms each). Other threads found then are named in ``threads_at_fork``:
+    idle ones are harmless (Dask's offload thread, left by a closed cluster, waits on its queue holding no
+    lock). ``close`` stops the server (its zygotes end with their workers' connections).
+
+    Parameters
+    ----------
+    serve_here : bool
+        Whether this process's own runs use it too (a preloaded Dask worker, cosim/campaign/preload.py); by
+        default only the processes forked from this one do (``local_cluster``'s workers).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, serve_here: bool = False) -> None:
         global ADDRESS
+        self.threads_at_fork = _quiesce()
         self.dir = tempfile.mkdtemp(prefix="feeddrive-zygote-")
         self.address = os.path.join(self.dir, "socket")
         listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -100,7 +113,7 @@ class ZygoteServer:
                 os._exit(code)
         listener.close()
         self.pid = pid
-        ADDRESS = (parent, self.address)
+        ADDRESS = (None if serve_here else parent, self.address)
 
     def close(self) -> None:
         """Stop the server and remove its socket."""
@@ -116,6 +129,20 @@ class ZygoteServer:
             pass
         self.pid = None
         shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def _quiesce() -> list[str]:
+    """Stop tqdm's monitor thread and wait for ``supervise``'s reapers; the names of the other threads left."""
+    from feeddrive.cosim.supervise import REAPER
+
+    tqdm = getattr(sys.modules.get("tqdm.std"), "tqdm", None)
+    monitor = getattr(tqdm, "monitor", None)
+    if monitor is not None and monitor.is_alive():
+        monitor.exit()  # joined; tqdm starts a new one with its next bar
+    for thread in threading.enumerate():
+        if thread.name == REAPER:
+            thread.join(1.0)
+    return [t.name for t in threading.enumerate() if t is not threading.current_thread() and t.is_alive()]
 
 
 def _serve(listener: socket.socket, parent: int) -> None:  # pragma: no cover - runs in the server

@@ -205,11 +205,16 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
     from distributed import Client
     from distributed.diagnostics.plugin import SchedulerPlugin
     from test_campaign_zygote import check_runs_forked_from_zygotes, check_server_closed
+    from tqdm import tqdm
 
     from feeddrive.cosim.campaign import local_cluster
 
     c = campaign(tmp_path, fail_if_Cd=1.3)
     serial = run_campaign(c, tmp_path / "serial", run=warm_toy_run, plots=False)
+    with tqdm(total=1, disable=False, file=open(os.devnull, "w")) as bar:  # noqa: SIM115 - closed by tqdm
+        bar.update(1)
+    monitor = tqdm.monitor  # a thread that takes tqdm's lock every 10 s: stopped before the zygote server's fork
+    assert monitor is not None and monitor.is_alive()
     PREPARED.clear()
     DISPATCH.clear()
     with local_cluster(2, run=warm_toy_run) as cluster, Client(cluster) as client:
@@ -218,6 +223,7 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
         dask = run_campaign(c, tmp_path / "dask", scheduler=cluster.scheduler_address, run=warm_toy_run, plots=False)
         dispatch = list(DISPATCH)  # this campaign's runs
         server, server_pid = cluster.zygote_server, cluster.zygote_server.pid
+        assert not monitor.is_alive() and "tqdm_monitor" not in server.threads_at_fork
         check_runs_forked_from_zygotes(cluster, client, tmp_path)  # on this cluster: its start is the test's time
     check_server_closed(server, server_pid)
     assert len(seen) == 2 and all(pid != os.getpid() and prepared == [os.getpid()] for pid, prepared in seen.values())
@@ -337,17 +343,26 @@ def test_resolved_scenario_is_reused_as_a_copy_until_its_fmu_changes(tmp_path, f
                     "FEEDDRIVE_DASK_PROCESSES=1 runs it")
 def test_preloaded_spawned_worker_has_the_runs_imports_before_its_first_task():
     """``--preload feeddrive.cosim.campaign.preload``: a spawned worker has every module of ``RUN_IMPORTS``
-    before it runs anything (without the preload, statsmodels and the run's modules come with the first run)."""
+    before it runs anything (without the preload, statsmodels and the run's modules come with the first run),
+    and its runs are forked from a zygote (cosim/campaign/preload.py)."""
     import sys
+    import tempfile
 
     from distributed import Client, LocalCluster
 
+    from feeddrive.cosim.campaign import preload
     from feeddrive.cosim.campaign.cosim_run import RUN_IMPORTS
 
+    c = Campaign(name="z", base={"name": "s"}, run="test_campaign_zygote:where_am_i", repetitions=3)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
                       preload=["feeddrive.cosim.campaign.preload"]) as cluster, Client(cluster) as client:
         (missing,) = client.run(lambda: [m for m in RUN_IMPORTS if m not in sys.modules]).values()
+        ((worker, server),) = client.run(lambda: (os.getpid(), preload.SERVER.pid)).values()
+        res = run_campaign(c, Path(tempfile.mkdtemp()), scheduler=cluster.scheduler_address, plots=False)
     assert missing == []
+    # its runs are forked from a one-thread zygote of the worker's own zygote server, not from the worker
+    assert [r["result"]["parent_status"] for r in res.records] == [{"Threads": 1, "PPid": server}] * 3
+    assert len({r["result"]["parent"] for r in res.records}) == 1 and server != worker
 
 
 def test_a_discarded_campaign_run_writes_no_signals_and_gives_the_same_results(tmp_path, feeddrive_fmu):
