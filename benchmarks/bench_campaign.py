@@ -221,6 +221,8 @@ def main() -> int:
         print(f"{mode:12} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
               f"{own:6.1f} {children:8.1f} {ideal:14.2f} {f'{start[mode]:8.2f}' if mode in start else '':8} "
               f"{runs[mode]:7.2f} {t - runs[mode]:7.2f}")
+    print("this process's CPU a run (least of the rounds): " + ", ".join(
+        f"{mode} {1e3 * cpu[mode][0] / args.runs:.1f} ms" for mode in times))
     if args.drift_motions:
         sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
         from drift import run_drift

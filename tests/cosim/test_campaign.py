@@ -225,7 +225,10 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
         server, server_pid = cluster.zygote_server, cluster.zygote_server.pid
         assert not monitor.is_alive() and "tqdm_monitor" not in server.threads_at_fork
         check_runs_forked_from_zygotes(cluster, client, tmp_path)  # on this cluster: its start is the test's time
+        # its workers were told to send a heartbeat every 5 s (cluster.HEARTBEAT_S), not Dask's 0.5 s
+        beats = client.run(lambda dask_worker: dask_worker.periodic_callbacks["heartbeat"].callback_time)
     check_server_closed(server, server_pid)
+    assert list(beats.values()) == [5000.0, 5000.0]
     assert len(seen) == 2 and all(pid != os.getpid() and prepared == [os.getpid()] for pid, prepared in seen.values())
     # 12 runs in 7 tasks of 3, 3, 2, 1, 1, 1, 1 runs (execute.batches): never a second task queued on a worker
     processing = [n for _, state, n in dispatch if state == "processing"]
