@@ -14,7 +14,8 @@ workers)`` (the runs spread evenly over the workers). The pool's workers are for
 once the run's imports are done; a fresh LocalCluster's workers import the stack with their first run
 (``dask spawned``, Dask's default); ``dask warm`` is that cluster after one campaign, as a long-lived
 cluster's workers are; ``dask`` is a fresh cluster of ``cosim.campaign.local_cluster``, whose workers are
-forked from this process (warm, as the pool's). As for the pool, the campaign's time is ``run_campaign``'s;
+forked from this process (warm, as the pool's), its runs in Dask tasks of a few (``execute.batches``) forked
+from a zygote per worker. As for the pool, the campaign's time is ``run_campaign``'s;
 a cluster's start is not in it and is printed apart (``start s``: the pool starts its workers inside
 ``run_campaign``). The load average is printed first.
 
@@ -57,8 +58,8 @@ BASE = {"name": "bench", "step": 1e-4, "stop_time": 2.1, "plant": {"fmu": "built
 MODES = ("serial", "pool", "dask", "dask spawned", "dask warm")
 #: wait before reading the CPU times [s]: a run's child is reaped in the background once its result is read
 #: (cosim/supervise.py), and the last one's CPU was not counted yet (the serial campaign's CPU came out one
-#: run short). The children a pool worker had not reaped when it exited are never counted (the pool's CPU
-#: may come out a little short)
+#: run short). A pool worker reaps its runs itself, the last ones as it exits (execute._pool_worker): all are
+#: counted when the pool is shut down
 SETTLE_S = 0.5
 
 
@@ -221,6 +222,8 @@ def main() -> int:
         print(f"{mode:12} {t:8.2f} {60 * args.runs / t:9.1f} {times['serial'] / t:9.2f} {own + children:7.1f} "
               f"{own:6.1f} {children:8.1f} {ideal:14.2f} {f'{start[mode]:8.2f}' if mode in start else '':8} "
               f"{runs[mode]:7.2f} {t - runs[mode]:7.2f}")
+    print("this process's CPU a run (least of the rounds): " + ", ".join(
+        f"{mode} {1e3 * cpu[mode][0] / args.runs:.1f} ms" for mode in times))
     if args.drift_motions:
         sys.path.insert(0, str(ROOT / "examples" / "drift_500"))
         from drift import run_drift

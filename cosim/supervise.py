@@ -48,6 +48,8 @@ POLL_S = 0.05
 #: reap a child that sent its result in a background thread (True), or leave it to ``reap`` (False: a
 #: process that forks runs must stay single-threaded, cosim/campaign/zygote.py)
 REAP_IN_THREAD = True
+#: the name of those threads (a process about to fork a long-lived server waits for them: cosim/campaign/zygote.py)
+REAPER = "feeddrive-reap"
 #: children that sent their result and were not reaped yet (``REAP_IN_THREAD`` False)
 _UNREAPED: list[int] = []
 LOG_FILE = "run.log"
@@ -219,7 +221,7 @@ def _watch(pid: int, fd: int, records: Any, timeout: float | None) -> Outcome:
             pass
         else:  # a complete result: reap the exiting child in the background (its teardown takes ~20 ms)
             if REAP_IN_THREAD:
-                threading.Thread(target=os.waitpid, args=(pid, 0), daemon=True).start()
+                threading.Thread(target=os.waitpid, args=(pid, 0), name=REAPER, daemon=True).start()
             else:
                 _UNREAPED.append(pid)
             return Outcome("ok", value=value) if kind == "ok" else Outcome("error", error=value)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import tempfile
 from collections.abc import Callable
@@ -82,7 +83,7 @@ def _local(run, specs, workers, on_done, timeout=None) -> None:
         except Exception:  # noqa: BLE001 - each worker calls it again and records the failure with the run
             pass
     context = "fork" if "fork" in get_all_start_methods() else "spawn"
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context(context))
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context(context), initializer=_pool_worker)
     try:
         futures = {pool.submit(execute, run, spec, timeout): spec for spec in specs}
         for future in as_completed(futures):
@@ -92,6 +93,23 @@ def _local(run, specs, workers, on_done, timeout=None) -> None:
                 on_done(_lost(futures[future], f"crashed: its worker process died ({exc}); not retried"))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _pool_worker() -> None:
+    """A pool worker's start: it never starts a thread, and reaps its runs' children itself.
+
+    Each run's child is reaped by its worker before the worker's next run (``runner.execute``), and the last
+    ones as the worker exits (a ``multiprocessing`` finalizer), not by a thread per run (``supervise``'s
+    default): every run is then forked from a single-threaded process, as from a Dask worker's zygote, and
+    the runs' CPU is all in the worker's ``RUSAGE_CHILDREN`` when the pool is shut down (a reaper thread
+    still waiting as its worker exited left its run uncounted: bench_campaign's pool CPU came out short).
+    """
+    from multiprocessing.util import Finalize
+
+    from feeddrive.cosim import supervise
+
+    supervise.REAP_IN_THREAD = False
+    Finalize(None, supervise.reap, kwargs={"block": True}, exitpriority=0)
 
 
 def _check_scheduler(scheduler: str) -> None:
@@ -121,10 +139,18 @@ def _connect(scheduler: str, run: str | Callable) -> tuple[Any, list]:
     if not callable(getattr(fn, "prepare", None)):
         return client, []
     try:
-        return client, [client.submit(_prepare_worker, run, key=f"campaign-prepare-{address}", workers=[address],
-                                      pure=False) for address in client.scheduler_info()["workers"]]
+        return client, [client.submit(_prepare_worker, _pickled(run), key=f"campaign-prepare-{address}",
+                                      workers=[address], pure=False) for address in client.scheduler_info()["workers"]]
     except Exception:  # noqa: BLE001 - only a head start: each run calls the hook anyway
         return client, []
+
+
+def _pickled(run: str | Callable) -> bytes | str:
+    """The run function as a Dask task gets it: its name as it is, a function pickled here (``zygote.load_run``
+    unpickles it in the task, where a failure is the runs', not the worker's connection's)."""
+    import cloudpickle  # a dependency of distributed: a run function of __main__ travels by value
+
+    return run if isinstance(run, str) else cloudpickle.dumps(run, protocol=5)
 
 
 def _loopback(scheduler: str) -> bool:
@@ -146,46 +172,79 @@ def _loopback(scheduler: str) -> bool:
         return False
 
 
-def _prepare_worker(run: str | Callable) -> None:
+def _prepare_worker(run: bytes | str) -> None:
     """A worker's head start: the run function's ``prepare`` (a failure is left to the runs, which record it)."""
+    from feeddrive.cosim.campaign.zygote import load_run
+
     try:
-        getattr(resolve_function(run) if isinstance(run, str) else run, "prepare")()
+        fn = load_run(run)
+        getattr(resolve_function(fn) if isinstance(fn, str) else fn, "prepare")()
     except Exception:  # noqa: BLE001, S110 - execute calls it again and records the failure with each run
         pass
 
 
-def _dask(run, specs, client, on_done, timeout=None) -> None:
-    """Run ``specs`` on the cluster of ``client``, at most one per worker thread at a time.
+#: the most runs in one Dask task (``batches``): a task costs ~14 ms of CPU in this process and the scheduler,
+#: spread over its runs; more would delay the progress and lose more finished runs to an interruption
+MAX_BATCH = 8
+#: each task takes 1 / (BATCH_SHARE x threads) of the runs not yet cut into tasks
+BATCH_SHARE = 2
 
-    A scheduler that queues runs itself (``_queues``: ``distributed.scheduler.worker-saturation`` <= 1, as
-    ``local_cluster``'s) gets them all at once, as one group: it keeps them and hands a worker its next run as
-    soon as the worker reports one done. Else the next run is submitted when one ends, not all at once: with
-    them all submitted, a scheduler at the default saturation (1.1) gave each one-thread worker a second run
-    behind the one it ran, so at the campaign's end one worker could still have two runs while the other
-    idled (no work stealing: cluster.QUIET), and a run that killed its worker took the run queued behind it
-    down too (the scheduler blames every task on a dead worker). That leaves each worker idle between its
-    runs for a round trip through this process, longer when this process is busy (issue 26).
+
+def batches(specs: list[RunSpec], threads: int) -> list[list[RunSpec]]:
+    """``specs`` cut in order into Dask tasks of decreasing size (guided self-scheduling).
+
+    Each task holds ``ceil(R / (BATCH_SHARE * threads))`` of the R runs still to cut (1 to ``MAX_BATCH``): the
+    first tasks amortise the task's cost over several runs, the last ones are single runs, so the workers,
+    which take the next task as they finish one, end within about one run of each other. 32 runs on 2
+    threads: tasks of 8, 6, 5, 4, 3, 2, 1, 1, 1, 1 runs.
+    """
+    out, k = [], 0
+    while k < len(specs):
+        size = min(MAX_BATCH, max(1, math.ceil((len(specs) - k) / (BATCH_SHARE * threads))))
+        out.append(specs[k:k + size])
+        k += size
+    return out
+
+
+def _dask(run, specs, client, on_done, timeout=None) -> None:
+    """Run ``specs`` on the cluster of ``client`` in tasks of a few runs (``batches``), at most one task per worker
+    thread at a time.
+
+    A scheduler that queues tasks itself (``_queues``: ``distributed.scheduler.worker-saturation`` <= 1, as
+    ``local_cluster``'s) gets them all at once, as one group: it keeps them and hands a worker its next task as
+    soon as the worker reports one done. Else the next task is submitted when one ends, not all at once: with
+    them all submitted, a scheduler at the default saturation (1.1) gave each one-thread worker a second task
+    behind the one it ran, so at the campaign's end one worker could still have two while the other idled
+    (no work stealing: cluster.QUIET), and a run that killed its worker took the task queued behind it down
+    too (the scheduler blames every task on a dead worker). That leaves each worker idle between its tasks
+    for a round trip through this process, longer when this process is busy (issue 26).
+
+    The records are the runs' own, as each run's ``execute`` made them; a task's come together when it ends.
+    A task whose workers kept dying (``KilledWorker``) is cut into single runs, run again one by one: only the
+    run that kills its worker is recorded as crashed.
     """
     from distributed import as_completed as dask_completed
     from distributed.scheduler import KilledWorker
 
-    from feeddrive.cosim.campaign.zygote import run_in_zygote  # the run forked from its worker's zygote, if any
+    from feeddrive.cosim.campaign.zygote import run_batch  # the runs forked from their worker's zygote, if any
 
-    queue, by_key, running = list(reversed(specs)), {}, set()
+    payload, by_key, running = _pickled(run), {}, set()
+    queue = list(reversed(batches(specs, _threads(client))))
 
     def submit() -> Any:
-        spec = queue.pop()
-        future = client.submit(run_in_zygote, run, spec, timeout, key=f"campaign-{spec.id}", pure=False)
-        by_key[future.key] = spec
+        batch = queue.pop()
+        future = client.submit(run_batch, payload, batch, timeout, key=f"campaign-{batch[0].id}-{len(batch)}",
+                               pure=False)
+        by_key[future.key] = batch
         running.add(future)
         return future
 
     try:
-        if _queues(client, len(specs)):
+        if _queues(client, len(queue)):
             queue.reverse()
-            futures = client.map(run_in_zygote, [run] * len(queue), queue, [timeout] * len(queue),
-                                 key=[f"campaign-{spec.id}" for spec in queue], pure=False)
-            by_key |= {f.key: spec for f, spec in zip(futures, queue)}
+            futures = client.map(run_batch, [payload] * len(queue), queue, [timeout] * len(queue),
+                                 key=[f"campaign-{batch[0].id}-{len(batch)}" for batch in queue], pure=False)
+            by_key |= {f.key: batch for f, batch in zip(futures, queue)}
             running |= set(futures)
             queue.clear()
             pending = dask_completed(futures)
@@ -195,11 +254,19 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
             running.discard(future)
             free = _threads(client) - len(running) if queue else 0  # workers may have come or gone
             for _ in range(min(len(queue), max(free, 0 if running else 1))):
-                pending.add(submit())  # before this run's record is written: its worker waits for it
+                pending.add(submit())  # before this task's records are written: its worker waits for it
             try:
-                on_done(future.result())
+                records = future.result()
             except KilledWorker as exc:  # the scheduler gave up after its allowed-failures: no endless retry
-                on_done(_lost(by_key[future.key], f"crashed: Dask workers died running it ({exc})"))
+                batch = by_key[future.key]
+                if len(batch) > 1:  # which of its runs killed the workers: each alone
+                    queue[:0] = [[spec] for spec in reversed(batch)]
+                    if not running:
+                        pending.add(submit())
+                    continue
+                records = [_lost(batch[0], f"crashed: Dask workers died running it ({exc})")]
+            for record in records:
+                on_done(record)
     finally:
         client.cancel(list(running))
 

@@ -49,10 +49,11 @@ def execute(run: str | Callable[[RunSpec], dict], spec: RunSpec, timeout: float 
     with its reason. The result goes through a JSON round trip in the child, so records are identical
     whichever executor ran them.
     """
-    from feeddrive.cosim.supervise import supervise
+    from feeddrive.cosim.supervise import reap, supervise
 
     start = time.perf_counter()
     result, status, reason = None, "failed", ""
+    reap()  # the earlier runs' children that have exited, where no thread reaps them (supervise.REAP_IN_THREAD)
     try:
         fn = resolve_function(run) if isinstance(run, str) else run
         prepare = getattr(fn, "prepare", None)

@@ -14,8 +14,8 @@ hook and before the cluster starts any thread: a process that never starts one. 
 to it through a Unix socket on its first run; the server forks it a zygote of its own (the server is
 single-threaded, so that fork is safe too) and the zygote runs the worker's runs one after the other: the
 run's ``execute`` (its ``prepare``, its scenario resolved and its FMU's description read once per zygote),
-each run forked from the zygote, single-threaded at every fork. The Dask task only sends the run and waits
-for its record (``run_in_zygote``).
+each run forked from the zygote, single-threaded at every fork. The Dask task (``run_batch``: a few runs, cosim/
+campaign/execute.py) only sends them one by one and waits for their records.
 
 A zygote that dies under a run (killed from outside its containment) makes that run ``failed`` and the next
 run gets a new zygote; a worker whose zygote server is gone runs its runs itself, as without zygotes. A
@@ -39,8 +39,9 @@ import threading
 from typing import Any
 
 #: (pid of the process that started the zygote server, its socket's path); inherited by the workers that
-#: process forks. The process itself does not use it (its runs are not on a Dask worker)
-ADDRESS: tuple[int, str] | None = None
+#: process forks. The process itself does not use it (its runs are not on a Dask worker), unless the pid is
+#: None (a preloaded worker's own server)
+ADDRESS: tuple[int | None, str] | None = None
 #: in a zygote: the pid of the worker it serves
 WORKER_PID: int | None = None
 
@@ -75,12 +76,24 @@ def _read(sock: socket.socket, n: int) -> bytearray:
 class ZygoteServer:
     """The zygote server of a ``local_cluster``: forked from this process now, from the calling thread.
 
-    Call it before the cluster starts (its event loop's thread): the server then has no other thread, and
-    nor has any process it forks. ``close`` stops it (its zygotes end with their workers' connections).
+    Call it before the cluster starts (its event loop's thread). A forked process has only the forking thread,
+    and a lock another thread held at the fork stays held for ever in it (and in every run forked from it):
+    the threads this process's campaigns start are therefore stopped first (tqdm's monitor, which a progress
+    bar started and which takes tqdm's lock every 10 s; a new bar starts it again) or waited for
+    (``supervise``'s reapers, a few ms each). Other threads found then are named in ``threads_at_fork``:
+    idle ones are harmless (Dask's offload thread, left by a closed cluster, waits on its queue holding no
+    lock). ``close`` stops the server (its zygotes end with their workers' connections).
+
+    Parameters
+    ----------
+    serve_here : bool
+        Whether this process's own runs use it too (a preloaded Dask worker, cosim/campaign/preload.py); by
+        default only the processes forked from this one do (``local_cluster``'s workers).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, serve_here: bool = False) -> None:
         global ADDRESS
+        self.threads_at_fork = _quiesce()
         self.dir = tempfile.mkdtemp(prefix="feeddrive-zygote-")
         self.address = os.path.join(self.dir, "socket")
         listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -100,7 +113,7 @@ class ZygoteServer:
                 os._exit(code)
         listener.close()
         self.pid = pid
-        ADDRESS = (parent, self.address)
+        ADDRESS = (None if serve_here else parent, self.address)
 
     def close(self) -> None:
         """Stop the server and remove its socket."""
@@ -116,6 +129,20 @@ class ZygoteServer:
             pass
         self.pid = None
         shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def _quiesce() -> list[str]:
+    """Stop tqdm's monitor thread and wait for ``supervise``'s reapers; the names of the other threads left."""
+    from feeddrive.cosim.supervise import REAPER
+
+    tqdm = getattr(sys.modules.get("tqdm.std"), "tqdm", None)
+    monitor = getattr(tqdm, "monitor", None)
+    if monitor is not None and monitor.is_alive():
+        monitor.exit()  # joined; tqdm starts a new one with its next bar
+    for thread in threading.enumerate():
+        if thread.name == REAPER:
+            thread.join(1.0)
+    return [t.name for t in threading.enumerate() if t is not threading.current_thread() and t.is_alive()]
 
 
 def _serve(listener: socket.socket, parent: int) -> None:  # pragma: no cover - runs in the server
@@ -188,8 +215,12 @@ def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
             reply = (own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime)
         else:
             _, run, spec, timeout = request
-            supervise.reap()  # the earlier runs' children that have exited (a zombie costs nothing meanwhile)
-            reply = execute(run, spec, timeout)
+            try:
+                fn = _loaded(run)
+            except Exception as exc:  # noqa: BLE001 - e.g. a module the worker's parent imported after the fork
+                _send(conn, pickle.dumps(("refused", f"{type(exc).__name__}: {exc}")))
+                continue
+            reply = execute(fn, spec, timeout)  # which reaps the earlier runs' children that have exited
         _send(conn, pickle.dumps(("ok", reply), protocol=pickle.HIGHEST_PROTOCOL))
 
 
@@ -207,26 +238,56 @@ class _Link:
             return _recv(self.sock)
 
 
-def run_in_zygote(run: Any, spec: Any, timeout: float | None = None) -> dict[str, Any]:
-    """A campaign run's Dask task: the run's ``execute`` in this worker thread's zygote; its record.
+def load_run(run: bytes | str) -> Any:
+    """The run function of a Dask task: ``package.module:function`` as it is (``execute`` imports it), or the
+    function from its pickle (``cloudpickle``: by reference to its module, by value for one of ``__main__``)."""
+    return run if isinstance(run, str) else pickle.loads(run)
 
-    Without a zygote server (a cluster not started by ``local_cluster``, or its server gone), or for a run the
-    zygote cannot read, the run is executed here, as before. A zygote that dies under the run gives a ``failed``
-    record (the next run gets a new zygote).
+
+#: in a zygote: the last run function unpickled, by its pickle (a campaign sends the same one every run)
+_LOADED: list[tuple[bytes | str, Any]] = []
+
+
+def _loaded(run: bytes | str) -> Any:  # pragma: no cover - runs in a zygote
+    if not _LOADED or _LOADED[0][0] != run:
+        _LOADED[:] = [(run, load_run(run))]
+    return _LOADED[0][1]
+
+
+def run_batch(run: bytes | str, specs: list, timeout: float | None = None) -> list[dict[str, Any]]:
+    """A campaign's Dask task: its runs one after the other, each ``execute``-d in this worker thread's zygote;
+    their records, in order.
+
+    The run function comes pickled (``load_run``) and is unpickled here, inside the task, not by the worker as
+    it reads the scheduler's message: a function the worker cannot import (its module only on the campaign's
+    machine) then fails these runs with one line, where the worker's connection to the scheduler broke on it
+    and the campaign waited for ever. Without a zygote server (a cluster not started by ``local_cluster`` nor
+    preloaded, or its server gone), or for a run the zygote cannot read, the run is executed here. A zygote
+    that dies under a run fails that run only (the next run gets a new zygote).
     """
     from feeddrive.cosim.campaign.runner import _lost, execute
 
-    link = _link()
-    if link is None:
-        return execute(run, spec, timeout)
-    import cloudpickle  # a dependency of distributed: a run function of __main__ travels by value
-
     try:
-        kind, value = link.ask(cloudpickle.dumps(("run", run, spec, timeout), protocol=pickle.HIGHEST_PROTOCOL))
-    except (OSError, EOFError) as exc:
-        _drop(link)
-        return _lost(spec, f"crashed: its zygote process died ({exc or type(exc).__name__}); not retried")
-    return value if kind == "ok" else execute(run, spec, timeout)
+        fn = load_run(run)
+    except Exception as exc:  # noqa: BLE001 - every run of the task fails with the reason, the campaign goes on
+        reason = (f"run: the Dask worker cannot load the run function ({type(exc).__name__}: "
+                  f"{' '.join(str(exc).split())}); name it 'package.module:function' of a module the workers can "
+                  "import (installed there, or sent with client.upload_file)")
+        return [_lost(spec, reason) for spec in specs]
+    records = []
+    for spec in specs:
+        link = _link()
+        if link is None:
+            records.append(execute(fn, spec, timeout))
+            continue
+        try:
+            kind, value = link.ask(pickle.dumps(("run", run, spec, timeout), protocol=pickle.HIGHEST_PROTOCOL))
+        except (OSError, EOFError) as exc:
+            _drop(link)
+            records.append(_lost(spec, f"crashed: its zygote process died ({exc or type(exc).__name__}); not retried"))
+            continue
+        records.append(value if kind == "ok" else execute(fn, spec, timeout))
+    return records
 
 
 def zygote_cpu() -> tuple[float, float]:

@@ -199,17 +199,22 @@ class _Dispatch:
 def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
     """``local_cluster``: worker processes (not threads) forked from this process after the run's prepare hook
     ran here, so they start with its imports; the campaign's records are the serial run's. Its scheduler
-    keeps the runs (all 12 submitted at once, more than twice its 2 threads) and gives each worker one at a
-    time: no worker ever holds a second run behind the one it runs (cosim/campaign/execute.py ``_dask``). The runs
-    are forked from a single-threaded zygote per worker (test_campaign_zygote.py)."""
+    keeps the tasks (the 12 runs in 7 tasks, all submitted at once, more than twice its 2 threads) and gives
+    each worker one at a time: no worker ever holds a second task behind the one it runs (cosim/campaign/
+    execute.py ``_dask``). The runs are forked from a single-threaded zygote per worker (test_campaign_zygote.py)."""
     from distributed import Client
     from distributed.diagnostics.plugin import SchedulerPlugin
     from test_campaign_zygote import check_runs_forked_from_zygotes, check_server_closed
+    from tqdm import tqdm
 
     from feeddrive.cosim.campaign import local_cluster
 
     c = campaign(tmp_path, fail_if_Cd=1.3)
     serial = run_campaign(c, tmp_path / "serial", run=warm_toy_run, plots=False)
+    with tqdm(total=1, disable=False, file=open(os.devnull, "w")) as bar:  # noqa: SIM115 - closed by tqdm
+        bar.update(1)
+    monitor = tqdm.monitor  # a thread that takes tqdm's lock every 10 s: stopped before the zygote server's fork
+    assert monitor is not None and monitor.is_alive()
     PREPARED.clear()
     DISPATCH.clear()
     with local_cluster(2, run=warm_toy_run) as cluster, Client(cluster) as client:
@@ -218,12 +223,17 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
         dask = run_campaign(c, tmp_path / "dask", scheduler=cluster.scheduler_address, run=warm_toy_run, plots=False)
         dispatch = list(DISPATCH)  # this campaign's runs
         server, server_pid = cluster.zygote_server, cluster.zygote_server.pid
+        assert not monitor.is_alive() and "tqdm_monitor" not in server.threads_at_fork
         check_runs_forked_from_zygotes(cluster, client, tmp_path)  # on this cluster: its start is the test's time
+        # its workers were told to send a heartbeat every 5 s (cluster.HEARTBEAT_S), not Dask's 0.5 s
+        beats = client.run(lambda dask_worker: dask_worker.periodic_callbacks["heartbeat"].callback_time)
     check_server_closed(server, server_pid)
+    assert list(beats.values()) == [5000.0, 5000.0]
     assert len(seen) == 2 and all(pid != os.getpid() and prepared == [os.getpid()] for pid, prepared in seen.values())
+    # 12 runs in 7 tasks of 3, 3, 2, 1, 1, 1, 1 runs (execute.batches): never a second task queued on a worker
     processing = [n for _, state, n in dispatch if state == "processing"]
-    assert len(processing) == 12 and max(processing) == 1
-    assert sum(state == "queued" for _, state, _ in dispatch) >= 10  # all but the first run of each worker
+    assert len(processing) == 7 and max(processing) == 1
+    assert sum(state == "queued" for _, state, _ in dispatch) >= 5  # all but the first task of each worker
     assert dask.aggregates == serial.aggregates
     assert [(r["id"], r["status"], r["result"]) for r in dask.records] == \
            [(r["id"], r["status"], r["result"]) for r in serial.records]
@@ -336,17 +346,26 @@ def test_resolved_scenario_is_reused_as_a_copy_until_its_fmu_changes(tmp_path, f
                     "FEEDDRIVE_DASK_PROCESSES=1 runs it")
 def test_preloaded_spawned_worker_has_the_runs_imports_before_its_first_task():
     """``--preload feeddrive.cosim.campaign.preload``: a spawned worker has every module of ``RUN_IMPORTS``
-    before it runs anything (without the preload, statsmodels and the run's modules come with the first run)."""
+    before it runs anything (without the preload, statsmodels and the run's modules come with the first run),
+    and its runs are forked from a zygote (cosim/campaign/preload.py)."""
     import sys
+    import tempfile
 
     from distributed import Client, LocalCluster
 
+    from feeddrive.cosim.campaign import preload
     from feeddrive.cosim.campaign.cosim_run import RUN_IMPORTS
 
+    c = Campaign(name="z", base={"name": "s"}, run="test_campaign_zygote:where_am_i", repetitions=3)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
                       preload=["feeddrive.cosim.campaign.preload"]) as cluster, Client(cluster) as client:
         (missing,) = client.run(lambda: [m for m in RUN_IMPORTS if m not in sys.modules]).values()
+        ((worker, server),) = client.run(lambda: (os.getpid(), preload.SERVER.pid)).values()
+        res = run_campaign(c, Path(tempfile.mkdtemp()), scheduler=cluster.scheduler_address, plots=False)
     assert missing == []
+    # its runs are forked from a one-thread zygote of the worker's own zygote server, not from the worker
+    assert [r["result"]["parent_status"] for r in res.records] == [{"Threads": 1, "PPid": server}] * 3
+    assert len({r["result"]["parent"] for r in res.records}) == 1 and server != worker
 
 
 def test_a_discarded_campaign_run_writes_no_signals_and_gives_the_same_results(tmp_path, feeddrive_fmu):
@@ -365,3 +384,15 @@ def test_a_discarded_campaign_run_writes_no_signals_and_gives_the_same_results(t
     strip = ("processing_s", "processing_cpu_s", "time", "wall_time_s")
     assert [{k: v for k, v in m.items() if k not in strip} for m in lean.report["motions"]] == \
            [{k: v for k, v in m.items() if k not in strip} for m in full.report["motions"]]
+
+
+def test_dask_tasks_hold_fewer_runs_towards_the_campaigns_end():
+    """``batches``: the runs in order, cut into tasks of ceil(R / (2 x threads)) of the R runs left (at most 8), so
+    that the last tasks are single runs; every run in exactly one task."""
+    from feeddrive.cosim.campaign.execute import batches
+
+    specs = list(range(32))
+    cut = batches(specs, 2)
+    assert [len(b) for b in cut] == [8, 6, 5, 4, 3, 2, 1, 1, 1, 1] and sum(cut, []) == specs
+    assert [len(b) for b in batches(specs[:5], 2)] == [2, 1, 1, 1] and batches([], 2) == []
+    assert [len(b) for b in batches(list(range(200)), 4)] [:3] == [8, 8, 8] and sum(batches(specs, 1), []) == specs

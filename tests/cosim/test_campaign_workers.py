@@ -91,3 +91,36 @@ def test_the_longest_runs_start_first_on_several_workers(tmp_path):
     assert costs == [0.2 / 1e-3 * 2, 0.5 / 1e-3 * 2, default / 1e-3 * 2, 0.5 / 1e-3 * 2] and 0.2 < default < 0.5
     assert [s.index for s in longest_first(cosim_run.run_cosim, specs)] == [1, 3, 2, 0]
     assert longest_first("test_campaign:toy_run", specs) == specs  # no cost hook
+
+
+def spin(spec):
+    """A run that uses 0.1 s of CPU (its own, measured by itself) and reports it, and its parent's threads as it starts."""
+    import re
+    import resource
+    from pathlib import Path
+
+    threads = int(re.search(r"^Threads:\s+(\d+)", Path(f"/proc/{os.getppid()}/status").read_text(), re.M).group(1))
+    while time.process_time() < 0.1:
+        pass
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    return {"truth": {}, "injected": {"plant": {}, "sensors": {}}, "motions": [], "cpu": own.ru_utime + own.ru_stime,
+            "parent_threads": threads}
+
+
+def test_pool_runs_are_forked_from_single_threaded_workers_and_their_cpu_is_all_counted(tmp_path):
+    """On the local pool each run is forked from a worker with no other thread (its runs' children are reaped by
+    the worker, not by a thread per run), and every run's CPU reaches this process's ``RUSAGE_CHILDREN`` once
+    the campaign returns: the last runs were reaped before their workers exited (bench_campaign reads the
+    pool's CPU there)."""
+    import resource
+
+    from feeddrive.cosim.campaign import run_campaign
+
+    c = Campaign(name="spin", base={"name": "s"}, run="test_campaign_workers:spin", repetitions=6)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    res = run_campaign(c, tmp_path / "out", workers=2, plots=False)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert [r["status"] for r in res.records] == ["ok"] * 6
+    assert [r["result"]["parent_threads"] for r in res.records] == [1] * 6
+    runs = sum(r["result"]["cpu"] for r in res.records)
+    assert runs >= 0.6 and (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime) >= runs

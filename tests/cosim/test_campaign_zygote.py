@@ -67,6 +67,23 @@ def check_runs_forked_from_zygotes(cluster, client, tmp_path) -> None:
     res = run_campaign(c, tmp_path / "late-runs", scheduler=cluster.scheduler_address, run=run, plots=False)
     assert [r["status"] for r in res.records] == ["ok"] * 8
     assert {r["result"]["parent"] for r in res.records} <= set(workers.values())
+    # a run function the workers cannot import at all (its module only on this process's path): each run fails
+    # with the reason, where the worker could not read the scheduler's message and the campaign hung for ever
+    mine = tmp_path / "client-only"
+    mine.mkdir()
+    (mine / "client_only_run.py").write_text("def run(spec):\n    return {}\n")
+    sys.path.insert(0, str(mine))
+    try:
+        from client_only_run import run
+    finally:
+        sys.path.remove(str(mine))
+    res = run_campaign(c.model_copy(update={"repetitions": 3}), tmp_path / "unloadable", run=run, plots=False,
+                       scheduler=cluster.scheduler_address)
+    assert [r["reason"] for r in res.records] == ["run: the Dask worker cannot load the run function "
+                                                  "(ModuleNotFoundError: No module named 'client_only_run'); name it "
+                                                  "'package.module:function' of a module the workers can import "
+                                                  "(installed there, or sent with client.upload_file)"] * 3
+    assert [r["status"] for r in res.records] == ["failed"] * 3 and res.executed == 3
 
 
 def check_server_closed(server, pid: int) -> None:
