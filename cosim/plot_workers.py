@@ -25,6 +25,7 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import wait
@@ -64,6 +65,32 @@ class FigureJob:
         return [out] if isinstance(out, Path) else list(out)
 
 
+@dataclass(frozen=True)
+class FigureBatch:
+    """Figures drawn one after the other by one process (a motion's run figures, sent while the simulation
+    runs: one drawing process beside it, not two); returns their files in order."""
+
+    jobs: tuple[FigureJob, ...]
+
+    @property
+    def cost(self) -> float:
+        return sum(job.cost for job in self.jobs)
+
+    def __call__(self) -> list[Path]:
+        return [path for job in self.jobs for path in job()]
+
+
+class Submitted:
+    """A job handed to :meth:`PlotWorkers.submit` before the run's end: its place in :meth:`PlotWorkers.draw`'s
+    list, where its files are waited for (or it is drawn then, when no worker was idle to take it)."""
+
+    def __init__(self, job: FigureJob | FigureBatch) -> None:
+        self.job = job
+        self.files: list[Path] | None = None
+        self.error: BaseException | None = None
+        self.sent = False
+
+
 def drawing_processes(processes: int | None = None) -> int:
     """Processes to draw with: ``processes``, else ``$FEEDDRIVE_PLOT_PROCESSES``, else the number of CPUs;
     1 without ``fork`` or in a daemonic process (a campaign's Pool or Dask worker may have no children)."""
@@ -84,7 +111,7 @@ def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
 
 
 def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder: str | Path,
-                    title: str = "") -> list[FigureJob]:
+                    title: str = "", only: int | None = None, done: Mapping[int, Sequence] | None = None) -> list:
     """The run's figures (cosim.plots) as jobs, each with what it draws of its motion: every trace already reduced
     to its min/max envelope at the figure's width (:func:`envelope`), so a job is tens of kB, not MB.
 
@@ -98,12 +125,19 @@ def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder:
         Directory of the PNG files.
     title : str
         Prefix of the figure titles (the scenario name).
+    only : int or None
+        Only this motion's jobs (sent while the run goes on, :meth:`PlotWorkers.submit`).
+    done : mapping motion -> jobs, or None
+        Motions whose jobs were made already: those are put in their place instead.
     """
     folder = Path(folder)
     wanted = [name for _, _, names in PROFILES for name in names] + list(CURRENTS)
-    jobs = []
+    jobs: list = []
     for k, idx in motions(signals).items():
-        if idx.size < 2:
+        if idx.size < 2 or (only is not None and k != only):
+            continue
+        if done and k in done:
+            jobs += done[k]
             continue
         t = time[idx]
         part = {name: signals[name][idx] for name in wanted if name in signals}
@@ -163,6 +197,8 @@ class PlotWorkers:
     def __init__(self, processes: int | None = None, preload: Sequence[str] = (), jobs: Sequence[Callable] = (),
                  here: bool = False, warm: bool = True) -> None:
         self._conns: list[Any] = []  # this process's end of each worker's pipe
+        # per worker, what it was sent and has not answered, in order: a job's index in draw()'s list, or a Submitted
+        self._pending: dict[Any, deque] = {}
         self._pid: int | None = None  # the first worker (the others are its children)
         self._index = {id(job): j for j, job in enumerate(jobs)}
         self._here = here
@@ -188,6 +224,7 @@ class PlotWorkers:
         for mine, theirs in pipes:
             theirs.close()
             self._conns.append(mine)
+            self._pending[mine] = deque([_WARMING])  # until the worker says it is ready
 
     def __enter__(self) -> PlotWorkers:
         return self
@@ -195,66 +232,122 @@ class PlotWorkers:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def draw(self, jobs: Sequence[Callable[[], list[Path]]], meanwhile: Callable[[], Any] | None = None
+    def submit(self, job: FigureJob | FigureBatch) -> Submitted:
+        """Send ``job`` to a worker now, while the run goes on, if no worker is drawing already (the simulation
+        keeps a CPU: one worker draws beside it); otherwise :meth:`draw` sends it. The returned
+        :class:`Submitted` takes the job's place in :meth:`draw`'s list, which returns its files (or raises its
+        error). A motion's figures are final once it has ended: they are drawn while the run simulates the rest
+        and the monitor treats the motion, not after the simulation."""
+        ticket = Submitted(job)
+        self._collect((), {}, timeout=0)  # results arrived meanwhile: their workers are idle again
+        if self._working():
+            return ticket
+        for conn in [conn for conn in self._conns if not self._pending[conn]]:  # never blocked by a warm-up
+            try:
+                conn.send(job)
+            except OSError:  # the worker is gone: the next one, or draw() draws it
+                self._lost(conn, (), {})
+                continue
+            except Exception:  # noqa: BLE001 - data that cannot be pickled: draw() draws it here
+                return ticket
+            self._pending[conn].append(ticket)
+            ticket.sent = True
+            break
+        return ticket
+
+    def draw(self, jobs: Sequence[Callable[[], list[Path]] | Submitted], meanwhile: Callable[[], Any] | None = None
              ) -> list[Path]:
         """Draw ``jobs``; returns their files in the order of ``jobs``.
 
         :class:`FigureJob` s and the jobs given at the fork go to the workers, costliest first, one at a time to
         each idle one (and to this process, with ``here``, between the workers' results); ``meanwhile()`` (work
         of the run that does not need the figures) and any other job run here while they draw (every job when
-        there is no worker)."""
+        there is no worker). A :class:`Submitted` job is waited for (sent here if it was not yet)."""
         results: dict[int, list[Path]] = {}
-        queue = [j for j, job in enumerate(jobs) if isinstance(job, FigureJob) or id(job) in self._index
+        queue = [j for j, job in enumerate(jobs) if self._sendable(job) and not getattr(job, "sent", False)
                  ] if self._conns else []
-        queue.sort(key=lambda j: -getattr(jobs[j], "cost", 1.0))  # the costliest first: the last ones sent are short
-        idle = list(self._conns)
-        busy: dict[Any, int] = {}  # worker's connection -> its job
+        queue.sort(key=lambda j: -getattr(_job(jobs[j]), "cost", 1.0))  # the costliest first: the last ones are short
+        local = [j for j, job in enumerate(jobs)
+                 if j not in queue and not (isinstance(job, Submitted) and job.sent)]
 
         def dispatch() -> None:
-            while queue and idle:
-                conn, j = idle.pop(0), queue.pop(0)
+            while queue:
+                idle = [conn for conn in self._conns if not self._pending[conn]]
+                if not idle:
+                    return
+                conn, j = idle[0], queue.pop(0)
+                job = _job(jobs[j])
                 try:
-                    conn.send(self._index.get(id(jobs[j]), jobs[j]))  # an inherited job by its index
+                    conn.send(self._index.get(id(job), job))  # an inherited job by its index
                 except OSError:  # the worker is gone: its job is drawn here, it gets no more
-                    self._conns.remove(conn)
-                    conn.close()
-                    results[j] = list(jobs[j]())
+                    self._lost(conn, jobs, results)
+                    results[j] = list(job())
                 except Exception:  # noqa: BLE001 - data that cannot be pickled: drawn here
-                    idle.insert(0, conn)
-                    results[j] = list(jobs[j]())
+                    results[j] = list(job())
                 else:
-                    busy[conn] = j
+                    self._pending[conn].append(j)
 
         dispatch()
         if meanwhile is not None:
             meanwhile()
-        for j, job in enumerate(jobs):  # this process's share, while the workers draw
-            if j not in queue and j not in results and j not in busy.values():
-                results[j] = list(job())
-        while busy or (self._here and queue):
+        for j in local:  # this process's share, while the workers draw
+            results[j] = list(_job(jobs[j])())
+        while self._working() or (queue and self._conns):  # (a warm-up is waited for only by a job to send)
             if self._here and queue:  # this process's share: one job, then the results that came meanwhile
                 j = queue.pop(0)
-                results[j] = list(jobs[j]())
-                ready = wait(list(busy), timeout=0) if busy else []
+                results[j] = list(_job(jobs[j])())
+                self._collect(jobs, results, timeout=0)
             else:
-                ready = wait(list(busy))
-            for conn in ready:
-                j = busy.pop(conn)
-                try:
-                    status, value = conn.recv()
-                except (EOFError, OSError):  # the worker died: its figure is drawn here, it gets no more
-                    self._conns.remove(conn)
-                    conn.close()
-                    results[j] = list(jobs[j]())
-                    continue
-                if status != "ok":
-                    raise value
-                results[j] = value
-                idle.append(conn)
+                self._collect(jobs, results, timeout=None)
             dispatch()
         for j in queue:  # every worker died
-            results[j] = list(jobs[j]())
+            results[j] = list(_job(jobs[j])())
+        for j, job in enumerate(jobs):
+            if isinstance(job, Submitted) and j not in results:
+                if job.error is not None:
+                    raise job.error
+                results[j] = list(job.files or [])
         return [path for j in range(len(jobs)) for path in results[j]]
+
+    def _working(self) -> bool:
+        """A worker draws (or has a job waiting)."""
+        return any(key is not _WARMING for keys in self._pending.values() for key in keys)
+
+    def _sendable(self, job: Any) -> bool:
+        job = _job(job)
+        return isinstance(job, (FigureJob, FigureBatch)) or id(job) in self._index
+
+    def _collect(self, jobs: Sequence, results: dict[int, list[Path]], timeout: float | None) -> None:
+        """Receive the results that are ready (``timeout`` 0) or the next one (None): a job of ``jobs`` into
+        ``results``, a :class:`Submitted` into itself; a failed job of ``jobs`` is raised."""
+        busy = [conn for conn in self._conns if self._pending[conn]]
+        for conn in wait(busy, timeout) if busy else ():
+            try:
+                status, value = conn.recv()
+            except (EOFError, OSError):  # the worker died: its figures are drawn here, it gets no more
+                self._lost(conn, jobs, results)
+                continue
+            key = self._pending[conn].popleft()
+            if key is _WARMING:  # ("ready", None): the worker waits for jobs
+                continue
+            if isinstance(key, Submitted):
+                key.files, key.error = (value, None) if status == "ok" else (None, value)
+            elif status != "ok":
+                raise value
+            else:
+                results[key] = value
+
+    def _lost(self, conn: Any, jobs: Sequence, results: dict[int, list[Path]]) -> None:
+        """A worker is gone: what it had not answered is drawn here."""
+        self._conns.remove(conn)
+        conn.close()
+        for key in self._pending.pop(conn):
+            if key is _WARMING:
+                continue
+            if isinstance(key, Submitted):
+                key.files = list(key.job())
+            else:
+                results[key] = list(_job(jobs[key])())
 
     def close(self, wait: bool = True) -> None:
         """End the workers: each finishes its figure and exits; this waits for them (10 s at most, then the
@@ -270,7 +363,7 @@ class PlotWorkers:
                 except OSError:
                     pass
                 conn.close()
-            self._conns = []
+            self._conns, self._pending = [], {}
             # the thread only waits in the kernel: a fork meanwhile (the next run's workers) inherits no lock of it
             threading.Thread(target=_reap, args=(self._pid,), name="feeddrive-plot-reaper", daemon=True).start()
             self._pid = None
@@ -288,12 +381,22 @@ class PlotWorkers:
             except (EOFError, OSError):
                 pass
             conn.close()
-        self._conns = []
+        self._conns, self._pending = [], {}
         if self._pid is not None:
             if time.monotonic() > deadline:
                 _kill(self._pid)
             os.waitpid(self._pid, 0)
             self._pid = None
+
+
+#: what a worker is busy with before its first message, ``("ready", None)``: its warm-up (no job is sent to it before,
+#: so that a job sent while the run goes on never waits in the pipe, nor the run in ``send``, for that warm-up)
+_WARMING = "warming"
+
+
+def _job(job: Any) -> Any:
+    """The job itself of a :class:`Submitted`."""
+    return job.job if isinstance(job, Submitted) else job
 
 
 def _reap(pid: int) -> None:
@@ -347,6 +450,7 @@ def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - 
     # collector's passes during the drawing: 9 % of the figures' time (5 figures of a tool change: 2.11 -> 1.92 s
     # of CPU, best of 6), for 5 to 23 ms per figure of collection
     gc.disable()
+    conn.send(("ready", None))
     while True:
         if not conn.poll():
             gc.collect()
