@@ -174,9 +174,9 @@ class Monitor(Component):
         return draw_concurrently(self.plot_jobs(folder))
 
     def plot_jobs(self, folder: str | Path) -> list:
-        """The figures of :meth:`write_plots` as ``cosim.plot_workers.FigureJob`` s, drawn by the run's
+        """The figures of :meth:`write_plots` as ``cosim.figure_jobs.FigureJob`` s, drawn by the run's
         drawing processes (``cosim run``)."""
-        from feeddrive.cosim.plot_workers import monitor_figure_jobs
+        from feeddrive.cosim.figure_jobs import monitor_figure_jobs
 
         Path(folder).mkdir(parents=True, exist_ok=True)
         if self.config.db:

@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from feeddrive.cosim.figure_data import motion_figure  # noqa: E402
-from feeddrive.cosim.plot_workers import monitor_figure_jobs  # noqa: E402
+from feeddrive.cosim.figure_jobs import monitor_figure_jobs  # noqa: E402
 from feeddrive.cosim.plots import DPI, draw_concurrently, write_png  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402

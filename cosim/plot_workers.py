@@ -3,9 +3,11 @@
 A run's five PNGs and the import of matplotlib they need took longer than the co-simulation itself, and
 the user waited for them after it. :class:`PlotWorkers` forks its processes at the start of the run: each
 imports matplotlib and draws a first, throw-away figure (fonts, the Agg renderer) while the simulation
-runs in the parent, then waits for figures. At the end of the run the parent sends each figure as a
-:class:`FigureJob` (the drawing function's name and what it draws, pickled: each long trace as its
-envelope, tens of kB) to the next idle process; the run itself never imports matplotlib.
+runs in the parent, then says it is ready and waits for figures. The parent sends each figure as a
+:class:`cosim.figure_jobs.FigureJob` (the drawing function's name and what it draws, pickled: each long trace
+as its envelope, tens of kB) to the next idle process: a motion's run figures when the motion ends
+(:meth:`PlotWorkers.submit`, to one worker beside the simulation), the others at the end of the run
+(:meth:`PlotWorkers.draw`); the run itself never imports matplotlib.
 
 Jobs that are not :class:`FigureJob` (a user component's own ``write_plots``) are drawn in this process,
 while the workers draw theirs, unless they were given when the workers were forked (``jobs``): the
@@ -26,58 +28,13 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
 from multiprocessing.connection import wait
+from multiprocessing.reduction import ForkingPickler
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from feeddrive.cosim.figure_data import envelope, motion_figure
-
-#: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots, cost)
-RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure", 3.0), ("motion_{k}_currents.png", "currents_figure", 2.0))
-#: rows of the profiles figure: (label, unit, candidate signals in order of preference: measured first)
-PROFILES = (("voltage u", "V", ("sensors.u", "plant.voltage")),
-            ("current i", "A", ("sensors.Im2", "sensors.Im1", "plant.current")),
-            ("speed w", "rad/s", ("sensors.w_tach", "plant.speed")))
-#: the redundant current sensors of the currents figure
-CURRENTS = ("sensors.Im1", "sensors.Im2")
-
-
-@dataclass(frozen=True)
-class FigureJob:
-    """One figure (or a few) drawn by ``module.function(*args)``, which returns the file(s) it wrote.
-
-    The function is found by name where the job runs: pickling the job does not import its module (and
-    matplotlib) in the run's process. ``cost`` is the figure's drawing time relative to the others' (about
-    its number of panels and texts): the costliest are sent first, so that the workers end together.
-    """
-
-    module: str
-    function: str
-    args: tuple = ()
-    cost: float = 1.0
-
-    def __call__(self) -> list[Path]:
-        out = getattr(importlib.import_module(self.module), self.function)(*self.args)
-        return [out] if isinstance(out, Path) else list(out)
-
-
-@dataclass(frozen=True)
-class FigureBatch:
-    """Figures drawn one after the other by one process (a motion's run figures, sent while the simulation
-    runs: one drawing process beside it, not two); returns their files in order."""
-
-    jobs: tuple[FigureJob, ...]
-
-    @property
-    def cost(self) -> float:
-        return sum(job.cost for job in self.jobs)
-
-    def __call__(self) -> list[Path]:
-        return [path for job in self.jobs for path in job()]
+from feeddrive.cosim.figure_jobs import FigureBatch, FigureJob
 
 
 class Submitted:
@@ -99,76 +56,6 @@ def drawing_processes(processes: int | None = None) -> int:
     if "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
         return 1
     return k
-
-
-def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
-    """``motion index -> sample indices`` of each high-speed motion (NC state 1), from nc.state/nc.motion."""
-    if "nc.state" not in signals or "nc.motion" not in signals:
-        return {}
-    state, motion = signals["nc.state"], signals["nc.motion"]
-    rapid = state == 1
-    return {int(k): np.flatnonzero(rapid & (motion == k)) for k in np.unique(motion[rapid])}
-
-
-def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder: str | Path,
-                    title: str = "", only: int | None = None, done: Mapping[int, Sequence] | None = None) -> list:
-    """The run's figures (cosim.plots) as jobs, each with what it draws of its motion: every trace already reduced
-    to its min/max envelope at the figure's width (:func:`envelope`), so a job is tens of kB, not MB.
-
-    Parameters
-    ----------
-    time : ndarray, shape (n,)
-        Sample times [s].
-    signals : mapping name -> ndarray, shape (n,)
-        Recorded signals (``component.port``).
-    folder : path
-        Directory of the PNG files.
-    title : str
-        Prefix of the figure titles (the scenario name).
-    only : int or None
-        Only this motion's jobs (sent while the run goes on, :meth:`PlotWorkers.submit`).
-    done : mapping motion -> jobs, or None
-        Motions whose jobs were made already: those are put in their place instead.
-    """
-    folder = Path(folder)
-    wanted = [name for _, _, names in PROFILES for name in names] + list(CURRENTS)
-    jobs: list = []
-    for k, idx in motions(signals).items():
-        if idx.size < 2 or (only is not None and k != only):
-            continue
-        if done and k in done:
-            jobs += done[k]
-            continue
-        t = time[idx]
-        part = {name: signals[name][idx] for name in wanted if name in signals}
-        traces = {name: envelope(t, y) for name, y in part.items()}
-        args = {"profiles_figure": (k, traces), "currents_figure": (k, traces, None)}
-        if all(name in part for name in CURRENTS):  # the residue and its mean from every sample
-            residue = part[CURRENTS[0]] - part[CURRENTS[1]]
-            args["currents_figure"] = (k, traces | {"residue": envelope(t, residue)}, float(np.mean(residue)))
-        for pattern, function, cost in RUN_FIGURES:
-            path = folder / pattern.format(k=k)
-            jobs.append(FigureJob("feeddrive.cosim.plots", function, (*args[function], path, title), cost))
-    return jobs
-
-
-def monitor_figure_jobs(traces: Sequence, motions: Sequence[Mapping], folder: str | Path,
-                        thresholds: Mapping | None = None) -> list[FigureJob]:
-    """The monitor's figures (cosim.monitor_plots) as jobs: ``monitor_motion<k>.png`` and
-    ``monitor_correlation<k>.png`` of each kept trace, ``monitor_trends.png`` of the axis."""
-    folder = Path(folder)
-    module = "feeddrive.cosim.monitor_plots"
-    # what the figures draw of each trace: its long series as envelopes (kB to send, not the motion's MB)
-    shown = [motion_figure(tr) for tr in traces]
-    # costs measured against the run's figures (cosim.plots): 4 and 2 panels, and 6 panels for the trends
-    jobs = [FigureJob(module, "plot_motion", (f, folder / f"monitor_motion{f.motion}.png"), 6.0) for f in shown]
-    jobs += [FigureJob(module, "plot_correlation", (f, folder / f"monitor_correlation{f.motion}.png"), 4.0)
-             for f in shown if f.mismatch is not None]
-    if any(m.get("parameters") for m in motions):
-        axis = motions[-1].get("axis")
-        jobs.append(FigureJob(module, "plot_trends", (list(motions), folder / "monitor_trends.png",
-                                                      f"axis {axis}" if axis else "", thresholds), 6.0))
-    return jobs
 
 
 class PlotWorkers:
@@ -199,6 +86,7 @@ class PlotWorkers:
         self._conns: list[Any] = []  # this process's end of each worker's pipe
         # per worker, what it was sent and has not answered, in order: a job's index in draw()'s list, or a Submitted
         self._pending: dict[Any, deque] = {}
+        self._senders: list[threading.Thread] = []  # submit()'s writers
         self._pid: int | None = None  # the first worker (the others are its children)
         self._index = {id(job): j for j, job in enumerate(jobs)}
         self._here = here
@@ -237,22 +125,25 @@ class PlotWorkers:
         keeps a CPU: one worker draws beside it); otherwise :meth:`draw` sends it. The returned
         :class:`Submitted` takes the job's place in :meth:`draw`'s list, which returns its files (or raises its
         error). A motion's figures are final once it has ended: they are drawn while the run simulates the rest
-        and the monitor treats the motion, not after the simulation."""
+        and the monitor treats the motion, not after the simulation.
+
+        The job (hundreds of kB: more than the socket holds) is written by a thread, so the run does not wait for
+        the worker to read it, e.g. while it is still warming up."""
         ticket = Submitted(job)
         self._collect((), {}, timeout=0)  # results arrived meanwhile: their workers are idle again
-        if self._working():
+        if self._working() or not self._conns:
             return ticket
-        for conn in [conn for conn in self._conns if not self._pending[conn]]:  # never blocked by a warm-up
-            try:
-                conn.send(job)
-            except OSError:  # the worker is gone: the next one, or draw() draws it
-                self._lost(conn, (), {})
-                continue
-            except Exception:  # noqa: BLE001 - data that cannot be pickled: draw() draws it here
-                return ticket
-            self._pending[conn].append(ticket)
-            ticket.sent = True
-            break
+        try:
+            data = bytes(ForkingPickler.dumps(job))
+        except Exception:  # noqa: BLE001 - data that cannot be pickled: draw() draws it here
+            return ticket
+        conn = min(self._conns, key=lambda c: len(self._pending[c]))  # an idle worker, else one warming up
+        self._pending[conn].append(ticket)
+        ticket.sent = True
+        # the thread only writes (the kernel's wait, the GIL released); draw() and close() join it before they write
+        sender = threading.Thread(target=_send_bytes, args=(conn, data), name="feeddrive-plot-sender", daemon=True)
+        sender.start()
+        self._senders.append(sender)
         return ticket
 
     def draw(self, jobs: Sequence[Callable[[], list[Path]] | Submitted], meanwhile: Callable[[], Any] | None = None
@@ -302,12 +193,18 @@ class PlotWorkers:
             dispatch()
         for j in queue:  # every worker died
             results[j] = list(_job(jobs[j])())
+        self._join_senders()  # done: their jobs are answered
         for j, job in enumerate(jobs):
             if isinstance(job, Submitted) and j not in results:
                 if job.error is not None:
                     raise job.error
                 results[j] = list(job.files or [])
         return [path for j in range(len(jobs)) for path in results[j]]
+
+    def _join_senders(self) -> None:
+        for sender in self._senders:
+            sender.join()
+        self._senders = []
 
     def _working(self) -> bool:
         """A worker draws (or has a job waiting)."""
@@ -356,6 +253,7 @@ class PlotWorkers:
         ``wait=False`` (the workers are idle: :meth:`draw` has returned): they are told to exit and a background
         thread reaps them. A worker's pipe closes only once the kernel has torn its memory down: waiting for
         that was 50 to 190 ms at the end of every run."""
+        self._join_senders()  # a job being written is not cut by the None that ends the worker
         if not wait and self._pid is not None:
             for conn in self._conns:
                 try:
@@ -392,6 +290,13 @@ class PlotWorkers:
 #: what a worker is busy with before its first message, ``("ready", None)``: its warm-up (no job is sent to it before,
 #: so that a job sent while the run goes on never waits in the pipe, nor the run in ``send``, for that warm-up)
 _WARMING = "warming"
+
+
+def _send_bytes(conn: Any, data: bytes) -> None:
+    try:
+        conn.send_bytes(data)
+    except OSError:  # the worker is gone: draw() sees it (EOF) and draws its jobs here
+        pass
 
 
 def _job(job: Any) -> Any:

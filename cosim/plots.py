@@ -20,13 +20,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from feeddrive.cosim.figure_data import PNG  # noqa: E402
-from feeddrive.cosim.plot_workers import (  # noqa: E402, F401 - re-exported
-    CURRENTS,
-    PROFILES,
-    PlotWorkers,
-    drawing_processes,
-    motions,
-)
+from feeddrive.cosim.figure_jobs import CURRENTS, PROFILES, motions  # noqa: E402, F401 - re-exported
+from feeddrive.cosim.plot_workers import PlotWorkers, drawing_processes  # noqa: E402
 
 #: resolution of the run's and the monitor's PNGs [dots per inch]. Their figures are made at it: the layout
 #: (tight_layout) and the PNG then share one Agg renderer, and each text is measured once (with the figure's
@@ -49,7 +44,7 @@ def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str |
     title : str
         Prefix of the figure titles (the scenario name).
     """
-    from feeddrive.cosim.plot_workers import run_figure_jobs
+    from feeddrive.cosim.figure_jobs import run_figure_jobs
 
     return [path for job in run_figure_jobs(time, signals, out_dir, title) for path in job()]
 

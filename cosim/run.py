@@ -37,12 +37,13 @@ import yaml
 
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
+from feeddrive.cosim.figure_jobs import FigureBatch, run_figure_jobs
 from feeddrive.cosim.master import Master
-from feeddrive.cosim.plot_workers import FigureBatch, PlotWorkers, run_figure_jobs
+from feeddrive.cosim.plot_workers import PlotWorkers
 from feeddrive.cosim.recorder import Sampling, write_sampling_sidecar
 from feeddrive.cosim.scenario import Scenario, load_scenario
 
-#: the modules of the run's figures (cosim.plot_workers.FigureJob), loaded by the drawing processes at the start
+#: the modules of the run's figures (cosim.figure_jobs.FigureJob), loaded by the drawing processes at the start
 FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
 #: modules the monitor imports when it treats its first motion (estimator.distributions' scipy.special,
 #: estimator.kernels' scipy.fft), imported while the simulation's compiled loop runs (cosim.run._import_meanwhile)

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from feeddrive.cosim.figure_data import DISPLAY_BUCKETS
-from feeddrive.cosim.plot_workers import FigureBatch, FigureJob, PlotWorkers, run_figure_jobs
+from feeddrive.cosim.figure_jobs import FigureBatch, FigureJob, run_figure_jobs
+from feeddrive.cosim.plot_workers import PlotWorkers
 
 needs_fork = pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
                                 reason="no fork start method on this platform: figures are drawn in turn")
