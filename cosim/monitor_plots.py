@@ -41,9 +41,9 @@ def correlation_layout(checks: int) -> tuple[tuple, dict]:
 LAYOUTS = ((motion_layout(4), (9, 6)), (correlation_layout(2), (8, 7)), (TRENDS_LAYOUT, (4, 7)))
 
 
-def prepare_figures() -> None:
+def prepare_figures(layouts: Sequence = LAYOUTS) -> None:
     """This module's figures made in advance by a drawing process (cosim.plots.prepare_figures)."""
-    _prepare(LAYOUTS)
+    _prepare(layouts)
 
 
 def plot_motion(trace, path: Path) -> Path:

@@ -112,7 +112,8 @@ class PlotWorkers:
         for mine, theirs in pipes:
             theirs.close()
             self._conns.append(mine)
-            self._pending[mine] = deque([_WARMING])  # until the worker says it is ready
+            # until the worker says it is ready: no job is written to it before (the send would wait for its warm-up)
+            self._pending[mine] = deque([_WARMING] if warm else [])
 
     def __enter__(self) -> PlotWorkers:
         return self
@@ -163,8 +164,7 @@ class PlotWorkers:
 
         def dispatch() -> None:
             while queue:
-                # a worker still warming up takes a job too (it waits in its pipe), as this process waits anyway
-                idle = [conn for conn in self._conns if all(key is _WARMING for key in self._pending[conn])]
+                idle = [conn for conn in self._conns if not self._pending[conn]]
                 if not idle:
                     return
                 conn, j = idle[0], queue.pop(0)
@@ -225,9 +225,11 @@ class PlotWorkers:
             except (EOFError, OSError):  # the worker died: its figures are drawn here, it gets no more
                 self._lost(conn, jobs, results)
                 continue
-            key = self._pending[conn].popleft()
-            if key is _WARMING:  # ("ready", None): the worker waits for jobs
+            if status == "ready":  # the worker waits for jobs
+                if self._pending[conn] and self._pending[conn][0] is _WARMING:
+                    self._pending[conn].popleft()
                 continue
+            key = self._pending[conn].popleft()
             if isinstance(key, Submitted):
                 key.files, key.error = (value, None) if status == "ok" else (None, value)
             elif status != "ok":
@@ -288,8 +290,8 @@ class PlotWorkers:
             self._pid = None
 
 
-#: what a worker is busy with before its first message, ``("ready", None)``: its warm-up (a job sent meanwhile waits
-#: in its pipe; submit() prefers a worker that is ready)
+#: what a worker is busy with before its first message, ``("ready", None)``: its warm-up (draw() sends it nothing
+#: meanwhile; submit() prefers a worker that is ready, and writes from a thread)
 _WARMING = "warming"
 
 
@@ -336,7 +338,9 @@ def _first_worker(pipes: list, preload: tuple[str, ...], table: tuple, warm: boo
                 _serve(pipes[j][1], pipes, table)
                 os._exit(0)
             children.append(pid)
-        _serve(pipes[0][1], pipes, table)
+        # the first worker makes the run's usual figures in advance, while it has nothing to draw (the others were
+        # forked before: the warm-up is not made longer, and one process's CPU is taken, not two)
+        _serve(pipes[0][1], pipes, table, _preparations(preload) if warm else [])
         for pid in children:
             os.waitpid(pid, 0)
     except BaseException:  # noqa: BLE001 - the run sees EOF and draws the figures itself
@@ -345,9 +349,11 @@ def _first_worker(pipes: list, preload: tuple[str, ...], table: tuple, warm: boo
         os._exit(code)  # no atexit handlers, no flush of buffers inherited from the run
 
 
-def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - runs in a worker
+def _serve(conn: Any, pipes: list, table: tuple, preparations: list | None = None
+           ) -> None:  # pragma: no cover - runs in a worker
     """Draw each job received on ``conn`` (a job, or the index of one of ``table``, inherited at the fork) until
-    None or EOF, sending back ``("ok", files)`` or ``("error", exc)``."""
+    None or EOF, sending back ``("ok", files)`` or ``("error", exc)``; while no job waits, make the figures of
+    ``preparations`` (:func:`_preparations`), one at a time."""
     # every other worker's end closed here: the run sees EOF when that worker is gone
     for _, theirs in pipes:
         if theirs is not conn:
@@ -360,6 +366,9 @@ def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - 
     while True:
         if not conn.poll():
             gc.collect()
+            while preparations and not conn.poll():  # a job waits for one figure's making at most
+                prepare, layout = preparations.pop(0)
+                prepare((layout,))
         try:
             job = conn.recv()
         except (EOFError, OSError):
@@ -375,6 +384,18 @@ def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - 
                 conn.send(("error", exc))
             except Exception:  # noqa: BLE001 - an exception that cannot be pickled
                 conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+
+
+def _preparations(preload: tuple[str, ...]) -> list[tuple[Callable, Any]]:
+    """``(prepare_figures, layout)`` of each figure layout (``LAYOUTS``) of the modules ``preload``: the run's
+    figures that a drawing process makes before they are asked for (cosim.plots.prepare_figures)."""
+    out = []
+    for name in preload:
+        module = sys.modules.get(name)
+        prepare = getattr(module, "prepare_figures", None)
+        if callable(prepare):
+            out += [(prepare, layout) for layout in getattr(module, "LAYOUTS", ())]
+    return out
 
 
 def _warm_up(preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a worker
@@ -398,10 +419,6 @@ def _warm_up(preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a 
     ax.legend(fontsize=7)
     fig.savefig(io.BytesIO(), dpi=20)
     plt.close(fig)
-    for name in preload:  # the figures of the run, made before they are asked for (cosim.plots.prepare_figures)
-        prepare = getattr(sys.modules[name], "prepare_figures", None)
-        if callable(prepare):
-            prepare()
     # matplotlib's modules and caches stay out of the figures' garbage collections too (the run's objects are
     # frozen already): 5-7 % of the figures' time (in-process, 5 figures 3.15 -> 2.93 s, best of 3)
     gc.collect()
