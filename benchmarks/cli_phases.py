@@ -4,8 +4,8 @@
 
 Runs ``run_scenario`` as the child of ``cosim run`` does, in this fresh interpreter, and prints the time at
 which each phase ends (steps of the run wrapped here to mark them; nothing else is changed): imports, the
-scenario, the drawing processes forked, the master made (the monitor's imports), the simulation with the
-monitor in the loop, the figure jobs, report.html's preparation (while the figures are drawn), the figures,
+scenario, the drawing processes forked, the master made (the monitor's imports), each motion's run figures sent
+to a drawing process when it ends, the simulation with the monitor in the loop, the figure jobs, report.html's preparation (while the figures are drawn), the figures,
 report.json and report.html; and, per drawing process, when it warmed up and drew each figure (with the
 figure's CPU time). Times depend on the machine's load.
 """
@@ -71,6 +71,7 @@ def main(scenario_path: str) -> None:
     scenario = load_scenario(scenario_path)
     mark("scenario loaded")
     wrap(run.Master, "from_scenario", "drawing processes forked", "master made (the monitor's imports)")
+    wrap(pw.PlotWorkers, "submit", None, "a motion's run figures sent to a drawing process (the motion ended)")
     wrap(run, "plot_jobs", "simulation with the monitor (report.json wall_time_s)", "figure jobs made")
     wrap(run, "_prepare_page", None, "report.html prepared (while the figures are drawn)")
     wrap(pw.PlotWorkers, "draw", None, "figures drawn")

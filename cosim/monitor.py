@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time as _time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +72,9 @@ class Monitor(Component):
         self.pipeline: MonitorPipeline | None = None
         self.traces: list[MotionTrace] = []
         self.results: list[dict] = []
+        #: called as ``motion_ended(motion, t_last)`` when a motion ends, before the monitor treats it: ``t_last`` is
+        #: the time of its last sample [s] (``cosim run`` sends the motion's figures to a drawing process then)
+        self.motion_ended: Callable[[int, float], None] | None = None
 
     def setup(self, t0: float, h: float, n_steps: int) -> None:
         cfg = self.config
@@ -106,13 +109,13 @@ class Monitor(Component):
             if self._motion is None:
                 self._motion, self._start, self._k = values[8], n + 1, 0
             elif values[8] != self._motion:
-                self._end_motion()
+                self._end_motion(n)
                 self._motion, self._start, self._k = values[8], n + 1, 0
             if self._k < len(self._rows):
                 self._rows[self._k] = values
                 self._k += 1
         elif self._motion is not None:
-            self._end_motion()
+            self._end_motion(n)
         if n >= self._age_step:
             self._request, self._age_step = 1.0, math.inf
 
@@ -130,7 +133,10 @@ class Monitor(Component):
         self._rows[self._k:self._k + take] = rows[:take]
         self._k += take
 
-    def _end_motion(self) -> None:
+    def _end_motion(self, n: int) -> None:
+        """The motion ended at step ``n`` (its last sample is step ``n - 1``'s, at ``t0 + n * h``): treat it."""
+        if self.motion_ended is not None:
+            self.motion_ended(int(self._motion), self.t0 + n * self.h)
         rows = self._rows[:self._k].copy()  # the buffer serves the next motion
         motion, self._motion = int(self._motion), None
         if rows.shape[0] < 2:
@@ -168,9 +174,9 @@ class Monitor(Component):
         return draw_concurrently(self.plot_jobs(folder))
 
     def plot_jobs(self, folder: str | Path) -> list:
-        """The figures of :meth:`write_plots` as ``cosim.plot_workers.FigureJob`` s, drawn by the run's
+        """The figures of :meth:`write_plots` as ``cosim.figure_jobs.FigureJob`` s, drawn by the run's
         drawing processes (``cosim run``)."""
-        from feeddrive.cosim.plot_workers import monitor_figure_jobs
+        from feeddrive.cosim.figure_jobs import monitor_figure_jobs
 
         Path(folder).mkdir(parents=True, exist_ok=True)
         if self.config.db:

@@ -19,10 +19,31 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from feeddrive.cosim.figure_data import motion_figure  # noqa: E402
-from feeddrive.cosim.plot_workers import monitor_figure_jobs  # noqa: E402
-from feeddrive.cosim.plots import DPI, draw_concurrently, write_png  # noqa: E402
-from feeddrive.cosim.trends import PARAMETERS  # noqa: E402, F401 - re-exported
+from feeddrive.cosim.figure_jobs import monitor_figure_jobs  # noqa: E402
+from feeddrive.cosim.plots import DPI, draw_concurrently, subplots, write_png  # noqa: E402
+from feeddrive.cosim.plots import prepare_figures as _prepare  # noqa: E402
+from feeddrive.cosim.trends import PARAMETERS, TRENDS_LAYOUT  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
+
+
+def motion_layout(panels: int) -> tuple[tuple, dict]:
+    """``plt.subplots``' arguments of :func:`plot_motion` with ``panels`` panels."""
+    return (panels, 1), {"figsize": (9, 2.4 * panels), "sharex": True, "squeeze": False, "dpi": DPI}
+
+
+def correlation_layout(checks: int) -> tuple[tuple, dict]:
+    """``plt.subplots``' arguments of :func:`plot_correlation` with ``checks`` residues."""
+    return (1, checks), {"figsize": (10, 3.2), "squeeze": False, "dpi": DPI}
+
+
+#: the figures made at a drawing process's warm-up (cosim.plots.prepare_figures): a DC drive's motion (4 panels) and
+#: correlation (2 residues: current, speed), and the trends
+LAYOUTS = ((motion_layout(4), (9, 6)), (correlation_layout(2), (8, 7)), (TRENDS_LAYOUT, (4, 7)))
+
+
+def prepare_figures(layouts: Sequence = LAYOUTS) -> None:
+    """This module's figures made in advance by a drawing process (cosim.plots.prepare_figures)."""
+    _prepare(layouts)
 
 
 def plot_motion(trace, path: Path) -> Path:
@@ -34,7 +55,8 @@ def plot_motion(trace, path: Path) -> Path:
     lines, mm = shown.lines, shown.mismatch
     generic = mm is not None and "current" not in mm.checks  # a model's own equations (the PMSM's i_q, i_d, w)
     panels = 1 + (mm is not None) * (len(mm.checks) if generic else 3)
-    fig, axes = plt.subplots(panels, 1, figsize=(9, 2.4 * panels), sharex=True, squeeze=False, dpi=DPI)
+    args, kwargs = motion_layout(panels)
+    fig, axes = subplots(*args, **kwargs)
     axes = axes[:, 0]
     if "r" in lines:
         axes[0].plot(*lines["r"], lw=0.3, color="0.6", label="r = Im1 - Im2")
@@ -131,7 +153,8 @@ def plot_correlation(trace, path: Path) -> Path:
     :func:`plot_motion`."""
     trace = motion_figure(trace)
     mm = trace.mismatch
-    fig, axes = plt.subplots(1, len(mm.checks), figsize=(10, 3.2), squeeze=False, dpi=DPI)
+    args, kwargs = correlation_layout(len(mm.checks))
+    fig, axes = subplots(*args, **kwargs)
     for ax, (name, check) in zip(axes[0], mm.checks.items()):
         lags = np.arange(check.correlation.shape[0])
         for j, x in enumerate(check.inputs):  # a model's own check: 1, 2, ...

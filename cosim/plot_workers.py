@@ -3,9 +3,11 @@
 A run's five PNGs and the import of matplotlib they need took longer than the co-simulation itself, and
 the user waited for them after it. :class:`PlotWorkers` forks its processes at the start of the run: each
 imports matplotlib and draws a first, throw-away figure (fonts, the Agg renderer) while the simulation
-runs in the parent, then waits for figures. At the end of the run the parent sends each figure as a
-:class:`FigureJob` (the drawing function's name and what it draws, pickled: each long trace as its
-envelope, tens of kB) to the next idle process; the run itself never imports matplotlib.
+runs in the parent, then says it is ready and waits for figures. The parent sends each figure as a
+:class:`cosim.figure_jobs.FigureJob` (the drawing function's name and what it draws, pickled: each long trace
+as its envelope, tens of kB) to the next idle process: a motion's run figures when the motion ends
+(:meth:`PlotWorkers.submit`, to one worker beside the simulation), the others at the end of the run
+(:meth:`PlotWorkers.draw`); the run itself never imports matplotlib.
 
 Jobs that are not :class:`FigureJob` (a user component's own ``write_plots``) are drawn in this process,
 while the workers draw theirs, unless they were given when the workers were forked (``jobs``): the
@@ -25,43 +27,25 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections import deque
+from collections.abc import Callable, Sequence
 from multiprocessing.connection import wait
+from multiprocessing.reduction import ForkingPickler
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from feeddrive.cosim.figure_data import envelope, motion_figure
-
-#: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots, cost)
-RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure", 3.0), ("motion_{k}_currents.png", "currents_figure", 2.0))
-#: rows of the profiles figure: (label, unit, candidate signals in order of preference: measured first)
-PROFILES = (("voltage u", "V", ("sensors.u", "plant.voltage")),
-            ("current i", "A", ("sensors.Im2", "sensors.Im1", "plant.current")),
-            ("speed w", "rad/s", ("sensors.w_tach", "plant.speed")))
-#: the redundant current sensors of the currents figure
-CURRENTS = ("sensors.Im1", "sensors.Im2")
+from feeddrive.cosim.figure_jobs import FigureBatch, FigureJob
 
 
-@dataclass(frozen=True)
-class FigureJob:
-    """One figure (or a few) drawn by ``module.function(*args)``, which returns the file(s) it wrote.
+class Submitted:
+    """A job handed to :meth:`PlotWorkers.submit` before the run's end: its place in :meth:`PlotWorkers.draw`'s
+    list, where its files are waited for (or it is drawn then, when no worker was idle to take it)."""
 
-    The function is found by name where the job runs: pickling the job does not import its module (and
-    matplotlib) in the run's process. ``cost`` is the figure's drawing time relative to the others' (about
-    its number of panels and texts): the costliest are sent first, so that the workers end together.
-    """
-
-    module: str
-    function: str
-    args: tuple = ()
-    cost: float = 1.0
-
-    def __call__(self) -> list[Path]:
-        out = getattr(importlib.import_module(self.module), self.function)(*self.args)
-        return [out] if isinstance(out, Path) else list(out)
+    def __init__(self, job: FigureJob | FigureBatch) -> None:
+        self.job = job
+        self.files: list[Path] | None = None
+        self.error: BaseException | None = None
+        self.sent = False
 
 
 def drawing_processes(processes: int | None = None) -> int:
@@ -72,69 +56,6 @@ def drawing_processes(processes: int | None = None) -> int:
     if "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
         return 1
     return k
-
-
-def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
-    """``motion index -> sample indices`` of each high-speed motion (NC state 1), from nc.state/nc.motion."""
-    if "nc.state" not in signals or "nc.motion" not in signals:
-        return {}
-    state, motion = signals["nc.state"], signals["nc.motion"]
-    rapid = state == 1
-    return {int(k): np.flatnonzero(rapid & (motion == k)) for k in np.unique(motion[rapid])}
-
-
-def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder: str | Path,
-                    title: str = "") -> list[FigureJob]:
-    """The run's figures (cosim.plots) as jobs, each with what it draws of its motion: every trace already reduced
-    to its min/max envelope at the figure's width (:func:`envelope`), so a job is tens of kB, not MB.
-
-    Parameters
-    ----------
-    time : ndarray, shape (n,)
-        Sample times [s].
-    signals : mapping name -> ndarray, shape (n,)
-        Recorded signals (``component.port``).
-    folder : path
-        Directory of the PNG files.
-    title : str
-        Prefix of the figure titles (the scenario name).
-    """
-    folder = Path(folder)
-    wanted = [name for _, _, names in PROFILES for name in names] + list(CURRENTS)
-    jobs = []
-    for k, idx in motions(signals).items():
-        if idx.size < 2:
-            continue
-        t = time[idx]
-        part = {name: signals[name][idx] for name in wanted if name in signals}
-        traces = {name: envelope(t, y) for name, y in part.items()}
-        args = {"profiles_figure": (k, traces), "currents_figure": (k, traces, None)}
-        if all(name in part for name in CURRENTS):  # the residue and its mean from every sample
-            residue = part[CURRENTS[0]] - part[CURRENTS[1]]
-            args["currents_figure"] = (k, traces | {"residue": envelope(t, residue)}, float(np.mean(residue)))
-        for pattern, function, cost in RUN_FIGURES:
-            path = folder / pattern.format(k=k)
-            jobs.append(FigureJob("feeddrive.cosim.plots", function, (*args[function], path, title), cost))
-    return jobs
-
-
-def monitor_figure_jobs(traces: Sequence, motions: Sequence[Mapping], folder: str | Path,
-                        thresholds: Mapping | None = None) -> list[FigureJob]:
-    """The monitor's figures (cosim.monitor_plots) as jobs: ``monitor_motion<k>.png`` and
-    ``monitor_correlation<k>.png`` of each kept trace, ``monitor_trends.png`` of the axis."""
-    folder = Path(folder)
-    module = "feeddrive.cosim.monitor_plots"
-    # what the figures draw of each trace: its long series as envelopes (kB to send, not the motion's MB)
-    shown = [motion_figure(tr) for tr in traces]
-    # costs measured against the run's figures (cosim.plots): 4 and 2 panels, and 6 panels for the trends
-    jobs = [FigureJob(module, "plot_motion", (f, folder / f"monitor_motion{f.motion}.png"), 6.0) for f in shown]
-    jobs += [FigureJob(module, "plot_correlation", (f, folder / f"monitor_correlation{f.motion}.png"), 4.0)
-             for f in shown if f.mismatch is not None]
-    if any(m.get("parameters") for m in motions):
-        axis = motions[-1].get("axis")
-        jobs.append(FigureJob(module, "plot_trends", (list(motions), folder / "monitor_trends.png",
-                                                      f"axis {axis}" if axis else "", thresholds), 6.0))
-    return jobs
 
 
 class PlotWorkers:
@@ -163,6 +84,9 @@ class PlotWorkers:
     def __init__(self, processes: int | None = None, preload: Sequence[str] = (), jobs: Sequence[Callable] = (),
                  here: bool = False, warm: bool = True) -> None:
         self._conns: list[Any] = []  # this process's end of each worker's pipe
+        # per worker, what it was sent and has not answered, in order: a job's index in draw()'s list, or a Submitted
+        self._pending: dict[Any, deque] = {}
+        self._senders: list[threading.Thread] = []  # submit()'s writers
         self._pid: int | None = None  # the first worker (the others are its children)
         self._index = {id(job): j for j, job in enumerate(jobs)}
         self._here = here
@@ -188,6 +112,8 @@ class PlotWorkers:
         for mine, theirs in pipes:
             theirs.close()
             self._conns.append(mine)
+            # until the worker says it is ready: no job is written to it before (the send would wait for its warm-up)
+            self._pending[mine] = deque([_WARMING] if warm else [])
 
     def __enter__(self) -> PlotWorkers:
         return self
@@ -195,66 +121,133 @@ class PlotWorkers:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def draw(self, jobs: Sequence[Callable[[], list[Path]]], meanwhile: Callable[[], Any] | None = None
+    def submit(self, job: FigureJob | FigureBatch) -> Submitted:
+        """Send ``job`` to a worker now, while the run goes on, if no worker is drawing already (the simulation
+        keeps a CPU: one worker draws beside it); otherwise :meth:`draw` sends it. The returned
+        :class:`Submitted` takes the job's place in :meth:`draw`'s list, which returns its files (or raises its
+        error). A motion's figures are final once it has ended: they are drawn while the run simulates the rest
+        and the monitor treats the motion, not after the simulation.
+
+        The job (hundreds of kB: more than the socket holds) is written by a thread, so the run does not wait for
+        the worker to read it, e.g. while it is still warming up."""
+        ticket = Submitted(job)
+        self._collect((), {}, timeout=0)  # results arrived meanwhile: their workers are idle again
+        if self._working() or not self._conns:
+            return ticket
+        try:
+            data = bytes(ForkingPickler.dumps(job))
+        except Exception:  # noqa: BLE001 - data that cannot be pickled: draw() draws it here
+            return ticket
+        conn = min(self._conns, key=lambda c: len(self._pending[c]))  # an idle worker, else one warming up
+        self._pending[conn].append(ticket)
+        ticket.sent = True
+        # the thread only writes (the kernel's wait, the GIL released); draw() and close() join it before they write
+        sender = threading.Thread(target=_send_bytes, args=(conn, data), name="feeddrive-plot-sender", daemon=True)
+        sender.start()
+        self._senders.append(sender)
+        return ticket
+
+    def draw(self, jobs: Sequence[Callable[[], list[Path]] | Submitted], meanwhile: Callable[[], Any] | None = None
              ) -> list[Path]:
         """Draw ``jobs``; returns their files in the order of ``jobs``.
 
         :class:`FigureJob` s and the jobs given at the fork go to the workers, costliest first, one at a time to
         each idle one (and to this process, with ``here``, between the workers' results); ``meanwhile()`` (work
         of the run that does not need the figures) and any other job run here while they draw (every job when
-        there is no worker)."""
+        there is no worker). A :class:`Submitted` job is waited for (sent here if it was not yet)."""
         results: dict[int, list[Path]] = {}
-        queue = [j for j, job in enumerate(jobs) if isinstance(job, FigureJob) or id(job) in self._index
+        queue = [j for j, job in enumerate(jobs) if self._sendable(job) and not getattr(job, "sent", False)
                  ] if self._conns else []
-        queue.sort(key=lambda j: -getattr(jobs[j], "cost", 1.0))  # the costliest first: the last ones sent are short
-        idle = list(self._conns)
-        busy: dict[Any, int] = {}  # worker's connection -> its job
+        queue.sort(key=lambda j: -getattr(_job(jobs[j]), "cost", 1.0))  # the costliest first: the last ones are short
+        local = [j for j, job in enumerate(jobs)
+                 if j not in queue and not (isinstance(job, Submitted) and job.sent)]
 
         def dispatch() -> None:
-            while queue and idle:
-                conn, j = idle.pop(0), queue.pop(0)
+            while queue:
+                idle = [conn for conn in self._conns if not self._pending[conn]]
+                if not idle:
+                    return
+                conn, j = idle[0], queue.pop(0)
+                job = _job(jobs[j])
                 try:
-                    conn.send(self._index.get(id(jobs[j]), jobs[j]))  # an inherited job by its index
+                    conn.send(self._index.get(id(job), job))  # an inherited job by its index
                 except OSError:  # the worker is gone: its job is drawn here, it gets no more
-                    self._conns.remove(conn)
-                    conn.close()
-                    results[j] = list(jobs[j]())
+                    self._lost(conn, jobs, results)
+                    results[j] = list(job())
                 except Exception:  # noqa: BLE001 - data that cannot be pickled: drawn here
-                    idle.insert(0, conn)
-                    results[j] = list(jobs[j]())
+                    results[j] = list(job())
                 else:
-                    busy[conn] = j
+                    self._pending[conn].append(j)
 
         dispatch()
         if meanwhile is not None:
             meanwhile()
-        for j, job in enumerate(jobs):  # this process's share, while the workers draw
-            if j not in queue and j not in results and j not in busy.values():
-                results[j] = list(job())
-        while busy or (self._here and queue):
+        for j in local:  # this process's share, while the workers draw
+            results[j] = list(_job(jobs[j])())
+        while self._working() or (queue and self._conns):
             if self._here and queue:  # this process's share: one job, then the results that came meanwhile
                 j = queue.pop(0)
-                results[j] = list(jobs[j]())
-                ready = wait(list(busy), timeout=0) if busy else []
+                results[j] = list(_job(jobs[j])())
+                self._collect(jobs, results, timeout=0)
             else:
-                ready = wait(list(busy))
-            for conn in ready:
-                j = busy.pop(conn)
-                try:
-                    status, value = conn.recv()
-                except (EOFError, OSError):  # the worker died: its figure is drawn here, it gets no more
-                    self._conns.remove(conn)
-                    conn.close()
-                    results[j] = list(jobs[j]())
-                    continue
-                if status != "ok":
-                    raise value
-                results[j] = value
-                idle.append(conn)
+                self._collect(jobs, results, timeout=None)
             dispatch()
         for j in queue:  # every worker died
-            results[j] = list(jobs[j]())
+            results[j] = list(_job(jobs[j])())
+        self._join_senders()  # done: their jobs are answered
+        for j, job in enumerate(jobs):
+            if isinstance(job, Submitted) and j not in results:
+                if job.error is not None:
+                    raise job.error
+                results[j] = list(job.files or [])
         return [path for j in range(len(jobs)) for path in results[j]]
+
+    def _join_senders(self) -> None:
+        for sender in self._senders:
+            sender.join()
+        self._senders = []
+
+    def _working(self) -> bool:
+        """A worker draws (or has a job waiting)."""
+        return any(key is not _WARMING for keys in self._pending.values() for key in keys)
+
+    def _sendable(self, job: Any) -> bool:
+        job = _job(job)
+        return isinstance(job, (FigureJob, FigureBatch)) or id(job) in self._index
+
+    def _collect(self, jobs: Sequence, results: dict[int, list[Path]], timeout: float | None) -> None:
+        """Receive the results that are ready (``timeout`` 0) or the next one (None): a job of ``jobs`` into
+        ``results``, a :class:`Submitted` into itself; a failed job of ``jobs`` is raised."""
+        busy = [conn for conn in self._conns if self._pending[conn]]
+        for conn in wait(busy, timeout) if busy else ():
+            try:
+                status, value = conn.recv()
+            except (EOFError, OSError):  # the worker died: its figures are drawn here, it gets no more
+                self._lost(conn, jobs, results)
+                continue
+            if status == "ready":  # the worker waits for jobs
+                if self._pending[conn] and self._pending[conn][0] is _WARMING:
+                    self._pending[conn].popleft()
+                continue
+            key = self._pending[conn].popleft()
+            if isinstance(key, Submitted):
+                key.files, key.error = (value, None) if status == "ok" else (None, value)
+            elif status != "ok":
+                raise value
+            else:
+                results[key] = value
+
+    def _lost(self, conn: Any, jobs: Sequence, results: dict[int, list[Path]]) -> None:
+        """A worker is gone: what it had not answered is drawn here."""
+        self._conns.remove(conn)
+        conn.close()
+        for key in self._pending.pop(conn):
+            if key is _WARMING:
+                continue
+            if isinstance(key, Submitted):
+                key.files = list(key.job())
+            else:
+                results[key] = list(_job(jobs[key])())
 
     def close(self, wait: bool = True) -> None:
         """End the workers: each finishes its figure and exits; this waits for them (10 s at most, then the
@@ -263,6 +256,7 @@ class PlotWorkers:
         ``wait=False`` (the workers are idle: :meth:`draw` has returned): they are told to exit and a background
         thread reaps them. A worker's pipe closes only once the kernel has torn its memory down: waiting for
         that was 50 to 190 ms at the end of every run."""
+        self._join_senders()  # a job being written is not cut by the None that ends the worker
         if not wait and self._pid is not None:
             for conn in self._conns:
                 try:
@@ -270,7 +264,7 @@ class PlotWorkers:
                 except OSError:
                     pass
                 conn.close()
-            self._conns = []
+            self._conns, self._pending = [], {}
             # the thread only waits in the kernel: a fork meanwhile (the next run's workers) inherits no lock of it
             threading.Thread(target=_reap, args=(self._pid,), name="feeddrive-plot-reaper", daemon=True).start()
             self._pid = None
@@ -288,12 +282,29 @@ class PlotWorkers:
             except (EOFError, OSError):
                 pass
             conn.close()
-        self._conns = []
+        self._conns, self._pending = [], {}
         if self._pid is not None:
             if time.monotonic() > deadline:
                 _kill(self._pid)
             os.waitpid(self._pid, 0)
             self._pid = None
+
+
+#: what a worker is busy with before its first message, ``("ready", None)``: its warm-up (draw() sends it nothing
+#: meanwhile; submit() prefers a worker that is ready, and writes from a thread)
+_WARMING = "warming"
+
+
+def _send_bytes(conn: Any, data: bytes) -> None:
+    try:
+        conn.send_bytes(data)
+    except OSError:  # the worker is gone: draw() sees it (EOF) and draws its jobs here
+        pass
+
+
+def _job(job: Any) -> Any:
+    """The job itself of a :class:`Submitted`."""
+    return job.job if isinstance(job, Submitted) else job
 
 
 def _reap(pid: int) -> None:
@@ -327,7 +338,9 @@ def _first_worker(pipes: list, preload: tuple[str, ...], table: tuple, warm: boo
                 _serve(pipes[j][1], pipes, table)
                 os._exit(0)
             children.append(pid)
-        _serve(pipes[0][1], pipes, table)
+        # the first worker makes the run's usual figures in advance, while it has nothing to draw (the others were
+        # forked before: the warm-up is not made longer, and one process's CPU is taken, not two)
+        _serve(pipes[0][1], pipes, table, _preparations(preload) if warm else [])
         for pid in children:
             os.waitpid(pid, 0)
     except BaseException:  # noqa: BLE001 - the run sees EOF and draws the figures itself
@@ -336,9 +349,11 @@ def _first_worker(pipes: list, preload: tuple[str, ...], table: tuple, warm: boo
         os._exit(code)  # no atexit handlers, no flush of buffers inherited from the run
 
 
-def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - runs in a worker
+def _serve(conn: Any, pipes: list, table: tuple, preparations: list | None = None
+           ) -> None:  # pragma: no cover - runs in a worker
     """Draw each job received on ``conn`` (a job, or the index of one of ``table``, inherited at the fork) until
-    None or EOF, sending back ``("ok", files)`` or ``("error", exc)``."""
+    None or EOF, sending back ``("ok", files)`` or ``("error", exc)``; while no job waits, make the figures of
+    ``preparations`` (:func:`_preparations`), one at a time."""
     # every other worker's end closed here: the run sees EOF when that worker is gone
     for _, theirs in pipes:
         if theirs is not conn:
@@ -347,9 +362,13 @@ def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - 
     # collector's passes during the drawing: 9 % of the figures' time (5 figures of a tool change: 2.11 -> 1.92 s
     # of CPU, best of 6), for 5 to 23 ms per figure of collection
     gc.disable()
+    conn.send(("ready", None))
     while True:
         if not conn.poll():
             gc.collect()
+            while preparations and not conn.poll():  # a job waits for one figure's making at most
+                prepare, layout = preparations.pop(0)
+                prepare((layout,))
         try:
             job = conn.recv()
         except (EOFError, OSError):
@@ -365,6 +384,18 @@ def _serve(conn: Any, pipes: list, table: tuple) -> None:  # pragma: no cover - 
                 conn.send(("error", exc))
             except Exception:  # noqa: BLE001 - an exception that cannot be pickled
                 conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+
+
+def _preparations(preload: tuple[str, ...]) -> list[tuple[Callable, Any]]:
+    """``(prepare_figures, layout)`` of each figure layout (``LAYOUTS``) of the modules ``preload``: the run's
+    figures that a drawing process makes before they are asked for (cosim.plots.prepare_figures)."""
+    out = []
+    for name in preload:
+        module = sys.modules.get(name)
+        prepare = getattr(module, "prepare_figures", None)
+        if callable(prepare):
+            out += [(prepare, layout) for layout in getattr(module, "LAYOUTS", ())]
+    return out
 
 
 def _warm_up(preload: tuple[str, ...]) -> None:  # pragma: no cover - runs in a worker

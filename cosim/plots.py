@@ -20,18 +20,53 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from feeddrive.cosim.figure_data import PNG  # noqa: E402
-from feeddrive.cosim.plot_workers import (  # noqa: E402, F401 - re-exported
-    CURRENTS,
-    PROFILES,
-    PlotWorkers,
-    drawing_processes,
-    motions,
-)
+from feeddrive.cosim.figure_jobs import CURRENTS, PROFILES, motions  # noqa: E402, F401 - re-exported
+from feeddrive.cosim.plot_workers import PlotWorkers, drawing_processes  # noqa: E402
 
 #: resolution of the run's and the monitor's PNGs [dots per inch]. Their figures are made at it: the layout
 #: (tight_layout) and the PNG then share one Agg renderer, and each text is measured once (with the figure's
 #: default 100 dpi every text was measured again at 110 dpi when the PNG was drawn)
 DPI = 110
+
+
+def profiles_layout(rows: int) -> tuple[tuple, dict]:
+    """``plt.subplots``' arguments of :func:`profiles_figure` with ``rows`` rows."""
+    return (rows, 1), {"sharex": True, "figsize": (9, 2.2 * rows + 0.6), "dpi": DPI}
+
+
+#: ``plt.subplots``' arguments of :func:`currents_figure`
+CURRENTS_LAYOUT = ((2, 1), {"sharex": True, "figsize": (9, 5), "dpi": DPI})
+#: the figures made at a drawing process's warm-up (:func:`prepare_figures`): layout and major ticks per axis (x, y)
+LAYOUTS = ((profiles_layout(3), (9, 6)), (CURRENTS_LAYOUT, (9, 6)))
+#: figures made at a drawing process's warm-up, each taken by the first figure of its layout (:func:`subplots`)
+_PREPARED: dict[str, list] = {}
+
+
+def prepare_figures(layouts: Sequence[tuple[tuple[tuple, dict], tuple[int, int]]] = LAYOUTS) -> None:
+    """Make a figure of each layout (default: this module's) now, with its axes and their first ticks, for :func:`subplots` to hand out.
+
+    Called by a drawing process while the run simulates (cosim.plot_workers): making the axes and the ticks (each
+    tick two lines, a grid line and two texts) was 15 to 25 % of a figure's time, then spent after the simulation.
+    A figure made in advance is the one made when asked for: the same calls, the same PNG bytes (the 23 PNGs of a
+    tool change, a PMSM run and a current-sensor fault compared); the ticks are laid out from the data as before,
+    the first ones made beforehand (``Axis.get_major_ticks`` makes the missing ones, as it copies their style).
+    """
+    for (args, kwargs), (nx, ny) in layouts:
+        fig, axes = plt.subplots(*args, **kwargs)
+        for ax in np.ravel(axes):
+            ax.xaxis.get_major_ticks(nx)
+            ax.yaxis.get_major_ticks(ny)
+        _PREPARED.setdefault(_layout_key(args, kwargs), []).append((fig, axes))
+
+
+def subplots(*args, **kwargs) -> tuple:
+    """``plt.subplots(*args, **kwargs)``, or the figure of that layout made by :func:`prepare_figures`."""
+    ready = _PREPARED.get(_layout_key(args, kwargs))
+    return ready.pop() if ready else plt.subplots(*args, **kwargs)
+
+
+def _layout_key(args: tuple, kwargs: dict) -> str:
+    return repr((args, sorted(kwargs.items())))
 
 
 def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str | Path,
@@ -49,7 +84,7 @@ def plot_run(time: np.ndarray, signals: Mapping[str, np.ndarray], out_dir: str |
     title : str
         Prefix of the figure titles (the scenario name).
     """
-    from feeddrive.cosim.plot_workers import run_figure_jobs
+    from feeddrive.cosim.figure_jobs import run_figure_jobs
 
     return [path for job in run_figure_jobs(time, signals, out_dir, title) for path in job()]
 
@@ -79,7 +114,8 @@ def profiles_figure(k: int, traces: Mapping[str, tuple[np.ndarray, np.ndarray]],
     rows = [(label, unit, names[0], names[-1]) for label, unit, names in rows if names]
     if not rows:
         return []
-    fig, axes = plt.subplots(len(rows), 1, sharex=True, figsize=(9, 2.2 * len(rows) + 0.6), dpi=DPI)
+    args, kwargs = profiles_layout(len(rows))
+    fig, axes = subplots(*args, **kwargs)
     for ax, (label, unit, measured, true) in zip(np.atleast_1d(axes), rows):
         ax.plot(*traces[measured], lw=0.6, label=measured)
         if true != measured:
@@ -99,7 +135,7 @@ def currents_figure(k: int, traces: Mapping[str, tuple[np.ndarray, np.ndarray]],
     and ``residue_mean``: r's mean over every sample [A] (``[]``: a sensor is missing)."""
     if not all(name in traces for name in CURRENTS) or "residue" not in traces:
         return []
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(9, 5), dpi=DPI)
+    fig, (ax1, ax2) = subplots(*CURRENTS_LAYOUT[0], **CURRENTS_LAYOUT[1])
     ax1.plot(*traces[CURRENTS[0]], lw=0.6, label="Im1")
     ax1.plot(*traces[CURRENTS[1]], lw=0.6, label="Im2")
     ax1.set_ylabel("current [A]")

@@ -37,12 +37,13 @@ import yaml
 
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
+from feeddrive.cosim.figure_jobs import FigureBatch, run_figure_jobs
 from feeddrive.cosim.master import Master
-from feeddrive.cosim.plot_workers import PlotWorkers, run_figure_jobs
+from feeddrive.cosim.plot_workers import PlotWorkers
 from feeddrive.cosim.recorder import Sampling, write_sampling_sidecar
 from feeddrive.cosim.scenario import Scenario, load_scenario
 
-#: the modules of the run's figures (cosim.plot_workers.FigureJob), loaded by the drawing processes at the start
+#: the modules of the run's figures (cosim.figure_jobs.FigureJob), loaded by the drawing processes at the start
 FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
 #: modules the monitor imports when it treats its first motion (estimator.distributions' scipy.special,
 #: estimator.kernels' scipy.fft), imported while the simulation's compiled loop runs (cosim.run._import_meanwhile)
@@ -164,6 +165,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         # imported while the compiled loop runs: the monitor's on its first motion, report.html's at the end
         importer = _import_meanwhile((MONITOR_LATE_IMPORTS if scenario.monitor is not None else ())
                                      + (("feeddrive.cosim.report.page",) if page else ()))
+        early = _draw_motions_early(master, workers, out_dir / "plots", scenario.name) if workers is not None else {}
         recorder = master.run(progress=progress, signals_path=paths["signals"] if signals else None)
         report["loop"] = master.loop  # compiled fine loop or Python loop, and why (cosim/fastloop)
         report["components"] = master.reports()
@@ -171,8 +173,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         signals = recorder.signals()
         if workers is not None:
             # report.html's template is loaded while the workers draw (its imports were made during the loop)
-            paths["plots"] = workers.draw(plot_jobs(master, recorder.time, signals, out_dir / "plots", scenario.name),
-                                          meanwhile=_prepare_page if page else None)
+            paths["plots"] = workers.draw(plot_jobs(master, recorder.time, signals, out_dir / "plots", scenario.name,
+                                                    early), meanwhile=_prepare_page if page else None)
             workers.close(wait=False)  # idle now: they exit while report.json and report.html are written
     except BaseException as exc:
         rec = master.recorder
@@ -201,10 +203,12 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     return RunResult(out_dir, recorder.time, signals, dict(zip(recorder.names, recorder.units)), report, paths)
 
 
-def plot_jobs(master: Master, time: np.ndarray, signals: dict[str, np.ndarray], folder: Path, title: str) -> list:
+def plot_jobs(master: Master, time: np.ndarray, signals: dict[str, np.ndarray], folder: Path, title: str,
+              early: dict[int, list] | None = None) -> list:
     """The run's figures (cosim.plots) and those of components that draw their own (the monitor): as
-    ``FigureJob`` s for the drawing processes, or a component's ``write_plots`` drawn in this process."""
-    jobs: list = run_figure_jobs(time, signals, folder, title)
+    ``FigureJob`` s for the drawing processes, or a component's ``write_plots`` drawn in this process; a motion's
+    run figures sent while the run went on (``early``: motion -> its submitted jobs) in their place."""
+    jobs: list = run_figure_jobs(time, signals, folder, title, done=early)
     if jobs:  # made before any figure: the workers draw in any order
         folder.mkdir(parents=True, exist_ok=True)
     for comp in master.components.values():
@@ -213,6 +217,31 @@ def plot_jobs(master: Master, time: np.ndarray, signals: dict[str, np.ndarray], 
         elif callable(getattr(comp, "write_plots", None)):
             jobs.append(functools.partial(comp.write_plots, folder))
     return jobs
+
+
+def _draw_motions_early(master: Master, workers: PlotWorkers, folder: Path, title: str) -> dict[int, list]:
+    """Send each motion's run figures (cosim.plots) to a drawing process when the motion ends, while the run
+    simulates the rest and the monitor treats the motion, instead of after the simulation. Returns the
+    dict that collects ``motion -> [Submitted]``, filled as the motions end (for :func:`plot_jobs`).
+
+    The monitor says when a motion ended (``Monitor.motion_ended``); the motion's samples are all recorded by
+    then when the compiled loop runs (it hands its rows to the recorder before the monitor's step), not always in
+    the Python loop (rows handed over per block): a motion not yet recorded whole is drawn at the end."""
+    early: dict[int, list] = {}
+    recorder = master.recorder
+
+    def ended(motion: int, t_last: float) -> None:
+        if recorder.n == 0 or recorder.t0 + (recorder.n - 1) * recorder.h < t_last - 0.5 * recorder.h:
+            return
+        jobs = run_figure_jobs(recorder.time, recorder.signals(), folder, title, only=motion)
+        if jobs:
+            folder.mkdir(parents=True, exist_ok=True)
+            early[motion] = [workers.submit(FigureBatch(tuple(jobs)))]
+
+    for comp in master.components.values():
+        if hasattr(comp, "motion_ended"):  # the monitor (cosim.monitor.Monitor)
+            comp.motion_ended = ended
+    return early
 
 
 def column_sampling(scenario: Scenario, names: Sequence[str]) -> dict[str, Sampling]:

@@ -38,6 +38,8 @@ PARAMETERS = (("R", "Ohm"), ("L", "H"), ("K", "N.m/A"), ("Jt", "kg.m2"), ("ft", 
 UNITS = dict(PARAMETERS)
 #: a history spanning more than this [s] is plotted against calendar time
 DATE_SPAN_S = 86400.0
+#: ``plt.subplots``' arguments of :func:`trend_figure` (at the figure's own 100 dpi)
+TRENDS_LAYOUT = ((3, 2), {"figsize": (11, 8.2), "sharex": True})
 
 
 def alarm_half_width(std: float | None, ref: Mapping, z_crit: float, min_relative: float) -> float:
@@ -162,7 +164,6 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
 
     matplotlib.use("Agg")
     import matplotlib.dates as mdates
-    import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator, ScalarFormatter
 
     series = trend_series(motions, thresholds)
@@ -173,7 +174,9 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
     stored = {n: p["unit"] for m in motions for n, p in (m.get("parameters") or {}).items()
               if isinstance(p, dict) and p.get("unit")}
     units = {**UNITS, **stored, **(units or {})}
-    fig, axes = plt.subplots(3, 2, figsize=(11, 8.2), sharex=True)
+    from feeddrive.cosim.plots import subplots
+
+    fig, axes = subplots(*TRENDS_LAYOUT[0], **TRENDS_LAYOUT[1])
     for ax, (name, _) in zip(axes.T.ravel(), PARAMETERS):
         s = series.get(name)
         if s is None:

@@ -179,12 +179,66 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, 
         raise FMUBuildInputError(f"motor {motor!r}: expected one of {', '.join(MOTORS)}")
     if backlash and motor != "dc":
         raise FMUBuildInputError(f"backlash: only the DC drive has a backlash variant, not motor {motor!r}")
-    model, sources = _generated(backlash, fmi_version, motor)
     root = Path(cache_dir or os.environ.get("FEEDDRIVE_CACHE") or Path.home() / ".cache" / "feeddrive")
-    target = root / cache_key(sources) / f"{model.name}.fmu"
-    if target.is_file():
-        return target
+    # the FMU made from these inputs before, found without generating its sources (~60 ms of every scenario load)
+    index = root / "inputs" / _inputs_key(backlash, fmi_version, motor)
     try:
-        return _build(sources, target)
+        target = root / index.read_text(encoding="utf-8").strip()
+    except OSError:
+        target = None
+    if target is not None and target.parent.parent == root and target.is_file():
+        return target
+    model, sources = _generated(backlash, fmi_version, motor)
+    target = root / cache_key(sources) / f"{model.name}.fmu"
+    try:
+        if not target.is_file():
+            _build(sources, target)
+        _write_atomically(index, f"{target.parent.name}/{target.name}\n")
     except OSError as exc:
         raise FMUBuildError(f"cannot write the FMU cache {target.parent}: {exc.strerror}") from exc
+    return target
+
+
+def _inputs_key(backlash: bool, fmi_version: int, motor: str) -> str:
+    """Hash of what the built-in FMU is generated and built from: the model function (its name and its module's
+    source), the sources of the models and of this package (the code generator, the C wrapper and core), the
+    versions of CasADi (its C code generator) and fmpy (the FMI headers), the variant, the FMI version, the compiler
+    command and its flags. Equal keys give equal generated sources, so :func:`cache_key` of the sources is looked
+    up by it; any edit of these inputs makes another key, and the sources are generated again."""
+    from feeddrive.fmu_build import codegen
+
+    function = feed_drive if motor == "dc" else pmsm_drive  # looked up at each call: a replaced one is another model
+    digest = hashlib.sha256()
+    for text in (function.__module__, function.__qualname__, repr((backlash, fmi_version, motor)),
+                 getattr(fmpy, "__version__", "?"), _casadi_version(), *compiler(), *CFLAGS):
+        digest.update(text.encode() + b"\0")
+    module_file = getattr(sys.modules.get(function.__module__), "__file__", None)
+    files = [Path(codegen.WRAPPER_SOURCE), Path(codegen.WRAPPER3_SOURCE), *map(Path, codegen.CORE_SOURCES)]
+    files += sorted(Path(__file__).parent.glob("*.py")) + sorted(_models_dir().glob("*.py"))
+    for path in files + ([Path(module_file)] if module_file else []):
+        digest.update(str(path.name).encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:24]
+
+
+def _models_dir() -> Path:
+    """The folder of the models package (feeddrive.models)."""
+    return Path(sys.modules[Model.__module__].__file__).parent
+
+
+def _casadi_version() -> str:
+    import casadi
+
+    return casadi.__version__
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """``path`` written whole or not at all (parallel processes may write the same index)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".index_")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

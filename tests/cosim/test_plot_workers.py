@@ -3,6 +3,7 @@ end, in the order asked, the same bytes as drawn here; a failure is raised here,
 drawn here, and no process is left behind."""
 from __future__ import annotations
 
+import functools
 import multiprocessing
 import os
 import pickle
@@ -14,7 +15,8 @@ import numpy as np
 import pytest
 
 from feeddrive.cosim.figure_data import DISPLAY_BUCKETS
-from feeddrive.cosim.plot_workers import FigureJob, PlotWorkers, run_figure_jobs
+from feeddrive.cosim.figure_jobs import FigureBatch, FigureJob, run_figure_jobs
+from feeddrive.cosim.plot_workers import PlotWorkers
 
 needs_fork = pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
                                 reason="no fork start method on this platform: figures are drawn in turn")
@@ -24,6 +26,11 @@ def write_pid(path: Path) -> list[Path]:
     """A job: the file names the process that wrote it."""
     path.write_text(str(os.getpid()))
     return [path]
+
+
+def slow_write_pid(path: Path, seconds: float) -> list[Path]:
+    time.sleep(seconds)
+    return write_pid(path)
 
 
 def fail(message: str) -> list[Path]:
@@ -160,3 +167,30 @@ def test_the_run_figures_drawn_by_a_worker_are_those_drawn_here(tmp_path):
     assert [p.name for p in here] == [p.name for p in there] == names[2:]
     for a, b in zip(here, there):
         assert a.read_bytes() == b.read_bytes()
+
+
+@needs_fork
+def test_jobs_submitted_while_the_run_goes_on_take_one_idle_worker_and_are_returned_in_their_place(tmp_path):
+    """A motion's figures are sent when it ends (``submit``): to one idle worker (the simulation keeps the other
+    CPU), a batch drawn there in turn; ``draw`` returns their files where the submitted jobs stand. A job submitted
+    while a worker draws waits for ``draw``; a submitted job's error is raised by ``draw``; a dead worker's
+    submitted figures are drawn here."""
+    job = functools.partial(FigureJob, __name__)
+    with PlotWorkers(processes=2, warm=False) as workers:
+        workers.draw([job("write_pid", (tmp_path / "first.txt",))])  # a worker has said it is ready
+        early = workers.submit(FigureBatch((job("slow_write_pid", (tmp_path / "a.txt", 0.3)),
+                                            job("write_pid", (tmp_path / "b.txt",)))))
+        later = workers.submit(job("write_pid", (tmp_path / "c.txt",)))
+        assert early.sent and not later.sent
+        paths = workers.draw([job("write_pid", (tmp_path / "d.txt",)), early, later])
+        assert paths == [tmp_path / f"{name}.txt" for name in "dabc"]
+        pids = {name: int((tmp_path / f"{name}.txt").read_text()) for name in "abcd"}
+        assert pids["a"] == pids["b"] != os.getpid() and os.getpid() not in pids.values()
+        failed = workers.submit(job("fail", ("plots: no such signal sensors.Im3",)))
+        assert failed.sent
+        with pytest.raises(ValueError, match="no such signal sensors.Im3"):
+            workers.draw([failed])
+        dead = workers.submit(job("die", (tmp_path / "e.txt", os.getpid())))
+        assert dead.sent
+        assert workers.draw([dead]) == [tmp_path / "e.txt"]
+    assert int((tmp_path / "e.txt").read_text()) == os.getpid()  # drawn again here

@@ -80,6 +80,13 @@ def test_cache_is_reused_and_rebuilt_when_the_sources_change(tmp_path, monkeypat
     stamp = first.stat().st_mtime_ns
     assert builtin_fmu(tmp_path) == first and first.stat().st_mtime_ns == stamp  # not rebuilt
 
+    def not_generated(*args):  # the inputs' key finds the FMU: its sources are not generated again
+        raise AssertionError("sources generated again")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(feeddrive.fmu_build.build, "_generated", not_generated)
+        assert builtin_fmu(tmp_path) == first
+
     def heavier_drive(backlash: bool = False) -> Model:  # a model edit: the default inertia
         m = feed_drive(backlash)
         m.variables["Jt"] = replace(m.variables["Jt"], nominal=0.2)
