@@ -336,6 +336,11 @@ def test_simulation_spline_is_scipy_cubic_spline() -> None:
         for at in (np.arange(x[-1] + 1) + 1 / 6, np.arange(x[-1] + 1) - 0.25, np.arange(x[-1] + 1),
                    rng.permutation(np.arange(x[-1] + 1)) + 0.5):  # sorted (knots counted among them) or not
             np.testing.assert_array_equal(simulation._spline(x, Y, at), CubicSpline(x, Y, axis=1)(at))
+            # again on the same knots and times (the intervals kept from the call before), then on times changed
+            # in place (found again)
+            np.testing.assert_array_equal(simulation._spline(x, -0.5 * Y, at), CubicSpline(x, -0.5 * Y, axis=1)(at))
+            at += 0.375
+            np.testing.assert_array_equal(simulation._spline(x, Y, at), CubicSpline(x, Y, axis=1)(at))
 
 
 def test_residue_segments_are_each_labels_samples() -> None:
