@@ -135,7 +135,7 @@ def sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray | None = None) -> np.
         y = np.array(rows, dtype=float, order="C")
         z = np.ascontiguousarray(states.transpose(1, 0, 2))  # (m, n_sections, 2)
         coefs = np.ascontiguousarray(sos / sos[:, 3:4])
-        lib.fd_sosfilt(y.shape[0], y.shape[1], sos.shape[0], _ptr(coefs), _ptr(y), _ptr(z), 0)
+        _c_sosfilt(lib, coefs, y, z, 0)
         y = y.reshape(x.shape)
         return y if zi is None else (y, z.transpose(1, 0, 2).reshape(np.shape(zi)))
     # the sections as one state-space system (a section's state is the two entries of its zi)
@@ -179,7 +179,7 @@ def sosfiltfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
         coefs = np.ascontiguousarray(sos / sos[:, 3:4])
         for backward in (0, 1):  # the backward pass starts in the steady state of the forward output's last sample
             z = np.ascontiguousarray((zi * ext[None, :, -1:] if backward else zi * ext[None, :, :1]).transpose(1, 0, 2))
-            lib.fd_sosfilt(ext.shape[0], ext.shape[1], sos.shape[0], _ptr(coefs), _ptr(ext), _ptr(z), backward)
+            _c_sosfilt(lib, coefs, ext, z, backward)
         return ext[:, edge:-edge].reshape(x.shape)
     y, _ = sosfilt(sos, ext, zi * ext[None, :, :1])
     y = y[:, ::-1]
@@ -334,6 +334,18 @@ def _library() -> ctypes.CDLL | None:
     lib.fd_sosfilt.argtypes, lib.fd_sosfilt.restype = [n, n, n, dp, dp, dp, n], None
     lib.fd_lfilter.argtypes, lib.fd_lfilter.restype = [n, n, dp, dp, dp, dp, dp], None
     return lib
+
+
+#: rows per call of the C sosfilt: its states live on the C stack (a vector per row pair and section state)
+ROWS_PER_CALL = 64
+
+
+def _c_sosfilt(lib: ctypes.CDLL, coefs: np.ndarray, x: np.ndarray, z: np.ndarray, reverse: int) -> None:
+    """``fd_sosfilt`` on the rows of ``x`` (m, n) in place, ``z`` (m, n_sections, 2) (both C-contiguous), in blocks
+    of ``ROWS_PER_CALL`` rows (each row's recursion is its own: the same numbers in one call or several)."""
+    for i in range(0, x.shape[0], ROWS_PER_CALL):
+        rows, states = x[i:i + ROWS_PER_CALL], z[i:i + ROWS_PER_CALL]  # contiguous blocks of rows
+        lib.fd_sosfilt(rows.shape[0], x.shape[1], coefs.shape[0], _ptr(coefs), _ptr(rows), _ptr(states), reverse)
 
 
 def _ptr(a: np.ndarray) -> int:

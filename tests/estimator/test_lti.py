@@ -79,6 +79,17 @@ def test_sosfiltfilt_and_sosfilt_are_scipys(loops, order, ratio, n, rows, seed):
     close(zf, zf_ref)
 
 
+def test_many_rows_are_filtered_as_each_alone(loops):
+    """More rows than the C loop takes per call (``ROWS_PER_CALL``): the same numbers as scipy's, row by row."""
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((2 * lti.ROWS_PER_CALL + 3, 300)).cumsum(axis=1)
+    sos = signal.butter(4, 0.05, output="sos")
+    close(lti.sosfiltfilt(sos, x), signal.sosfiltfilt(sos, x, axis=-1))
+    zi = signal.sosfilt_zi(sos)[:, None, :] * x[None, :, :1]
+    for actual, expected in zip(lti.sosfilt(sos, x, zi=zi), signal.sosfilt(sos, x, axis=-1, zi=zi)):
+        close(actual, expected)
+
+
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(a1=st.floats(1e-5, 1.0), a0=st.floats(1e-3, 10.0), h=st.sampled_from([1e-5, 1e-4, 1e-3]),
        n=st.integers(1, 2000), seed=st.integers(0, 2 ** 32 - 1))
