@@ -37,16 +37,34 @@ def t_sf(x: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
     return _out(np.where(_positive(df), special.stdtr(df, -x), np.nan))
 
 
+#: the last quantiles of ``t_ppf`` by their arguments' bytes: ``stdtrit`` inverts the distribution iteratively
+#: (0.05-0.2 ms a call), and a motion asks for the same ones again (the three residue tests' 95 % quantile at
+#: the same windows count, every equation's interval with the same degrees of freedom), as does the next motion
+_T_PPF: dict = {}
+_T_PPF_SIZE = 64
+
+
 def t_ppf(q: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
     """Quantile ``x`` with ``P(T <= x) = q`` of Student's t (``scipy.stats.t.ppf``)."""
-    from scipy import special
-
     q, df = np.broadcast_arrays(np.asarray(q, dtype=float), np.asarray(df, dtype=float))
-    valid = _positive(df) & (q >= 0) & (q <= 1)
-    with np.errstate(invalid="ignore"):
-        out = special.stdtrit(df, q)
-    out = np.where(q == 0, -np.inf, np.where(q == 1, np.inf, out))
-    return _out(np.where(valid, out, np.nan))
+    key = (q.shape, q.tobytes(), df.tobytes())
+    out = _T_PPF.get(key)
+    if out is None:
+        from scipy import special
+
+        valid = _positive(df) & (q >= 0) & (q <= 1)
+        with np.errstate(invalid="ignore"):
+            out = special.stdtrit(df, q)
+        out = np.where(q == 0, -np.inf, np.where(q == 1, np.inf, out))
+        out = np.where(valid, out, np.nan)
+        out.setflags(write=False)
+        if len(_T_PPF) >= _T_PPF_SIZE:
+            try:  # the oldest; another thread may have emptied or changed the dict meanwhile
+                _T_PPF.pop(next(iter(_T_PPF)), None)
+            except (StopIteration, RuntimeError):
+                pass
+        _T_PPF[key] = out
+    return _out(out.copy())  # the caller's own array (it may write to it)
 
 
 def norm_ppf(q: float | np.ndarray) -> float | np.ndarray:

@@ -280,16 +280,37 @@ def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray) -> np.ndarray:
     if info > 0:
         raise np.linalg.LinAlgError("singular matrix")
     t = (s[:-1] + s[1:] - 2 * slope) / dxr
-    j = np.clip(_intervals(x, at) - 1, 0, n - 2)  # the interval, the end ones extrapolated
-    u = (at - x[j])[:, None]
+    j = _interval_of(x, at)
+    # take() along the rows: the same values as indexing with j, without the general indexing's iterator
+    # (2.4x faster on these (n, 1) arrays)
+    u = (at - x.take(j))[:, None]
     z = u
-    res = 0.0 + y[:-1][j] * 1.0
-    res = res + s[:-1][j] * z
+    res = 0.0 + y[:-1].take(j, axis=0) * 1.0
+    res = res + s[:-1].take(j, axis=0) * z
     z = z * u
-    res = res + ((slope - s[:-1]) / dxr - t)[j] * z
+    res = res + ((slope - s[:-1]) / dxr - t).take(j, axis=0) * z
     z = z * u
-    res = res + (t / dxr)[j] * z
+    res = res + (t / dxr).take(j, axis=0) * z
     return res.T
+
+
+#: the last knots, times and intervals of ``_interval_of``: the instruments simulate each equation of a half on
+#: the same knots and read it at the same times (two splines of the same layout per half and IV iteration)
+_LAST_INTERVALS: tuple = ()
+
+
+def _interval_of(x: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The interval of the knots ``x`` (n,) each time of ``at`` falls in, the end ones extrapolated:
+    ``clip(searchsorted(x, at, "right") - 1, 0, n - 2)``, kept for the next call with the same values."""
+    global _LAST_INTERVALS
+    last = _LAST_INTERVALS  # one read: another thread may replace it meanwhile
+    if last and last[0].shape == x.shape and last[1].shape == at.shape and np.array_equal(last[0], x) \
+            and np.array_equal(last[1], at):
+        return last[2]
+    j = np.clip(_intervals(x, at) - 1, 0, x.size - 2)
+    j.setflags(write=False)
+    _LAST_INTERVALS = (x.copy(), at.copy(), j)
+    return j
 
 
 def _intervals(x: np.ndarray, at: np.ndarray) -> np.ndarray:

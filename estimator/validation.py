@@ -52,7 +52,7 @@ import numpy as np
 from feeddrive.estimator import lti
 from feeddrive.estimator.distributions import chi2_sf, t_ppf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
-from feeddrive.estimator.filtering import FilterSpec, decimation_factor
+from feeddrive.estimator.filtering import FilterSpec, decimation_factor, share_filtered
 from feeddrive.estimator.kernels import bilinear_first_order
 
 #: the redundant pairs: quantity -> (sensor 1, sensor 2)
@@ -491,6 +491,10 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
         best[symbol[q]] = (x, xf)
         pairs[q] = PairValidation(q, (s1, s2), res, ratio, 1.0 - ratio, fits, chosen.sensor, x, valid,
                                   tuple(pair_notes))
+    for q, (s1, _) in PAIRS.items():  # the signals passed on, filtered already: the estimator's and model checks'
+        x, xf = best[symbol[q]]  # low-pass of them is this one (a mean or a correction of filtered rows)
+        if x is not raw[s1]:
+            share_filtered(filter, h, x, xf)
     faulty_pairs = [q for q, p in pairs.items() if p.residue is not None and p.residue.kind != "none"]
     if len(faulty_pairs) > 1:
         notes.append(f"faults on several quantities ({', '.join(faulty_pairs)}): each isolation used the "

@@ -65,6 +65,12 @@ def test_arrays_broadcast_and_scalars_stay_scalars():
     close(2 * d.t_sf(np.abs(z), 12.0), 2 * stats.t.sf(np.abs(z), 12.0))
     assert isinstance(d.t_ppf(0.975, 10), float) and isinstance(d.chi2_sf(3.0, 2), float)
     assert d.t_ppf(0.975, dofs).shape == (2, 3)
+    # asked again (the quantile kept): the same values, and the caller's array its own
+    first = d.t_ppf(0.975, dofs)
+    first[:] = 0.0
+    close(d.t_ppf(0.975, dofs), stats.t.ppf(0.975, dofs))
+    assert d.t_ppf(0.975, 10) == d.t_ppf(0.975, 10.0)
+    close(d.t_ppf(0.975, 10), stats.t.ppf(0.975, 10))
 
 
 @pytest.mark.parametrize(("ours", "theirs", "args"), [

@@ -51,7 +51,7 @@ def test_butter_sections_are_scipys(order, ratio, fs):
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(order=st.integers(1, 8), ratio=RATIOS, n=st.integers(40, 3000), rows=st.integers(1, 3),
+@given(order=st.integers(1, 8), ratio=RATIOS, n=st.integers(40, 3000), rows=st.integers(1, 5),
        seed=st.integers(0, 2 ** 32 - 1))
 def test_sosfiltfilt_and_sosfilt_are_scipys(loops, order, ratio, n, rows, seed):
     rng = np.random.default_rng(seed)
@@ -71,6 +71,23 @@ def test_sosfiltfilt_and_sosfilt_are_scipys(loops, order, ratio, n, rows, seed):
     close(y, y_ref)
     close(zf, zf_ref)
     close(lti.sosfilt(sos, x[0]), signal.sosfilt(sos, x[0]))
+    # several rows at once (the C loop takes them two by two, a last odd one alone), each from its own state
+    zr = zi[:, None, :] * x[None, :, :1] * np.linspace(0.5, 1.5, rows)[None, :, None]
+    y, zf = lti.sosfilt(sos, x, zi=zr)
+    y_ref, zf_ref = signal.sosfilt(sos, x, axis=-1, zi=zr)
+    close(y, y_ref)
+    close(zf, zf_ref)
+
+
+def test_many_rows_are_filtered_as_each_alone(loops):
+    """More rows than the C loop takes per call (``ROWS_PER_CALL``): the same numbers as scipy's, row by row."""
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((2 * lti.ROWS_PER_CALL + 3, 300)).cumsum(axis=1)
+    sos = signal.butter(4, 0.05, output="sos")
+    close(lti.sosfiltfilt(sos, x), signal.sosfiltfilt(sos, x, axis=-1))
+    zi = signal.sosfilt_zi(sos)[:, None, :] * x[None, :, :1]
+    for actual, expected in zip(lti.sosfilt(sos, x, zi=zi), signal.sosfilt(sos, x, axis=-1, zi=zi)):
+        close(actual, expected)
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -156,6 +156,40 @@ def test_filtered_signals_are_reused_only_for_the_same_values() -> None:
     assert not np.array_equal(changed, first)
 
 
+def test_validation_passes_on_its_signals_filtered() -> None:
+    """The signals measurement validation passes on (the mean of two sensors) are given to the estimator's
+    filter as the same mean of the sensors' filtered rows: within 1e-12 of filtering the mean again (F is
+    linear; only the rounding of one addition differs), and a mean changed since is filtered again."""
+    from feeddrive.estimator.filtering import clear_filter_memo, share_filtered
+    from feeddrive.estimator.validation import validate_measurements
+
+    rng = np.random.default_rng(11)
+    h, spec = 1e-4, FilterSpec(100.0, 4)
+    t = np.arange(8000) * h
+    w = 70.0 * np.sin(2 * np.pi * t / 0.8)
+    i = 2.0 * np.cos(2 * np.pi * t / 0.8)
+    u = 0.6 * i + 1.05 * w
+    noisy = {k: x + s * rng.standard_normal(t.size) for k, x, s in (("Im1", i, 0.05), ("Im2", i, 0.05), ("u", u, 0.2),
+                                                                     ("u_ref", u, 0.2), ("w_tach", w, 0.05),
+                                                                     ("w_enc", w, 0.05))}
+    clear_filter_memo()
+    v = validate_measurements(noisy, h, {"R": 0.6, "L": 4e-3, "K": 1.05}, spec)
+    shared = spec.apply({"u": v.u, "i": v.i, "w": v.w}, h)
+    assert all(p.residue.kind == "none" for p in v.pairs.values())  # healthy sensors: each passes on the mean
+    for k, x, (s1, s2) in (("u", v.u, ("u", "u_ref")), ("i", v.i, ("Im1", "Im2")), ("w", v.w, ("w_tach", "w_enc"))):
+        pair = lti.sosfiltfilt(spec.sos(h), np.vstack([noisy[s1], noisy[s2]]))
+        np.testing.assert_array_equal(shared[k], 0.5 * (pair[0] + pair[1]))  # not filtered again
+        direct = lti.sosfiltfilt(spec.sos(h), x)
+        assert not shared[k].flags.writeable
+        np.testing.assert_allclose(shared[k], direct, rtol=0, atol=1e-12 * np.max(np.abs(direct)))
+    x = v.u.copy()
+    x[5] += 1.0  # not the values shared: filtered afresh
+    np.testing.assert_array_equal(spec.apply({"u": x}, h)["u"], lti.sosfiltfilt(spec.sos(h), x))
+    share_filtered(FilterSpec(100.0, 4, zero_phase=False), h, x, np.zeros_like(x))  # a causal filter: not shared
+    assert not np.array_equal(FilterSpec(100.0, 4, zero_phase=False).apply({"u": x}, h)["u"], 0.0)
+    clear_filter_memo()
+
+
 @pytest.mark.parametrize("kind", ["dc", "pmsm", "pmsm-spm"])
 def test_model_facts_kept_per_model_are_the_derived_ones(kind: str) -> None:
     """The estimator's per-model facts (kernels: measured signals, each equation's parameters and residual
@@ -301,6 +335,11 @@ def test_simulation_spline_is_scipy_cubic_spline() -> None:
         Y = np.cumsum(rng.standard_normal((2, n)), axis=1) * 1e3
         for at in (np.arange(x[-1] + 1) + 1 / 6, np.arange(x[-1] + 1) - 0.25, np.arange(x[-1] + 1),
                    rng.permutation(np.arange(x[-1] + 1)) + 0.5):  # sorted (knots counted among them) or not
+            np.testing.assert_array_equal(simulation._spline(x, Y, at), CubicSpline(x, Y, axis=1)(at))
+            # again on the same knots and times (the intervals kept from the call before), then on times changed
+            # in place (found again)
+            np.testing.assert_array_equal(simulation._spline(x, -0.5 * Y, at), CubicSpline(x, -0.5 * Y, axis=1)(at))
+            at += 0.375
             np.testing.assert_array_equal(simulation._spline(x, Y, at), CubicSpline(x, Y, axis=1)(at))
 
 
