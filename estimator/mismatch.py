@@ -445,4 +445,7 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     p = min(1.0, m * worst.p_value)
     rule = (f"Bonferroni over {m} tests ({', '.join(t for t, _ in results)}): mismatch when a p-value is below "
             f"alpha / {m}")
+    free = [k for k in undetermined if k in params and k not in names]
+    if free:  # say why a check passes where the parameters are refused: they were not taken as known
+        rule += f"; {', '.join(free)} (not determined by this motion) are free in the tests, like the estimate's uncertainty"
     return MismatchResult(label, worst.statistic, p, alpha, bool(p >= alpha), rule, checks)

@@ -74,6 +74,9 @@ def model_check(mm: Mapping | None) -> dict | None:
     summary = (f"deciding test: {mm.get('test', '?')}, smallest p-value; Bonferroni-adjusted p = min(1, {m} p) = "
                f"{_n(p_adj, 3)} {'<' if mm.get('passed') is False else '>='} alpha = {alpha:g}"
                if finite(alpha) else f"deciding test: {mm.get('test', '?')}")
+    free = str(mm.get("rule") or "").partition("; ")[2]  # the parameters the motion did not determine
+    if free:
+        summary += f"; {free}"
     return {"rows": rows, "sizes": sizes, "level": level, "summary": summary, "passed": mm.get("passed")}
 
 

@@ -80,5 +80,9 @@ def test_model_check_does_not_reject_the_friction_the_motion_cannot_tell(tmp_pat
     # the lumped friction is the plant's at the cruise speed: Cd + ft w (1.2 + 0.02 w, w = 2 pi v / 20 mm)
     assert m["fitted"]["Cd"] == pytest.approx(1.2 + 0.02 * 2 * np.pi * v_max / 0.02, rel=0.05)
     assert m["mismatch"]["passed"], m["mismatch"]
+    assert m["mismatch"]["rule"].endswith("; ft, Cd (not determined by this motion) are free in the tests, like "
+                                          "the estimate's uncertainty"), m["mismatch"]["rule"]
     assert m["mismatch"]["checks"]["speed"]["peak"]["p_value"] > 0.01
     assert m["validated"]
+    page = html.unescape((tmp_path / "out" / "report.html").read_text())
+    assert "ft, Cd (not determined by this motion) are free in the tests" in page
