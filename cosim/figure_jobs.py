@@ -60,12 +60,17 @@ class FigureBatch:
         return [path for job in self.jobs for path in job()]
 
 
-def motions(signals: Mapping[str, np.ndarray]) -> dict[int, np.ndarray]:
-    """``motion index -> sample indices`` of each high-speed motion (NC state 1), from nc.state/nc.motion."""
+def motions(signals: Mapping[str, np.ndarray], only: int | None = None) -> dict[int, np.ndarray]:
+    """``motion index -> sample indices`` of each high-speed motion (NC state 1), from nc.state/nc.motion; of
+    motion ``only`` alone when given (one pass over the record, not one per motion: it is asked at each motion's
+    end while the run goes on)."""
     if "nc.state" not in signals or "nc.motion" not in signals:
         return {}
     state, motion = signals["nc.state"], signals["nc.motion"]
     rapid = state == 1
+    if only is not None:
+        idx = np.flatnonzero(rapid & (motion == only))
+        return {int(only): idx} if idx.size else {}
     return {int(k): np.flatnonzero(rapid & (motion == k)) for k in np.unique(motion[rapid])}
 
 
@@ -92,8 +97,8 @@ def run_figure_jobs(time: np.ndarray, signals: Mapping[str, np.ndarray], folder:
     folder = Path(folder)
     wanted = [name for _, _, names in PROFILES for name in names] + list(CURRENTS)
     jobs: list = []
-    for k, idx in motions(signals).items():
-        if idx.size < 2 or (only is not None and k != only):
+    for k, idx in motions(signals, only).items():
+        if idx.size < 2:
             continue
         if done and k in done:
             jobs += done[k]

@@ -62,7 +62,7 @@ def servo_model_check(pipe: Any, signals: Mapping[str, Any], dq: Mapping[str, np
             r = check_model_equations(x, h, values, model, cfg.filter, cfg.mismatch_alpha,
                                       covariance=est.covariance, names=est.names, noise=noise, noise_dof=len(x["w"]),
                                       speed_threshold=cfg.speed_threshold, speed_fraction=cfg.speed_fraction,
-                                      instruments=inst, undetermined=(*est.fixed, *est.lumped))
+                                      instruments=inst, undetermined=est.undetermined)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # NumericalFailure: it diverged
         return None, f"not checked: the model check could not be run: {exc}"
     return r, None

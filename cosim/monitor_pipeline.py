@@ -255,7 +255,7 @@ class MonitorPipeline:
                                                   speed_threshold=cfg.speed_threshold,
                                                   speed_fraction=cfg.speed_fraction,
                                                   decimation=self.estimation_options.decimation,
-                                                  undetermined=tuple(fitted))
+                                                  undetermined=est.undetermined)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # NumericalFailure: it diverged
                 # the check could not be run; the estimates stand, the residue check decides
                 result["not_checked"]["model (paper, output error)"] = (

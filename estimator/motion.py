@@ -313,6 +313,12 @@ class MotionEstimate:
     rate_hz: float | None = None
 
     @property
+    def undetermined(self) -> tuple[str, ...]:
+        """The parameters the fit held at a value because the motion could not determine them (``fixed``,
+        ``lumped``): the model checks take them as free (``mismatch.check_model``'s ``undetermined``)."""
+        return (*self.fixed, *self.lumped)
+
+    @property
     def method_used(self) -> str:
         """The method whose numbers are given (``iv`` when ``oe`` fell back, ``ls`` when IV did)."""
         return self.result.method_used
