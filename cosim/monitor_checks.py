@@ -79,12 +79,18 @@ def detect_subset(signals: Mapping[str, np.ndarray | None], h: float, options: V
         if res.kind == "none":
             best[symbol[quantity]] = 0.5 * (x1 + x2)
             continue
-        lo, hi = res.gain_diff_ci95
-        faults.append({"sensor": f"{s1} or {s2}", "kind": res.kind, "gain": 1.0 + res.gain_diff,
-                       "gain_ci95": [1.0 + lo, 1.0 + hi], "offset": res.offset, "offset_ci95": list(res.offset_ci95)})
+        faults.append(unisolated_fault(s1, s2, res))
         notes.append(f"{quantity}: {s1} and {s2} disagree ({res.kind}); not isolated: the isolation (Fig. 6) needs "
                      "the current, the voltage and the speed")
     return residues, faults, best, notes
+
+
+def unisolated_fault(s1: str, s2: str, res) -> dict:  # noqa: ANN001 - estimator.validation.ResidueTest
+    """A disagreeing pair's sensor-fault dict when the faulty one cannot be told: ``"Im1 or Im2"``, the
+    pair's relative gain and offset (residue test, eq. 10)."""
+    lo, hi = res.gain_diff_ci95
+    return {"sensor": f"{s1} or {s2}", "kind": res.kind, "gain": 1.0 + res.gain_diff, "gain_ci95": [1.0 + lo, 1.0 + hi],
+            "offset": res.offset, "offset_ci95": list(res.offset_ci95)}
 
 
 def motion_verdict(result: Mapping, mismatch: bool) -> str:
@@ -262,20 +268,27 @@ def config_with_options(args, config_class, **fixed):  # noqa: ANN001, ANN201 - 
         return config_class.model_validate(values)
     except ValidationError as exc:
         err = exc.errors()[0]
-        field = str(err["loc"][0]) if err["loc"] else ""
+        if not err["loc"]:  # a rule across fields (baseline: nominal and the nominal values): its own words
+            raise InputError(err["msg"].removeprefix("Value error, ")) from None
+        field = str(err["loc"][0])
         flag = CLI_OPTIONS.get(field, (field,))[0]
         detail = ".".join(str(x) for x in err["loc"][1:])
         raise InputError(f"{flag}{' ' + detail if detail else ''}: {err['msg']} (got {err.get('input')!r})") from None
 
 
-def note_not_validated(result: dict, flags: dict, valid: bool, mismatch: bool, why: str) -> None:
+def note_not_validated(result: dict, flags: dict, valid: bool, mismatch: bool, why: str,
+                       hint: str | None = None) -> None:
     """Append to ``result["notes"]`` each reason why the motion's parameters were not validated (``why``: the
-    model check's verdict when it had no power). Shared by the DC and the servo drive's paths."""
+    model check's verdict when it had no power; ``hint``: the flags' likely cause, ``MotionEstimate.hint``).
+    Shared by the DC and the servo drive's paths."""
     if flags:
-        result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values()))
+        result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values())
+                               + (f"; {hint}" if hint else ""))
+        if hint:
+            result["hint"] = hint
     if not valid:
         result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
     if mismatch:
         result["notes"].append("not validated: model mismatch (no diagnosis; parameters reported)")
-    elif valid and not result["validated"]:
+    elif valid and not flags and not result["validated"]:  # the model check alone withheld it
         result["notes"].append(f"not validated: {why} (the model check has no power; parameters reported)")

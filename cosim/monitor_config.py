@@ -56,8 +56,10 @@ class MonitorConfig(BaseModel):
         The axis of a history database baseline; None: this monitor's axis.
     baseline_motions : int
     nominal : dict of str to float
-        The axis's design values of ``R, L, K, Jt, ft, Cd`` (motor side, SI) where they differ from the
-        built-in model's: the first motion's sensor isolation and ``baseline: nominal`` use them.
+        The axis's design values of ``R, L, K, Jt, ft, Cd`` (motor side, SI): the first motion's sensor
+        isolation (R, L, K) and ``baseline: nominal`` (all of them) use them. A scenario with a built-in
+        plant states its model's; a vendor FMU's or a recording's are the user's (without them a disagreeing
+        pair on the first motion is not isolated, and ``baseline: nominal`` is refused).
     known : dict of str to float
         Parameters known in advance (motor side, SI), fixed in the estimation and the model checks, e.g.
         ``{R: 8.4, K: 0.042}`` (``cosim monitor --known R=8.4 K=0.042``); K is needed to estimate Jt, ft,
@@ -176,6 +178,14 @@ class MonitorConfig(BaseModel):
 
     @model_validator(mode="after")
     def _read_baseline(self) -> MonitorConfig:
+        if self.baseline == "nominal":  # the axis's own values: another motor's would diagnose a healthy axis
+            from feeddrive.models.drives import drive_model
+
+            need = [v.name for v in drive_model(self.drive).of_kind("physical") if not v.optional]
+            missing = [n for n in need if n not in self.nominal and n not in self.known]
+            if missing:
+                raise ValueError(f"baseline: nominal needs the axis's nominal values of {', '.join(need)} (monitor."
+                                 f"nominal, --nominal NAME=VALUE); missing {', '.join(missing)}")
         if self.baseline not in ("motions", "nominal"):
             self._stated = _read(self.baseline, self.baseline_axis or self.axis or "X", self.baseline_motions)
         return self

@@ -55,8 +55,10 @@ class MonitorPipeline:
         from feeddrive.models.drives import drive_model
 
         self.config, self.history, self.axis = config, history, axis
-        # the axis's own design values when given (a vendor motor), else the built-in model's
-        self.nominal = drive_model(config.drive).nominal(("physical",)) | dict(config.nominal) | dict(config.known)
+        # the axis's stated design values only (a scenario states its built-in plant's; a vendor FMU's or a
+        # recorded machine's are the user's): another motor's would blame the wrong sensor or diagnose a healthy axis
+        self.nominal = dict(config.nominal) | dict(config.known)
+        self.names = [v.name for v in drive_model(config.drive).of_kind("physical")]
         self.validation_options = ValidationOptions(config.alpha, config.window_s, config.gain_tol, config.offset_tol)
         # a PMSM's pole pairs are known, not estimated (as ``cosim estimate --pole-pairs``)
         design = {"p": float(config.pole_pairs)} if config.pole_pairs and config.drive != "dc" else {}
@@ -95,7 +97,7 @@ class MonitorPipeline:
         ``{"alpha", "z_crit", "min_relative": {name: fraction}, "baseline_motions", "baseline":
         {name: {"value", "std"}} or None}``: what the alarm bands of the trend plots are drawn from.
         """
-        return _drift_reference(self.baseline(), self.diagnosis_options, list(self.nominal)) | {
+        return _drift_reference(self.baseline(), self.diagnosis_options, self.names) | {
             "alpha": self.diagnosis_options.alpha, "baseline_mode": self.config.baseline,
             "baseline_motions": self.config.baseline_motions,
             "baseline_learnt": len(self.baseline_sets)}
@@ -179,7 +181,9 @@ class MonitorPipeline:
             v = validate_measurements(signals, h, electrical, cfg.filter, self.validation_options,
                                       nominal=self.nominal, decimation=self.estimation_options.decimation)
             trace.validation = v
-            faults = [f.to_dict() for f in v.sensor_faults]
+            faults = [f.to_dict() for f in v.sensor_faults] + [
+                checks.unisolated_fault(*p.sensors, p.residue) for p in v.pairs.values()
+                if p.residue is not None and p.residue.kind != "none" and not p.fits]  # no R, L, K to isolate with
             ratio = v.pairs["current"].gain_ratio if v.pairs["current"].residue is not None else None
             result |= {"measurements_valid": bool(v.valid and not faults), "reference": v.reference,
                        "gain_ratio": ratio, "relative_gain_error": None if ratio is None else 1.0 - ratio,
@@ -275,7 +279,8 @@ class MonitorPipeline:
             adequacy is not None and adequacy.verdict == "adequate")))
         if flags:
             result["validated"] = False
-        checks.note_not_validated(result, flags, valid, mismatch, adequacy.verdict if adequacy is not None else "model not checked")
+        checks.note_not_validated(result, flags, valid, mismatch,
+                                  adequacy.verdict if adequacy is not None else "model not checked", est.hint)
         if not result["validated"]:
             return mismatch
         self.diagnose(result)
@@ -288,7 +293,7 @@ class MonitorPipeline:
         reference = self.baseline()
         if reference is not None:
             # the reference and thresholds this motion was judged against: the trend plots' alarm band
-            result["drift_reference"] = _drift_reference(reference, self.diagnosis_options, list(self.nominal))
+            result["drift_reference"] = _drift_reference(reference, self.diagnosis_options, self.names)
             result["diagnosis"] = [d.to_dict() for d in diagnose(current, reference, self.last_validated, self.recent,
                                                                  self.diagnosis_options, self.table)]
         if self.building:

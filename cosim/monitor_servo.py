@@ -350,7 +350,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
             f"decides")
     mismatch = adequacy.mismatch
     result["validated"] = bool(valid and not flags and not mismatch and adequacy.verdict == "adequate")
-    checks.note_not_validated(result, flags, valid, mismatch, adequacy.verdict)
+    checks.note_not_validated(result, flags, valid, mismatch, adequacy.verdict, est.hint)
     if result["validated"]:
         pipe.diagnose(result)
     if valid and lost is not None and lost["detected"]:  # the drive chain, measured by the two encoders

@@ -313,6 +313,17 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
                                 f"expected {second!r} (or the key left out: the servo component states it)")
         implied["second_sensor_on"] = second
     raw = resolve_files(raw, base_dir) if isinstance(raw, dict) else raw  # a relative db or baseline FILE
+    plant = data.get("plant") if isinstance(data.get("plant"), dict) else {}
+    motor = {"builtin": ("dc",), "builtin-backlash": ("dc",), "builtin-pmsm": ("pmsm", "pmsm-spm")}.get(
+        plant.get("fmu", "builtin"), ())
+    if "nominal" in fields and (stated or implied.get("drive", "dc")) in motor:  # a built-in plant's design values
+        from feeddrive.models.drives import drive_model
+
+        given = raw.get("nominal") if isinstance(raw, dict) else None
+        implied["nominal"] = drive_model(stated or implied.get("drive", "dc")).nominal(("physical",)) | (
+            given if isinstance(given, dict) else {})
+        if isinstance(given, dict):
+            raw = {k: v for k, v in raw.items() if k != "nominal"}
     try:
         config = MonitorConfig.model_validate(implied | raw if isinstance(raw, dict) else raw)
     except ValidationError as exc:

@@ -1,7 +1,6 @@
 """The estimator's data types: one motion's signals, the options, and the results (no computation).
 
-Kept apart from :mod:`feeddrive.estimator.estimate` so that the method modules (``estimate``, ``oe``)
-share them without importing each other.
+Kept apart from ``estimate`` so that the method modules (``estimate``, ``oe``) share them without a cycle.
 """
 from __future__ import annotations
 
@@ -23,8 +22,6 @@ METHODS = ("ls", "iv", "oe")
 #: mean over [t - h, t] belongs to the middle of its interval, t - h / 2
 SAMPLING_DELAY = {"instant": 0.0, "mean": 0.5}
 
-#: Signals measured on the drive (the others are derivatives and sign(w), computed from them).
-MEASURED = ("u", "i", "w")
 #: Physical parameters of the model in model order (T0 and other optional terms on request).
 PHYSICAL = [v for v in MODEL.parameters if v.kind == "physical"]
 #: physical parameter names of every drive kind (the order of pooled results and of the bounds' names)
@@ -301,6 +298,7 @@ class MotionEstimate:
     flags: Mapping[str, str] = field(default_factory=dict)
     #: parameter -> value of the bounded least squares fit, offered when something is flagged
     bounded: Mapping[str, float] = field(default_factory=dict)
+    hint: str | None = None  #: the flags' cause when one quantity's sign convention explains them
     #: parameter -> the value it was fixed at in the re-fit of the others (L = 0: quasi-static equation)
     fixed: Mapping[str, float] = field(default_factory=dict)
     #: refused parameter kept in the fit as a lumped term -> its value there (Cd holding Cd + T0 or the
@@ -367,6 +365,8 @@ class MotionEstimate:
             out["flags"] = dict(self.flags)
         if self.bounded:
             out["bounded"] = {n: {"value": float(v), "bounded": True} for n, v in self.bounded.items()}
+        if self.hint:
+            out["hint"] = self.hint
         if self.rate_hz is not None:
             out["rate_hz"] = float(self.rate_hz)
         return out

@@ -61,6 +61,7 @@ from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_la
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.nc_rate import rate_rule, systematic
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
+from feeddrive.estimator.sign_convention import sign_hint
 from feeddrive.models.drives import differentiated
 
 #: Smallest spread of |w| (5th to 95th percentile, relative to the 95th) that separates ft from Cd.
@@ -469,11 +470,12 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
         shown = subsets[options.method]
         flags = physical_flags(shown, bounds or {})
         bounded = bounded_fit(p, {**options.known, **fixed}, bounds or {}, given) if flags else {}
+        hint = sign_hint(data, options, physical_flags(shown, {}), _fit_ls)
     start, end = float(data.t0), float(data.t0 + (data.n - 1) * data.h)
     order = [v.name for v in options.physical]
     refused = {n: refused[n] for n in sorted(refused, key=order.index) if n not in options.known}
     return MotionEstimate(options.method, start, end, subsets["ls"], subsets["iv"], subsets["oe"], refused=refused,
-                          flags=flags, bounded=bounded, fixed={n: v for n, v in fixed.items() if n in refused},
+                          flags=flags, bounded=bounded, hint=hint, fixed={n: v for n, v in fixed.items() if n in refused},
                           lumped={n: float(final.values[final.names.index(n)]) for n in lumped if n in final.names},
                           joint=_subset(unconditional, list(shown.names)),
                           derived=derived_estimates(shown, options.model), rate_hz=1.0 / p.h)

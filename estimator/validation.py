@@ -422,7 +422,8 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
         The monitor's low-pass filter (eq. 8), the same as the estimator's.
     options : ValidationOptions
     nominal : mapping with ``R``, ``L``, ``K``, optional
-        Used when ``electrical`` is None; defaults to the feed-drive model's nominal values.
+        The axis's stated values, used when ``electrical`` is None; None: the feed-drive model's. Without
+        all three a disagreeing pair is not isolated (``reference`` "none").
     decimation : int or "auto"
         ``EstimationOptions.decimation``: the gain ratios (eq. 12) average every D-th filtered sample, as the
         estimator's regressions (``filtering.decimation_factor``); the residue tests (eq. 10) read every raw one.
@@ -438,9 +439,10 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
         if nominal is None:
             from feeddrive.models.drives import drive_model
             nominal = drive_model("dc").nominal()  # the feed drive's model built once (feed_drive(): 3 ms a call)
-        electrical = nominal
-        reference = "nominal"
-        notes.append("no validated parameters yet (first motion): isolation uses nominal R, L, K")
+        # another machine's R, L, K taken for this one's would blame the wrong sensor (gains of 0.004 on both)
+        electrical, reference = (nominal, "nominal") if all(k in nominal for k in "RLK") else (None, "none")
+        notes.append("no validated parameters yet (first motion): isolation uses nominal R, L, K" if electrical else
+                     "no validated or stated R, L, K for this axis yet: a disagreeing pair cannot be isolated")
     else:
         reference = "last validated"
     raw = {}
@@ -473,6 +475,11 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
         ratio = gain_ratio(filt[s1], filt[s2], decimation_factor(filter.cutoff_hz, h, n, decimation))
         if res.kind == "none":
             pairs[q] = PairValidation(q, (s1, s2), res, ratio, 1.0 - ratio, (), None, best[symbol[q]][0], True)
+            continue
+        if electrical is None:  # Fig. 6 needs R, L, K: the pair is reported, neither sensor trusted
+            pairs[q] = PairValidation(q, (s1, s2), res, ratio, 1.0 - ratio, (), None, best[symbol[q]][0], False, (
+                f"{q}: {s1} and {s2} disagree ({res.kind}); not isolated: the isolation (Fig. 6) needs the axis's "
+                f"R, L, K: state them (monitor.nominal, --nominal R=... L=... K=...) or validate a healthy motion",))
             continue
         others = {k: v[1] for k, v in best.items()}
         ref = model_reference(q, others, h, electrical)

@@ -260,6 +260,8 @@ def several_table(rows, verdict, units: dict[str, str]) -> str:  # noqa: ANN001 
                 lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} refused: {why}")
             for n, why in r.flags.items():
                 lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} FLAGGED, not to be validated: {why}")
+            if r.hint:
+                lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {r.hint}")
     lines.append(f"agreement: {verdict.verdict} (p = {verdict.p_value:.3g}, Bonferroni over "
                  f"{len(verdict.per_parameter)} parameters; joint chi2 {verdict.chi2:.3g} on {verdict.dof} dof, "
                  f"p = {verdict.joint_p:.3g})")
@@ -295,6 +297,8 @@ def table(results, units: dict[str, str]) -> str:  # noqa: ANN001 - list of esti
             lines.append(f"  {name:3} refused: {why}{fixed}")
         for name, why in r.flags.items():
             lines.append(f"  {name:3} FLAGGED, not to be validated: {why}")
+        if r.hint:  # one quantity's reversed sign explains the flags (estimator/sign_convention.py)
+            lines.append(f"  hint: {r.hint}")
         if r.bounded:
             lines.append("  bounded estimate: " + ", ".join(f"{n} {v:.6g} {units[n]}" for n, v in r.bounded.items()))
     return "\n".join(lines)

@@ -104,7 +104,8 @@ def _derive(m: Mapping, statuses: Mapping[str, str]) -> tuple[str, str]:
         return "model mismatch", f"model mismatch: the {mm.get('test', 'model check')} test rejects{p}; " \
                                  "parameters not validated"
     if not m.get("validated"):
-        return "not validated", "not validated: " + ("; ".join(m.get("notes") or ()) or "no model check")
+        reasons = [n.removeprefix("not validated: ") for n in m.get("notes") or () if n.startswith("not validated")]
+        return "not validated", "not validated: " + ("; ".join(reasons) or "no model check")
     if m.get("diagnosis"):
         faults = "; ".join(dict.fromkeys(d.get("fault", "?") for d in m["diagnosis"]))
         params = ", ".join(dict.fromkeys(p for d in m["diagnosis"] for p in d.get("parameters", ())))

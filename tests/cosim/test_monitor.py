@@ -16,6 +16,7 @@ import pytest
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.monitor import MEASUREMENTS, Monitor, MonitorConfig, centred_speed
 from feeddrive.estimator.history import History
+from feeddrive.models.drives import drive_model
 
 _spec = importlib.util.spec_from_file_location(
     "validation_plant", Path(__file__).parents[1] / "estimator" / "test_validation.py")
@@ -23,6 +24,7 @@ plant = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(plant)
 H = plant.H
 TRUTH = {k: v for k, v in plant.NOMINAL.items() if k in ("R", "L", "K", "Jt", "ft", "Cd")}
+NOMINAL = drive_model("dc").nominal(("physical",))
 IDLE = 0.05
 
 
@@ -50,8 +52,9 @@ def run(monitor: Monitor, motions: list[dict], idle: float = IDLE) -> list[float
 
 
 def new(tmp_path=None, **config) -> Monitor:
+    """A monitor of the built-in plant's axis: its design values stated, as a scenario with that plant does."""
     db = {"db": str(tmp_path / "history.sqlite")} if tmp_path is not None else {}
-    return Monitor("monitor", MonitorConfig(**db, **config))
+    return Monitor("monitor", MonitorConfig(**db, **({"nominal": NOMINAL} | config)))
 
 
 def test_healthy_then_sensor_offset(tmp_path):

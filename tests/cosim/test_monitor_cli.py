@@ -48,7 +48,8 @@ def test_two_invocations_continue_the_history(recording, tmp_path, capsys):
     assert main(["monitor", str(recording), *MAP, "--db", str(db), "--axis", "X7", "--json"]) == 0
     first = json.loads(capsys.readouterr().out)["motions"]
     assert [m["validated"] for m in first] == [True, True]
-    assert first[0]["reference"] == "nominal" and first[1]["reference"] == "last validated"
+    # a recording states no R, L, K: the first motion had none to isolate with (it needed none: no pair disagreed)
+    assert first[0]["reference"] == "none" and first[1]["reference"] == "last validated"
     assert first[0]["start"] == pytest.approx(1000 * H)
     for name, truth in (("R", 0.6), ("K", 1.05), ("Jt", 0.1), ("Cd", 1.2)):
         assert first[0]["parameters"][name]["value"] == pytest.approx(truth, rel=0.01), name
