@@ -37,7 +37,7 @@ def finite(x: Any) -> bool:
 
 def fault_text(f: Mapping) -> str:
     """``Im1 gain 1.030, offset 0.200 A`` (the isolated sensor fault, report.json ``sensor_faults[k]``)."""
-    unit = SENSORS.get(f.get("sensor"), ("", ""))[1]
+    unit = SENSORS.get(str(f.get("sensor")).split(" or ")[0], ("", ""))[1]  # "Im1 or Im2": not isolated, same unit
     parts = []
     if finite(f.get("gain")):
         parts.append(f"gain {f['gain']:.4g}")

@@ -44,6 +44,8 @@ def test_a_disagreeing_pair_is_not_isolated_with_another_motors_values():
     assert fault["sensor"] == "Im1 or Im2" and fault["gain"] == pytest.approx(1.03, abs=0.003)
     assert res["reference"] == "none" and not res["measurements_valid"] and not res["validated"]
     assert res["verdict"] == "sensor fault"
+    line = verdict_line(res)
+    assert line.startswith("sensor fault: Im1 or Im2 gain 1.03") and " A; parameters not validated" in line
     assert any("needs the axis's R, L, K: state them" in n for n in res["notes"])
     assert not any("isolation uses nominal" in n for n in res["notes"])
 
