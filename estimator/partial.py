@@ -330,8 +330,9 @@ def _fit_ls(data: MotionData, options: EstimationOptions, lagfree: dict | None =
         names = {n for r in usable for n in r.names}
         for r in list(usable):
             if r.normaliser and (r.normaliser not in names or r.normaliser in refused):
-                why = (f"{r.equation} equation is scaled by {r.normaliser}, which is refused "
-                       f"({refused.get(r.normaliser, 'no voltage signal')})")
+                why = (f"{r.equation} equation is scaled by {r.normaliser}, which is refused ("
+                       + refused.get(r.normaliser, f"no voltage signal: map the voltage or state {r.normaliser} "
+                                                   f"(--known {r.normaliser}=VALUE, monitor.known)") + ")")
                 for n in r.names:
                     refused.setdefault(n, why)
                 usable.remove(r)

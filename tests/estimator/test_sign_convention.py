@@ -56,3 +56,14 @@ def test_flags_no_sign_explains_get_no_hint():
     est = estimate_parameters(MotionData(H, u=d["u"], i=d["i"], w=d["w"]), EstimationOptions(method="iv"))
     assert set(est.flags) == {"Cd"}
     assert est.hint is None
+
+
+def test_a_current_without_voltage_says_what_to_state():
+    """Not a sign, the same kind of help: without a voltage K is not estimated, and the refusal says what to give."""
+    from feeddrive.estimator.errors import NotEnoughExcitation
+
+    with pytest.raises(NotEnoughExcitation, match=r"scaled by K, which is refused \(no voltage signal: map the "
+                                                  r"voltage or state K \(--known K=VALUE, monitor.known\)\)"):
+        estimate_parameters(MotionData(H, i=D["i"], w=D["w"]), EstimationOptions(method="iv"))
+    est = estimate_parameters(MotionData(H, i=D["i"], w=D["w"]), EstimationOptions(method="iv", known={"K": TRUTH["K"]}))
+    assert est.parameters["Jt"].value == pytest.approx(TRUTH["Jt"], rel=0.05)
