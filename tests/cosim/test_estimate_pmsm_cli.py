@@ -134,4 +134,5 @@ def test_known_parameters_on_a_pmsm_by_ls_as_on_the_dc_drive(recording, capsys):
     (seg,) = json.loads(out)["segments"]
     assert {n: round(p["value"] / TRUTH[n], 3) for n, p in seg["parameters"].items()} == {"ft": 1.0, "Cd": 1.0}
     code, _, err = run(capsys, recording, *currents, "--known", "Jt=0.003")
-    assert code != 0 and "scaled by psi_f, which is refused (no voltage signal)" in err and "Traceback" not in err
+    assert code != 0 and "scaled by psi_f, which is refused (no voltage signal: map the voltage or state psi_f " \
+        "(--known psi_f=VALUE" in err and "Traceback" not in err
