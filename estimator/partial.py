@@ -470,8 +470,9 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
                    for m, r in (("ls", ls), ("iv", iv), ("oe", oe))}
         shown = subsets[options.method]
         flags = physical_flags(shown, bounds or {})
-        bounded = bounded_fit(p, {**options.known, **fixed}, bounds or {}, given) if flags else {}
         hint = sign_hint(data, options, physical_flags(shown, {}), _fit_ls)
+        # a bounded fit of sign-reversed data sits on its bounds (Jt 5e-18): offered only when no sign explains it
+        bounded = bounded_fit(p, {**options.known, **fixed}, bounds or {}, given) if flags and not hint else {}
     start, end = float(data.t0), float(data.t0 + (data.n - 1) * data.h)
     order = [v.name for v in options.physical]
     refused = {n: refused[n] for n in sorted(refused, key=order.index) if n not in options.known}

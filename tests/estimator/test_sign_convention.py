@@ -37,6 +37,7 @@ def test_a_reversed_quantity_is_named_and_the_flags_stand(negated, quantity, fla
     for name, v in values.items():
         assert v == pytest.approx(TRUTH[name], rel=0.05), name
     assert est.to_dict()["hint"] == est.hint
+    assert est.bounded == {}  # a bounded fit of reversed data would sit on its bounds (Jt 5e-18): not offered
 
 
 def test_a_torque_against_the_speed_names_both_and_healthy_data_get_no_hint():
