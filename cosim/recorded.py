@@ -327,6 +327,7 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     if n < MIN_SAMPLES:
         raise DataError(f"{path}: {n} samples, need at least {MIN_SAMPLES}")
     time = signals.pop("time", None)
+    time_stated = bool(units.get("time"))  # a header or map unit: else seconds are assumed, and said
     columns = {k: v for k, v in columns.items() if k != "time"}
     units = {k: v for k, v in units.items() if k != "time"}
     if not signals:
@@ -357,7 +358,8 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
             raise DataError(f"{path}: {what} {label!r} has steps of {h:.6g} s, "
                             f"the given sample time is {sample_time:.6g} s")
         h = float(sample_time)
-    info = timing.to_dict() | {"source": f"{what} {label!r}", "action": "none"}
+    info = timing.to_dict() | {"source": f"{what} {label!r}", "action": "none",
+                               "unit_stated": bool(time_stated or clock is not None)}
     if timing.uniform:
         return Recording(path, h, float(time[0]), signals, columns, units, timing=info, clock=clock)
     if resample is None and not split_gaps:
@@ -437,6 +439,11 @@ def assumed_units(rec: Recording) -> tuple[str, ...]:
     what it is taken as, on the side the other columns state (the motor's when none does), and how to state it."""
     side = rec.side or "motor"
     out = []
+    if rec.timing.get("unit_stated") is False:  # a time in ms taken for s made Jt 1e6 times too large, unsaid
+        source = rec.timing["source"].split(" ", 1)[1]
+        out.append(f"time: {source} states no unit (not in the header, not in the map): taken as s (a step of "
+                   f"{rec.h:.6g} s, {1 / rec.h:.6g} Hz); state it: --map 'time={source.strip(chr(39))} [UNIT]' "
+                   f"(e.g. ms)")
     for role in MECHANICAL:
         if role in rec.signals and not rec.units.get(role):
             unit = dict(zip(("motor", "table"), SI_UNITS[role]))[side].replace("*", ".")  # N.m, as printed elsewhere
