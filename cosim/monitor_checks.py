@@ -273,7 +273,8 @@ def config_with_options(args, config_class, **fixed):  # noqa: ANN001, ANN201 - 
         field = str(err["loc"][0])
         flag = CLI_OPTIONS.get(field, (field,))[0]
         detail = ".".join(str(x) for x in err["loc"][1:])
-        raise InputError(f"{flag}{' ' + detail if detail else ''}: {err['msg']} (got {err.get('input')!r})") from None
+        msg = err["msg"].removeprefix("Value error, ")
+        raise InputError(f"{flag}{' ' + detail if detail else ''}: {msg} (got {err.get('input')!r})") from None
 
 
 def note_not_validated(result: dict, flags: dict, valid: bool, mismatch: bool, why: str,

@@ -174,6 +174,10 @@ class MonitorConfig(BaseModel):
         if unknown:
             raise ValueError(f"unknown parameter {', '.join(map(repr, unknown))} of the {drive} drive "
                              f"(expected {', '.join(names)})")
+        if info.field_name != "bounds":  # a stated value is used as the axis's: it must be physically possible
+            from feeddrive.estimator.physical import impossible_values
+
+            impossible_values(value, "")
         return value
 
     @model_validator(mode="after")

@@ -59,6 +59,17 @@ def bounds_mapping(raw: object, where: str = "monitor.bounds") -> dict[str, tupl
     return parse_bounds(items, where)
 
 
+def impossible_values(values: Mapping[str, float], where: str) -> None:
+    """Raise ``EstimatorInputError`` naming the first stated value outside its physical range (``--known K=0``,
+    ``monitor.nominal: {R: -1}``): a known value is fixed in the fit and the checks, so an impossible one gave a
+    'model mismatch' or a sign hint about the data instead of a word about the input."""
+    for name, v in values.items():
+        if name in STRICT and not v > 0:
+            raise EstimatorInputError(f"{where} {name}={v:g}: expected a positive value ({name} > 0)".strip())
+        if name in NON_NEGATIVE and not v >= 0:
+            raise EstimatorInputError(f"{where} {name}={v:g}: expected a value >= 0 (a friction)".strip())
+
+
 def physical_flags(result: MethodResult | None, bounds: Bounds) -> dict[str, str]:
     """Given parameters outside their physical range or the user's bounds -> the reason, with the numbers."""
     flags: dict[str, str] = {}

@@ -61,7 +61,7 @@ from feeddrive.estimator import (
 from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.motion import FIELDS, SAMPLING_DELAY
 from feeddrive.estimator.partial import estimate_parameters
-from feeddrive.estimator.physical import parse_bounds
+from feeddrive.estimator.physical import impossible_values, parse_bounds
 from feeddrive.estimator.pooling import pool
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
@@ -158,6 +158,10 @@ def main(args: argparse.Namespace) -> int:
             known[name] = float(value)
         except ValueError:
             raise InputError(f"--known {name}={value!r}: expected a number") from None
+    try:
+        impossible_values(known, "--known")
+    except EstimatorInputError as exc:
+        raise InputError(str(exc)) from None
     if getattr(args, "pole_pairs", None) is not None:
         if args.drive == "dc" or not args.pole_pairs > 0:
             raise InputError(f"--pole-pairs {args.pole_pairs:g}: expected a positive number of pole pairs with "

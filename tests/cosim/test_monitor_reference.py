@@ -81,3 +81,22 @@ def test_a_reversed_current_measurement_says_so_in_the_verdict():
     # only the reasons it was not validated: no note about the isolation's reference, no "no power"
     assert "isolation uses" not in line and "no power" not in line
     assert res["hint"].startswith("the current's sign")
+
+
+def test_stated_values_must_be_physically_possible():
+    """A known value is fixed in the fit and the checks: K = 0 gave a 'model mismatch' verdict about the data,
+    K = -1.05 a hint that the speed was reversed. Now the input is refused, naming it."""
+    with pytest.raises(ScenarioError, match=r"^monitor.known: .*K=0: expected a positive value \(K > 0\)"):
+        Monitor("monitor", {"known": {"K": 0.0}})
+    with pytest.raises(ScenarioError, match=r"^monitor.nominal: .*R=-1: expected a positive value"):
+        Monitor("monitor", {"nominal": {"R": -1.0, "L": 0.004, "K": 1.05}})
+    with pytest.raises(ScenarioError, match=r"^monitor.known: .*ft=-0.1: expected a value >= 0 \(a friction\)"):
+        Monitor("monitor", {"known": {"ft": -0.1}})
+    assert Monitor("monitor", {"known": {"T0": -3.0, "ft": 0.0}}).config.known == {"T0": -3.0, "ft": 0.0}
+
+
+def test_cosim_estimate_refuses_an_impossible_known_value(capsys):
+    from feeddrive.cosim.cli import main
+
+    assert main(["estimate", str(EXAMPLES / "tool_change.yaml"), "--known", "K=-1.05"]) == 2
+    assert capsys.readouterr().err.strip() == "cosim estimate: error: --known K=-1.05: expected a positive value (K > 0)"
