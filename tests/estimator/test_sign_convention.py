@@ -68,3 +68,21 @@ def test_a_current_without_voltage_says_what_to_state():
         estimate_parameters(MotionData(H, i=D["i"], w=D["w"]), EstimationOptions(method="iv"))
     est = estimate_parameters(MotionData(H, i=D["i"], w=D["w"]), EstimationOptions(method="iv", known={"K": TRUTH["K"]}))
     assert est.parameters["Jt"].value == pytest.approx(TRUTH["Jt"], rel=0.05)
+
+
+def test_the_same_code_names_a_pmsm_current_measured_the_other_way():
+    """Model-generic: a PMSM's dq currents negated together (a current chain counting the other way)."""
+    from pmsm_data import H as HP
+    from pmsm_data import add_noise, closed_loop
+
+    from feeddrive.models.drives import drive_model
+
+    d = add_noise(closed_loop(), 40, 0)
+    sig = {k: (-d[k] if k in ("i_d", "i_q") else d[k]) for k in ("u_d", "u_q", "i_d", "i_q")}
+    est = estimate_parameters(MotionData(HP, w=d["w"], signals=sig),
+                              EstimationOptions(method="ls", model="pmsm", known={"p": 4}))
+    assert set(est.flags) == {"R", "L_d", "L_q", "Jt", "ft", "Cd"}
+    assert est.hint.startswith("the current's sign is the opposite of the model's convention")
+    truth = drive_model("pmsm").nominal(("physical",))
+    for name, v in quoted(est.hint).items():
+        assert v == pytest.approx(truth[name], rel=0.05), name
