@@ -295,6 +295,15 @@ class History:
         rows = self._db.execute(f"SELECT id, axis, scenario, time, result FROM motions {where} ORDER BY id", args)
         return [{**json.loads(r[4]), "id": r[0], "axis": r[1], "scenario": r[2], "time": r[3]} for r in rows]
 
+    def stored_at(self, axis: str, times: list[float], tol: float = 1e-3) -> list[tuple[int, float]]:
+        """``(id, time)`` of the stored motions of ``axis`` whose time is within ``tol`` seconds of one of
+        ``times`` (a recording replayed into the same history: its motions' machine times repeat)."""
+        out = []
+        for t in times:
+            out += self._db.execute("SELECT id, time FROM motions WHERE axis = ? AND time BETWEEN ? AND ? ORDER BY id",
+                                    (axis, float(t) - tol, float(t) + tol)).fetchall()
+        return [(int(i), float(t)) for i, t in out]
+
     def axes(self) -> list[str]:
         return [r[0] for r in self._db.execute("SELECT DISTINCT axis FROM motions ORDER BY axis")]
 

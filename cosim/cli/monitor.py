@@ -118,18 +118,27 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
     plots = _plot_folder(args.plots, args.overwrite) if args.plots else None
     out = _out_folder(args.out, args.overwrite) if args.out else None
-    started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    config = config.model_copy(update={"scenario": str(rec.path), "filter_cutoff_hz": filter_cutoff(args, rec.h)})
     clock0, clock_source = start_clock(rec, args.start_time)  # machine time of sample 0, and where it came from
-    traces = []
+    ends = [clock0 + rec.time(seg.stop - 1) - rec.t0 for seg in segments]  # each motion's machine time
     if args.db == DEFAULT_DB:
         Path(DEFAULT_DB).parent.mkdir(exist_ok=True)
+    with History(args.db) as history:  # a replay would count the same motions twice in the baseline and trends
+        stored = history.stored_at(args.axis, ends)
+    if stored:
+        again = [k for k, t in enumerate(ends, 1) if any(abs(t - st) <= 1e-3 for _, st in stored)]
+        raise InputError(f"{args.db}: axis {args.axis} already holds motion {', '.join(map(str, again))} of the "
+                         f"{len(ends)} of {rec.path} (history id {', '.join(str(i) for i, _ in stored)}: the same "
+                         f"machine times, "
+                         f"{clock_source.split(' (')[0]}); storing them again would count them twice in the baseline "
+                         "and the trends: use another --axis or --db (--db :memory: to look without storing)")
+    started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    config = config.model_copy(update={"scenario": str(rec.path), "filter_cutoff_hz": filter_cutoff(args, rec.h)})
+    traces = []
     with History(args.db) as history:
         pipeline = MonitorPipeline(config, history, args.axis)
         for k, seg in enumerate(segments, 1):
             part = {name: x[seg.start:seg.stop] for name, x in sig.items()}
-            traces.append(pipeline.process(part, rec.h, rec.time(seg.start), k,
-                                           clock0 + rec.time(seg.stop - 1) - rec.t0, str(rec.path)))
+            traces.append(pipeline.process(part, rec.h, rec.time(seg.start), k, ends[k - 1], str(rec.path)))
         motions = history.motions(args.axis)
         thresholds = pipeline.thresholds()
     results = [t.result for t in traces]

@@ -55,13 +55,22 @@ def test_two_invocations_continue_the_history(recording, tmp_path, capsys):
         assert first[0]["parameters"][name]["value"] == pytest.approx(truth, rel=0.01), name
     (fault,) = first[1]["sensor_faults"]
     assert fault["sensor"] == "Im1" and fault["kind"] == "offset" and fault["offset"] == pytest.approx(0.3, abs=0.02)
-    assert main(["monitor", str(recording), *MAP, "--db", str(db), "--axis", "X7"]) == 0
+    # a later recording of the axis (the same samples, stamped a day later)
+    later = ["--start-time", "2030-01-02T00:00:00Z"]
+    assert main(["monitor", str(recording), *MAP, "--db", str(db), "--axis", "X7", *later]) == 0
     out = capsys.readouterr().out
     assert "motion 1:" in out and "sensor fault Im1: offset" in out and "NOT validated" not in out
     with History(db) as h:
         stored = h.motions("X7")
     assert len(stored) == 4 and stored[2]["reference"] == "last validated"
     assert stored[0]["scenario"] == str(recording)
+    # the same recording again would count its motions twice in the baseline and trends: refused, nothing stored
+    assert main(["monitor", str(recording), *MAP, "--db", str(db), "--axis", "X7", *later]) == 2
+    err = capsys.readouterr().err
+    assert f"axis X7 already holds motion 1, 2 of the 2 of {recording} (history id 3, 4" in err
+    assert err.count("\n") == 1 and "--db :memory: to look without storing" in err
+    with History(db) as h:
+        assert len(h.motions("X7")) == 4
 
 
 def test_plots_and_errors(recording, tmp_path, capsys):
