@@ -77,7 +77,7 @@ def main(args: argparse.Namespace) -> int:
 
     for line in input_handling(md):
         print(f"  {line}")
-    missing = _missing_binary(path, md)
+    missing = _cannot_run(path, md)
     if missing:  # the variables are worth reading all the same (to write a map); running it is not possible
         print(f"cosim info: warning: {path}: {missing}; cosim run refuses it (exit 2)", file=sys.stderr)
     if args.map is None:
@@ -138,10 +138,16 @@ def _axis_kind(scenario: Path) -> str:
     return axis.get("kind", "linear") if isinstance(axis, dict) else "linear"
 
 
-def _missing_binary(path: Path, md) -> str | None:  # noqa: ANN001 - fmpy's ModelDescription
-    """Why the FMU cannot run here (no binary for this platform, naming those it has), or None."""
-    from feeddrive.cosim.fmu_inspect import check_archive
+def _cannot_run(path: Path, md) -> str | None:  # noqa: ANN001 - fmpy's ModelDescription
+    """Why the FMU cannot run here (Scheduled Execution only or clocks; no binary for this platform, naming
+    those it has), or None."""
+    from feeddrive.cosim.fmu_inspect import check_archive, runnable
 
+    # an FMI 3.0 FMU with neither Co-Simulation nor Model Exchange has no binary to look for
+    why = runnable(md, "cs" if md.coSimulation is not None else "me", path.name)
+    if why is not None:
+        return why[1]
+    problem = None
     for kind in (md.coSimulation, md.modelExchange):
         if kind is None:
             continue
