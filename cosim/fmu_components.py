@@ -178,7 +178,7 @@ def _output_unit(s: Any, fmus: dict, descriptions: dict, source: str) -> str | N
 
 def _link_units(s: Any, specs: list, descriptions: dict) -> None:
     """Each FMU component's input links (``config._links``), their units compared and converted with pint."""
-    from feeddrive.cosim.unit_map import _affine
+    from feeddrive.cosim.unit_map import _affine, angle_mismatch
 
     fmus = {spec.name: spec for spec in specs if spec.fmu is not None}
     for k, spec in enumerate(specs):
@@ -199,12 +199,16 @@ def _link_units(s: Any, specs: list, descriptions: dict) -> None:
 
                 try:
                     scale, offset = _affine(su, None, unit)  # x_fmu = scale * source + offset
+                    angle = angle_mismatch(su, unit)
                 except pint.errors.DimensionalityError:
                     raise s.error(key, f"{src} -> {spec.name}.{port}: unit {su!r} does not convert to {unit!r} "
                                        f"(another dimension); expected a source in a unit convertible to {unit}") from None
                 except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError, AssertionError):
                     raise s.error(key, f"{src} -> {spec.name}.{port}: cannot compare units {su!r} and {unit!r} "
                                        "(unknown to pint); expected units pint knows (state them in the FMU)") from None
+                if angle is not None:  # pint converts Hz into rad/s by 1
+                    raise s.error(key, f"{src} -> {spec.name}.{port}: unit {su!r} into {unit!r}: {angle}; expected "
+                                       "units that say it (rpm: revolutions per minute, rad/s: radians per second)")
             links[port] = Link(port, unit, src, su, scale, offset)
         cfg._links = links
 

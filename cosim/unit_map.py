@@ -137,6 +137,25 @@ def quantity(unit: str, base: Any = None) -> Any:
         raise ValueError(f"unit {unit!r} is not a unit pint knows") from None
 
 
+def angle_exponent(q: Any) -> int:
+    """The power of radian in a pint quantity's root units (``rpm``: 1, ``Hz`` and ``1/min``: 0)."""
+    return int(dict(q.to_root_units().unit_items()).get("radian", 0))
+
+
+def angle_mismatch(unit: str, target: str, base: Any = None) -> str | None:
+    """Why ``unit`` cannot be read as ``target`` although pint converts it, or None.
+
+    pint holds the radian dimensionless, so it converts ``Hz``, ``1/s`` and ``1/min`` into ``rad/s`` by 1 and
+    1/60: a rate that does not say whether it counts revolutions or radians (``1/min`` on a German data sheet
+    is rpm, 2 pi times more) would be taken on trust. The powers of the angle in both units must agree."""
+    have, want = angle_exponent(quantity(unit, base)), angle_exponent(quantity(target))
+    if have == want:
+        return None
+    if have == 0:
+        return f"{unit} counts no angle where {target} counts radians (revolutions or radians?)"
+    return f"{unit} holds the angle to the power {have}, {target} to the power {want}"
+
+
 def _affine(unit: str, base: Any, target: str) -> tuple[float, float]:
     """``(a, b)`` with ``value_in_target = a * value_in_unit + b``; DimensionalityError when impossible.
 
@@ -201,13 +220,15 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
     key = "unit" if source == "stated" else "var"
     whose = f"{entry.var!r} is {'stated' if source == 'stated' else 'declared'} in {unit}"
     try:
-        if _own_unit(unit, base, target):
+        own, angle = _own_unit(unit, base, target), None
+        if own:
             a, b = 1.0, 0.0
         else:
             import pint
 
             quantity(unit, base)
             a, b = _affine(unit, base, target)  # role = a * y + b
+            angle = angle_mismatch(unit, target, base)
     except ValueError as exc:
         raise UnitProblem(key, f"{whose}, a unit pint does not know ({exc}); expected a unit convertible to {target} "
                                f"(state the variable's true unit with unit: '...')") from None
@@ -217,6 +238,11 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
         raise UnitProblem(key, f"{whose}, role {role!r} needs {target}: incompatible units; expected a "
                                f"variable in a unit convertible to {target}, or its true unit stated with "
                                "unit: '...'") from None
+    if angle is not None:
+        if given and quantity(unit, base).dimensionless:  # e.g. a rotary table's angle in turns, scale given
+            return Conversion(**common, how="given", scale=scale, offset=offset)
+        raise UnitProblem(key, f"{whose}, role {role!r} needs {target}: {angle}; expected its true unit stated "
+                               "with unit: '...', e.g. unit: 'rpm' for revolutions per minute")
     if role in INPUT_ROLES:  # the FMU receives x = (role - b) / a
         a, b = 1.0 / a, -b / a
     if given:

@@ -1,0 +1,87 @@
+"""A vendor's speed in a unit that counts no angle (``1/min``, ``Hz``, ``1/s``) is never read as rad/s.
+
+pint holds the radian dimensionless, so it converts ``1/min`` into ``rad/s`` by 1/60 and ``Hz`` by 1; a motor
+speed declared ``1/min`` (a German data sheet's rpm) then reached the monitor 2 pi too small: a false
+``w_tach gain 0.1592`` sensor fault on a healthy drive. The plant's role map, the links into an FMU component
+and the master's check of a connection refuse a rate whose angle is unsaid, in one line that names the
+variable and the remedy (``unit: 'rpm'``). RefAxis (tests/plants/ref_axis.py, FMI 3.0), relabelled ``1/min``.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+import yaml
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "plants"))
+from ref_axis import HERE, MAP, model_description, pack  # noqa: E402
+
+from feeddrive.cosim.errors import ScenarioError  # noqa: E402
+from feeddrive.cosim.port_units import mismatch  # noqa: E402
+from feeddrive.cosim.scenario import scenario_from_dict  # noqa: E402
+
+EXAMPLE = Path(__file__).parents[2] / "examples" / "tool_change.yaml"
+
+
+@pytest.fixture(scope="module")
+def axes(tmp_path_factory) -> dict[str, Path]:
+    """RefAxis (FMI 3.0) as built (``rpm``) and the same binary with its speeds declared in 1/min."""
+    tmp = tmp_path_factory.mktemp("per_min")
+    rpm = pack(tmp / "RefAxis.fmu", 3, HERE, "RefAxis", model_description(3))
+    per_min = tmp / "RefAxisPerMin.fmu"
+    with zipfile.ZipFile(rpm) as src, zipfile.ZipFile(per_min, "w") as dst:
+        for name in src.namelist():
+            data = src.read(name)
+            dst.writestr(name, data.replace(b'"rpm"', b'"1/min"') if name == "modelDescription.xml" else data)
+    return {"rpm": rpm, "per_min": per_min}
+
+
+@pytest.mark.parametrize("unit, target, angle", [("1/min", "rad/s", False), ("Hz", "rad/s", False),
+                                                 ("1/s", "rad/s", False), ("rpm", "rad/s", True),
+                                                 ("deg/s", "rad/s", True), ("deg", "rad", True), ("1", "rad", False)])
+def test_a_rate_or_an_angle_must_name_its_angle(unit, target, angle):
+    from feeddrive.cosim.unit_map import angle_mismatch
+
+    assert (angle_mismatch(unit, target) is None) == angle
+    assert (mismatch(unit, target) is None or "scale" in mismatch(unit, target)) == angle
+
+
+def test_the_connection_check_names_the_missing_angle():
+    assert mismatch("Hz", "rad/s") == ("unit 'Hz' into 'rad/s': one counts an angle, the other not (revolutions "
+                                       "or radians?); expected the same unit on both sides")
+    assert mismatch("N.m", "N*m") is None and "0.10472 rad/s" in mismatch("rpm", "rad/s")
+
+
+def plant(fmu: Path, **entries) -> dict:
+    d = yaml.safe_load(EXAMPLE.read_text())
+    d["plant"] = {"fmu": str(fmu), "interface": "cs", "map": MAP | {k: v for k, v in entries.items()}}
+    d["monitor"] = {"db": ":memory:"}
+    return d
+
+
+def test_a_plant_speed_declared_per_minute_is_refused_until_its_unit_is_stated(axes):
+    fmu = axes["per_min"]
+    with pytest.raises(ScenarioError, match=r"plant\.map\.speed\.var: RefAxisPerMin\.fmu: 'n_act' is declared in "
+                                            r"1/min, role 'speed' needs rad/s: 1/min counts no angle where rad/s "
+                                            r"counts radians \(revolutions or radians\?\); expected its true unit "
+                                            r"stated with unit: '\.\.\.', e\.g\. unit: 'rpm'") as info:
+        scenario_from_dict(plant(fmu, speed={"var": "n_act"}, speed_ref={"var": "n_set", "unit": "rpm"}))
+    assert "\n" not in str(info.value)
+    # the speed command too (it was sent 2 pi too large: x 60 instead of x 9.5493)
+    with pytest.raises(ScenarioError, match=r"plant\.map\.speed_ref\.var: .*'n_set' is declared in 1/min"):
+        scenario_from_dict(plant(fmu, speed={"var": "n_act", "unit": "rpm"}, speed_ref={"var": "n_set"}))
+    s = scenario_from_dict(plant(fmu, speed={"var": "n_act", "unit": "rpm"}, speed_ref={"var": "n_set", "unit": "rpm"}))
+    assert s.plant.map["speed"].linear() == (pytest.approx(math.pi / 30, rel=1e-15), 0.0)
+    assert s.plant.map["speed_ref"].linear() == (pytest.approx(30 / math.pi, rel=1e-15), 0.0)
+
+
+def test_a_link_from_a_per_minute_output_into_rpm_is_refused(axes):
+    data = {"name": "units", "step": 1e-3, "stop_time": 0.1, "components": [
+        {"name": "a", "fmu": str(axes["per_min"]), "inputs": {"n_set": 60.0, "T_load": 0.0}},
+        {"name": "b", "fmu": str(axes["rpm"]), "inputs": {"n_set": "a.n_act", "T_load": 0.0}}]}
+    with pytest.raises(ScenarioError, match=r"components\[1\]\.inputs\.n_set: a\.n_act -> b\.n_set: unit '1/min' "
+                                            r"into 'rpm': 1/min counts no angle where rpm counts radians"):
+        scenario_from_dict(data)
