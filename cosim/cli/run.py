@@ -67,7 +67,7 @@ def main(args: argparse.Namespace) -> int:
     if args.db is not None:
         if scenario.monitor is None:
             raise InputError(f"--db {args.db}: the scenario {args.scenario} has no monitor (monitor: section)")
-        scenario = with_history(scenario, args.db.expanduser().resolve(), replace=True)
+        scenario = with_history(scenario, history_db(args.db), replace=True)
         if scenario is None:
             raise InputError(f"--db {args.db}: the scenario's monitor is a user class; its history is its own")
     out = args.out or _fresh_run_dir(Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}")
@@ -76,6 +76,12 @@ def main(args: argparse.Namespace) -> int:
                             default_history=Path(DEFAULT_DB))
     print(summary(result))
     return 0
+
+
+def history_db(db: Path) -> Path:
+    """``--db``'s file, absolute; ``:memory:`` (SQLite's name for no file) as it is: resolved, it became a file
+    ``./:memory:`` that every later ``--db :memory:`` run continued (a baseline learnt from other runs)."""
+    return db if str(db) == ":memory:" else db.expanduser().resolve()
 
 
 def history_line(monitor: dict) -> str | None:
