@@ -72,10 +72,13 @@ class Conversion:
     offset: float
     declared: str | None = None
     display_unit: str | None = None
+    inverted: bool = False  # the entry's scale is the units' conversion with the opposite sign
 
     @property
     def note(self) -> str | None:
         """The stated assumption, when the units did not decide (printed by ``cosim info --map`` and run)."""
+        if self.inverted:
+            return f"{self.role} <- {self.var}: sign inverted as given, scale {self.scale:.6g} (the FMU's opposite direction)"
         if self.how == "assumed":
             return f"{self.role} <- {self.var}: unit not declared: taken as {self.role_unit}"
         if self.how == "given":
@@ -96,7 +99,7 @@ class Conversion:
             text += f"  (unit stated; the FMU declares {self.declared or 'none'})"
         if self.display_unit and self.display_unit != self.unit:
             text += f"  (displayUnit {self.display_unit})"
-        if self.how == "given":
+        if self.how == "given" or self.inverted:
             text += "  (" + self.note.split(": ", 1)[1] + ")"
         return text
 
@@ -245,15 +248,21 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
                                "with unit: '...', e.g. unit: 'rpm' for revolutions per minute")
     if role in INPUT_ROLES:  # the FMU receives x = (role - b) / a
         a, b = 1.0 / a, -b / a
-    if given:
+    # a vendor whose positive direction is the master's negative one (a motor mounted mirrored, an encoder
+    # counting down): the units' conversion with the opposite sign, stated by the scale, offset-free
+    inverted = (entry.scale is not None and math.isclose(scale, -a, rel_tol=SCALE_RTOL) and b == 0.0
+                and offset == 0.0)
+    if given and not inverted:
         bad_scale = entry.scale is not None and not math.isclose(scale, a, rel_tol=SCALE_RTOL)
         bad_offset = not math.isclose(offset, b, rel_tol=SCALE_RTOL, abs_tol=SCALE_RTOL * max(1.0, abs(b)))
         if bad_scale or bad_offset:
             what, have, want = ("scale", scale, a) if bad_scale else ("offset", offset, b)
             raise UnitProblem(what, f"{what} {have:.6g} contradicts the unit of {entry.var!r} ({source} {unit}; "
                                     f"{unit} -> {target} is {'x' if what == 'scale' else '+'} {want:.6g}); expected "
-                                    f"no {what} (the units convert), or the variable's true unit stated with unit: '...'")
-    return Conversion(**common, how="converted", scale=a, offset=b)
+                                    f"no {what} (the units convert), the conversion with the opposite sign "
+                                    f"(scale {-want:.6g}: a direction the FMU counts negative), or the variable's "
+                                    "true unit stated with unit: '...'")
+    return Conversion(**common, how="converted", scale=-a if inverted else a, offset=b, inverted=inverted)
 
 
 def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "linear",

@@ -1,10 +1,18 @@
-"""A vendor's speed in a unit that counts no angle (``1/min``, ``Hz``, ``1/s``) is never read as rad/s.
+"""A vendor's conventions: its speed in a unit that counts no angle, its positive direction the master's negative.
+
+A speed in a unit that counts no angle (``1/min``, ``Hz``, ``1/s``) is never read as rad/s.
 
 pint holds the radian dimensionless, so it converts ``1/min`` into ``rad/s`` by 1/60 and ``Hz`` by 1; a motor
 speed declared ``1/min`` (a German data sheet's rpm) then reached the monitor 2 pi too small: a false
 ``w_tach gain 0.1592`` sensor fault on a healthy drive. The plant's role map, the links into an FMU component
 and the master's check of a connection refuse a rate whose angle is unsaid, in one line that names the
-variable and the remedy (``unit: 'rpm'``). RefAxis (tests/plants/ref_axis.py, FMI 3.0), relabelled ``1/min``.
+variable and the remedy (``unit: 'rpm'``).
+
+A vendor that counts a direction negative (a motor mounted mirrored, an encoder counting down) states it with
+the units' conversion of the opposite sign (``scale: -0.001`` on a position in mm); any other scale is still
+refused, and the refusal names that option. Before, the sign could not be stated at all: the position loop
+closed with the wrong sign ran the table away (-1.58 m on the tool change) while the monitor reported a
+``w_enc gain -1`` sensor fault. RefAxis (tests/plants/ref_axis.py, FMI 3.0), relabelled ``1/min``.
 """
 from __future__ import annotations
 
@@ -13,6 +21,7 @@ import sys
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -20,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "plants"))
 from ref_axis import HERE, MAP, model_description, pack  # noqa: E402
 
 from feeddrive.cosim.errors import ScenarioError  # noqa: E402
+from feeddrive.cosim.master import Master  # noqa: E402
 from feeddrive.cosim.port_units import mismatch  # noqa: E402
 from feeddrive.cosim.scenario import scenario_from_dict  # noqa: E402
 
@@ -85,3 +95,38 @@ def test_a_link_from_a_per_minute_output_into_rpm_is_refused(axes):
     with pytest.raises(ScenarioError, match=r"components\[1\]\.inputs\.n_set: a\.n_act -> b\.n_set: unit '1/min' "
                                             r"into 'rpm': 1/min counts no angle where rpm counts radians"):
         scenario_from_dict(data)
+
+
+def mirrored(fmu: Path, *inverted: str) -> dict:
+    """RefAxis as a plant on a short rapid, the roles ``inverted`` mapped with the opposite sign."""
+    plant_map = {r: e | ({"scale": -e["scale"]} if r in inverted else {}) for r, e in MAP.items()}
+    return {"name": "mirrored", "step": 1e-4, "stop_time": 0.3,
+            "plant": {"fmu": str(fmu), "interface": "cs", "input_hold": "zoh", "map": plant_map},
+            "sensors": {"current": [{"noise": 0.0}, {"noise": 0.0}], "voltage": {"noise": 0.0},
+                        "voltage_ref": {"noise": 0.0}},
+            "nc": {"program": [{"rapid": {"to": 0.01}}]}}
+
+
+def test_a_vendor_counting_the_direction_negative_states_it_with_the_sign_of_the_scale(axes):
+    def run(data):
+        with Master.from_scenario(scenario_from_dict(data)) as master:
+            return master.run().signals()
+
+    s = scenario_from_dict(mirrored(axes["rpm"], "speed_ref", "speed", "position"))
+    assert s.plant.map["position"].linear() == (-1e-3, 0.0)
+    assert s.unit_notes[-1] == "position <- pos_mm: sign inverted as given, scale -0.001 (the FMU's opposite direction)"
+    same, flipped = run(mirrored(axes["rpm"])), run(mirrored(axes["rpm"], "speed_ref", "speed", "position"))
+    assert np.abs(same["plant.speed"]).max() > 10
+    for role in ("speed", "position"):  # the master sees the same axis ...
+        np.testing.assert_array_equal(flipped[f"plant.{role}"], same[f"plant.{role}"])
+    np.testing.assert_array_equal(flipped["plant.voltage"], -same["plant.voltage"])  # ... the FMU turned the other way
+    np.testing.assert_allclose(flipped["plant.position"], flipped["nc.x_ref"], rtol=0, atol=1e-12)
+
+
+def test_a_scale_of_neither_sign_is_refused_naming_both(axes):
+    with pytest.raises(ScenarioError, match=r"plant\.map\.position\.scale: RefAxis\.fmu: scale -0\.01 contradicts "
+                                            r"the unit of 'pos_mm' \(declared mm; mm -> m is x 0\.001\); expected no "
+                                            r"scale \(the units convert\), the conversion with the opposite sign "
+                                            r"\(scale -0\.001: a direction the FMU counts negative\)"):
+        scenario_from_dict(mirrored(axes["rpm"]) | {"plant": {"fmu": str(axes["rpm"]), "map": MAP | {
+            "position": {"var": "pos_mm", "scale": -0.01}}}})
