@@ -127,7 +127,10 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
     lines = [f"{r['scenario']}: {r['stop_time_s']:.4g} s simulated in {r['wall_time_s']:.3g} s "
              f"({r['steps']} steps of {r['step_s']:.3g} s) -> {result.out_dir}"]
     if "plant.position" in s and "nc.x_ref" in s:
-        lines.append(f"  position: {s['plant.position'][-1]:.6f} m (NC target {s['nc.x_ref'][-1]:.6f} m)")
+        unit = "rad" if (r.get("drive_chain") or {}).get("kind") == "rotary" else "m"
+        lines.append(f"  position: {s['plant.position'][-1]:.6f} {unit} (NC target {s['nc.x_ref'][-1]:.6f} {unit})")
+        if r.get("following"):  # the axis did not follow its NC (cosim.axis.following_note, on every sample)
+            lines.append(f"  {r['following']}")
     for k, m in enumerate(r.get("motions") or [], 1):
         if isinstance(m, dict):
             params = m.get("parameters") or {}

@@ -130,3 +130,24 @@ def test_a_scale_of_neither_sign_is_refused_naming_both(axes):
                                             r"\(scale -0\.001: a direction the FMU counts negative\)"):
         scenario_from_dict(mirrored(axes["rpm"]) | {"plant": {"fmu": str(axes["rpm"]), "map": MAP | {
             "position": {"var": "pos_mm", "scale": -0.01}}}})
+
+
+def test_a_position_counted_the_other_way_is_named_when_the_axis_runs_away(axes):
+    from feeddrive.cosim.axis import following_note
+
+    with Master.from_scenario(scenario_from_dict(mirrored(axes["rpm"], "position"))) as master:
+        s = master.run().signals()
+    # the position loop closed with the wrong sign: the table leaves the 10 mm rapid's target, away from it
+    assert abs(s["plant.position"][-1] - 0.01) > 0.01
+    note = following_note(s)
+    assert note.startswith("the axis did not follow the NC: it ended ") and "m from the NC's target; its position " \
+        "moved against the NC's speed reference: a direction the plant FMU counts negative?" in note
+    with Master.from_scenario(scenario_from_dict(mirrored(axes["rpm"], "speed_ref", "speed", "position"))) as master:
+        assert following_note(master.run().signals()) is None
+    # run_scenario puts it in report.json (the console's summary gets the last sample only), the page shows it
+    from markupsafe import escape  # jinja2's
+
+    from feeddrive.cosim.report.page import render_run
+
+    page = render_run({"scenario": "s", "status": "ok", "following": note}, Path("."))
+    assert f'<p class="error" id="following">{escape(note)}</p>' in page
