@@ -36,7 +36,15 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from feeddrive.cosim.fmu_inspect import REAL_TYPES, check_archive, fmi_version, model_description, runnable, sha256
+from feeddrive.cosim.fmu_inspect import (
+    REAL_TYPES,
+    check_archive,
+    fixed_step_problem,
+    fmi_version,
+    model_description,
+    runnable,
+    sha256,
+)
 from feeddrive.cosim.fmu_ports import unit_of
 from feeddrive.cosim.unit_map import ROLE_UNITS, role_unit
 from feeddrive.cosim.yaml_source import from_validation
@@ -97,6 +105,13 @@ def _resolve_fmu(s: Any, k: int, spec: Any, cls: type, check_map: Any) -> Any:
     problem = runnable(md, cfg.interface, path.name)
     if problem:
         raise s.error((*where, "fmu" if problem[0] == "fmu" else "config"), problem[1])
+    # its rate as the master gives it (cosim/master.py): step_multiple ticks of the finest step, else the
+    # plant's rate for a part of the plant, else the recording step
+    oversample = s.plant.oversample if s.plant is not None else 1
+    ticks = cfg.step_multiple or (1 if cfg.map and s.nc is not None else oversample)
+    problem = fixed_step_problem(md, cfg.interface, s.step / oversample * ticks, path.name)
+    if problem:
+        raise s.error((*where, "config", "step_multiple") if cfg.step_multiple else ("step",), problem)
     try:
         check_archive(path, (md.coSimulation if cfg.interface == "cs" else md.modelExchange).modelIdentifier)
         hold = cfg.hold(md)

@@ -77,6 +77,10 @@ def main(args: argparse.Namespace) -> int:
 
     for line in input_handling(md):
         print(f"  {line}")
+    fixed = getattr(md.coSimulation, "fixedInternalStepSize", None) if md.coSimulation is not None else None
+    if fixed:  # cosim run refuses a communication step that is not a multiple of it (fmu_inspect.fixed_step_problem)
+        print(f"  Co-Simulation: fixed internal step {float(fixed):g} s (fixedInternalStepSize): the communication "
+              "step must be a multiple of it")
     missing = _cannot_run(path, md)
     if missing:  # the variables are worth reading all the same (to write a map); running it is not possible
         print(f"cosim info: warning: {path}: {missing}; cosim run refuses it (exit 2)", file=sys.stderr)

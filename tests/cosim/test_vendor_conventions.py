@@ -151,3 +151,29 @@ def test_a_position_counted_the_other_way_is_named_when_the_axis_runs_away(axes)
 
     page = render_run({"scenario": "s", "status": "ok", "following": note}, Path("."))
     assert f'<p class="error" id="following">{escape(note)}</p>' in page
+
+
+def test_a_step_that_is_not_a_multiple_of_the_fmus_fixed_internal_step_is_refused(axes, capsys):
+    # RefAxis declares fixedInternalStepSize 5e-5 and takes no partial step: every 7.5e-5 s its outputs would
+    # lag by up to 5e-5 s, silently (the Reference-FMUs' Dahlquist, 0.1 s stepped every 0.03 s, showed x(0.1) at 0.12)
+    data = mirrored(axes["rpm"]) | {"step": 7.5e-5}
+    with pytest.raises(ScenarioError, match=r"step: RefAxis\.fmu steps with a fixed internal step of 5e-05 s "
+                                            r"\(fixedInternalStepSize\) and its communication step would be 7\.5e-05 s, "
+                                            r"not a multiple of it: its outputs would lag up to 5e-05 s; expected a "
+                                            r"communication step that is a multiple of 5e-05 s, or interface: me"):
+        scenario_from_dict(data)
+    scenario_from_dict(data | {"plant": data["plant"] | {"interface": "me"}})  # the master integrates it
+    with pytest.raises(ScenarioError, match=r"communication step would be 2\.5e-05 s.*\(step / plant\.oversample\)"):
+        scenario_from_dict(data | {"plant": data["plant"] | {"oversample": 3}})
+    scenario_from_dict(mirrored(axes["rpm"]) | {"step": 1.5e-4})  # 3 internal steps
+    parts = {"name": "c", "step": 2.5e-5, "stop_time": 0.01,
+             "components": [{"name": "a", "fmu": str(axes["rpm"]), "inputs": {"n_set": 60.0, "T_load": 0.0}}]}
+    with pytest.raises(ScenarioError, match=r"components\[0\]\.config\.step_multiple: RefAxis\.fmu steps .* "
+                                            r"communication step would be 7\.5e-05 s"):
+        scenario_from_dict(parts | {"components": [parts["components"][0] | {"config": {"step_multiple": 3}}]})
+    scenario_from_dict(parts | {"components": [parts["components"][0] | {"config": {"step_multiple": 2}}]})
+    from feeddrive.cosim.cli import main
+
+    assert main(["info", str(axes["rpm"])]) == 0
+    assert ("  Co-Simulation: fixed internal step 5e-05 s (fixedInternalStepSize): the communication step must be "
+            "a multiple of it\n") in capsys.readouterr().out
