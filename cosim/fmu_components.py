@@ -120,7 +120,7 @@ def _resolve_fmu(s: Any, k: int, spec: Any, cls: type, check_map: Any) -> Any:
     # a role map here may be partial (a plant split into FMUs): only its entries are checked, and each one
     # converted by its units as the plant's are (n_mot [rpm] -> speed x 0.10472)
     conversions: dict = {}
-    problems = [p for p in check_map(md, cfg.map, path.name, s.axis.kind, conversions) if p[0] != ("plant", "map")]
+    problems = [p for p in check_map(md, cfg.map, path.name, s.axis.kind, conversions, interface=cfg.interface) if p[0] != ("plant", "map")]
     if problems:
         key, message = problems[0]
         raise s.error((*where, "config", *key[1:]), message)

@@ -166,7 +166,7 @@ def resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     parts = {r for c in s.components if c.fmu is not None and isinstance(c.config, dict)
              for r in c.config.get("map") or {}}
     conversions: dict[str, Conversion] = {}
-    problems = check_map(md, role_map, path.name, s.axis.kind, conversions, parts)
+    problems = check_map(md, role_map, path.name, s.axis.kind, conversions, parts, p.interface)
     if problems:
         raise s.error(*problems[0])
     role_map = {r: e.model_copy(update={"scale": conversions[r].scale, "offset": conversions[r].offset})

@@ -266,10 +266,12 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
 
 
 def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "linear",
-              conversions: dict[str, Conversion] | None = None, elsewhere: Any = ()) -> list[tuple[tuple, str]]:
+              conversions: dict[str, Conversion] | None = None, elsewhere: Any = (),
+              interface: str = "cs") -> list[tuple[tuple, str]]:
     """Problems of a role map against an FMU's model description, as ``(key path, message)`` pairs; the
     units of each entry are checked (``cosim.unit_map.convert``) and, given ``conversions``, filled in.
-    ``elsewhere``: roles that FMU components map (a plant split into several FMUs)."""
+    ``elsewhere``: roles that FMU components map (a plant split into several FMUs); ``interface``: ``cs`` or
+    ``me`` (in Model Exchange an input role needs a continuous input)."""
     from feeddrive.cosim.fmu_inspect import REAL_TYPES
 
     variables = {v.name: v for v in md.modelVariables}
@@ -290,6 +292,11 @@ def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "
             problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real (FMI 3.0: Float64)"))
         elif role in INPUT_ROLES and v.causality != "input":
             problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an input"))
+        elif role in INPUT_ROLES and interface == "me" and v.variability == "discrete":
+            # the FMU refused it at the first step (fmi3SetFloat64: only in initialization or event mode)
+            problems.append((path, f"{entry.var!r} is a discrete input: in Model Exchange it may change only in "
+                                   "event mode, which the master does not enter for an input; expected a continuous "
+                                   "input, or interface: cs"))
         elif role not in INPUT_ROLES and v.causality not in ("output", "local"):
             problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an output"))
         else:

@@ -92,7 +92,8 @@ def main(args: argparse.Namespace) -> int:
         return 0
     role_map, error = load_plant_map(args.map)
     conversions: dict = {}
-    problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions)
+    problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions,
+                         interface=_plant_interface(args.map))
     print(f"map of {args.map} (role [SI unit] <- FMU variable [unit] x scale + offset; -> for the FMU's inputs)")
     for role, e in role_map.items():
         if role in conversions:
@@ -140,6 +141,15 @@ def _axis_kind(scenario: Path) -> str:
     data, _ = read_yaml(scenario)
     axis = data.get("axis") if isinstance(data, dict) else None
     return axis.get("kind", "linear") if isinstance(axis, dict) else "linear"
+
+
+def _plant_interface(scenario: Path) -> str:
+    """``plant.interface`` of a scenario file (``me``: an input role needs a continuous input), default cs."""
+    from feeddrive.cosim.yaml_source import read_yaml
+
+    data, _ = read_yaml(scenario)
+    plant = data.get("plant") if isinstance(data, dict) else None
+    return plant.get("interface", "cs") if isinstance(plant, dict) else "cs"
 
 
 def _cannot_run(path: Path, md) -> str | None:  # noqa: ANN001 - fmpy's ModelDescription

@@ -41,12 +41,16 @@ def axes(tmp_path_factory) -> dict[str, Path]:
     """RefAxis (FMI 3.0) as built (``rpm``) and the same binary with its speeds declared in 1/min."""
     tmp = tmp_path_factory.mktemp("per_min")
     rpm = pack(tmp / "RefAxis.fmu", 3, HERE, "RefAxis", model_description(3))
-    per_min = tmp / "RefAxisPerMin.fmu"
-    with zipfile.ZipFile(rpm) as src, zipfile.ZipFile(per_min, "w") as dst:
-        for name in src.namelist():
-            data = src.read(name)
-            dst.writestr(name, data.replace(b'"rpm"', b'"1/min"') if name == "modelDescription.xml" else data)
-    return {"rpm": rpm, "per_min": per_min}
+    out = {"rpm": rpm}
+    for name, old, new in (("per_min", b'"rpm"', b'"1/min"'),
+                           ("discrete", b'name="n_set" valueReference="1" causality="input" variability="continuous"',
+                            b'name="n_set" valueReference="1" causality="input" variability="discrete"')):
+        out[name] = tmp / f"RefAxis_{name}.fmu"
+        with zipfile.ZipFile(rpm) as src, zipfile.ZipFile(out[name], "w") as dst:
+            for entry in src.namelist():
+                data = src.read(entry)
+                dst.writestr(entry, data.replace(old, new) if entry == "modelDescription.xml" else data)
+    return out
 
 
 @pytest.mark.parametrize("unit, target, angle", [("1/min", "rad/s", False), ("Hz", "rad/s", False),
@@ -74,7 +78,7 @@ def plant(fmu: Path, **entries) -> dict:
 
 def test_a_plant_speed_declared_per_minute_is_refused_until_its_unit_is_stated(axes):
     fmu = axes["per_min"]
-    with pytest.raises(ScenarioError, match=r"plant\.map\.speed\.var: RefAxisPerMin\.fmu: 'n_act' is declared in "
+    with pytest.raises(ScenarioError, match=r"plant\.map\.speed\.var: RefAxis_per_min\.fmu: 'n_act' is declared in "
                                             r"1/min, role 'speed' needs rad/s: 1/min counts no angle where rad/s "
                                             r"counts radians \(revolutions or radians\?\); expected its true unit "
                                             r"stated with unit: '\.\.\.', e\.g\. unit: 'rpm'") as info:
@@ -177,3 +181,16 @@ def test_a_step_that_is_not_a_multiple_of_the_fmus_fixed_internal_step_is_refuse
     assert main(["info", str(axes["rpm"])]) == 0
     assert ("  Co-Simulation: fixed internal step 5e-05 s (fixedInternalStepSize): the communication step must be "
             "a multiple of it\n") in capsys.readouterr().out
+
+
+def test_a_discrete_input_for_a_role_is_refused_in_model_exchange(axes):
+    # there it may change only in event mode, which the master does not enter for an input: the run failed at
+    # t = 0 in fmi3SetFloat64 (the Reference-FMUs' Feedthrough), a simulation failure for a bad map
+    data = mirrored(axes["discrete"])
+    data["plant"]["interface"] = "me"
+    with pytest.raises(ScenarioError, match=r"plant\.map\.speed_ref\.var: 'n_set' is a discrete input: in Model "
+                                            r"Exchange it may change only in event mode, which the master does not "
+                                            r"enter for an input; expected a continuous input, or interface: cs"):
+        scenario_from_dict(data)
+    data["plant"]["interface"] = "cs"  # set at each communication point
+    assert scenario_from_dict(data).plant.map["speed_ref"].var == "n_set"
