@@ -194,3 +194,15 @@ def test_a_discrete_input_for_a_role_is_refused_in_model_exchange(axes):
         scenario_from_dict(data)
     data["plant"]["interface"] = "cs"  # set at each communication point
     assert scenario_from_dict(data).plant.map["speed_ref"].var == "n_set"
+
+
+def test_a_pmsm_axis_without_servo_sensors_names_the_missing_component(axes):
+    # a DC FMU (or a vendor PMSM FMU without its servo component) on a PMSM axis: the master said only
+    # "input 'monitor.I_U' is not connected; add 'monitor.I_U: <component.output or number>' to connections"
+    data = mirrored(axes["rpm"]) | {"axis": {"name": "P", "drive": {"kind": "pmsm"}}, "monitor": {"db": ":memory:"}}
+    with pytest.raises(ScenarioError, match=r"axis\.drive\.kind: a PMSM axis's monitor reads the servo drive's sensors "
+                                            r"\(I_U, I_V, I_W, \.\.\.\), and no component provides them: expected a "
+                                            r"component named servo \(class feeddrive\.cosim\.sensors_servo:ServoSensors\)"
+                                            r".*or kind: dc if RefAxis\.fmu is a DC drive"):
+        scenario_from_dict(data)
+    scenario_from_dict(data | {"axis": {"name": "P", "drive": {"kind": "dc"}}})
