@@ -206,3 +206,19 @@ def test_a_pmsm_axis_without_servo_sensors_names_the_missing_component(axes):
                                             r".*or kind: dc if RefAxis\.fmu is a DC drive"):
         scenario_from_dict(data)
     scenario_from_dict(data | {"axis": {"name": "P", "drive": {"kind": "dc"}}})
+
+
+@pytest.mark.parametrize("unit", ["1/min", "Hz", "1/s"])
+def test_a_recorded_speed_column_per_minute_is_refused_too(tmp_path, unit):
+    from feeddrive.cosim.errors import DataError
+    from feeddrive.cosim.recorded import load_recording
+
+    path = tmp_path / "r.csv"
+    path.write_text(f"t [s],n [{unit}]\n" + "".join(f"{k * 1e-3},{60.0 * k}\n" for k in range(20)))
+    with pytest.raises(DataError, match=rf"column 'n \[{unit}\]' \(role speed\): {unit} counts no angle where rad/s "
+                                        r"counts radians \(revolutions or radians\?\); expected the unit that says it, "
+                                        r"e\.g\. \[rpm\]"):
+        load_recording(path, {"time": "t", "speed": "n"})
+    path.write_text("t [s],n [rpm]\n" + "".join(f"{k * 1e-3},{60.0 * k}\n" for k in range(20)))
+    rec = load_recording(path, {"time": "t", "speed": "n"})
+    np.testing.assert_allclose(rec.signals["speed"], 2 * math.pi * np.arange(20), rtol=1e-15)
