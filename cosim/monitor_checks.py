@@ -268,25 +268,11 @@ def config_with_options(args, config_class, **fixed):  # noqa: ANN001, ANN201 - 
         raise InputError(f"{flag}{' ' + detail if detail else ''}: {err['msg']} (got {err.get('input')!r})") from None
 
 
-def sign_hint(flags: Mapping) -> str:
-    """What a pattern of impossible signs says, or "": eq. 1 read with the current negated gives R, L < 0 and
-    K > 0 (and Jt, ft, Cd < 0 through K i); with the voltage negated, R, L and K < 0. Either is a sign convention
-    (a vendor FMU's output, or both sensors of the pair), not a drive: the remedy is the map, not the drive."""
-    if {"R", "L"} <= set(flags) and "K" not in flags:
-        return ("; R and L < 0 with K > 0: the current counts the direction opposite to the voltage's (a plant FMU "
-                "or both current sensors counting it negative? map it with the opposite sign)")
-    if {"R", "L", "K"} <= set(flags):
-        return ("; R, L and K < 0: the voltage counts the direction opposite to the current's and the speed's (a "
-                "plant FMU or both voltage sensors counting it negative? map it with the opposite sign)")
-    return ""
-
-
 def note_not_validated(result: dict, flags: dict, valid: bool, mismatch: bool, why: str) -> None:
     """Append to ``result["notes"]`` each reason why the motion's parameters were not validated (``why``: the
     model check's verdict when it had no power). Shared by the DC and the servo drive's paths."""
     if flags:
-        result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values())
-                               + sign_hint(flags))
+        result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values()))
     if not valid:
         result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
     if mismatch:
