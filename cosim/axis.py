@@ -205,3 +205,24 @@ def resolve_drive_chain(data: dict, builtin: bool, nominal: tuple[float, float],
             for key, value in chain.items():
                 _set(data, section + (key,), value)
     return data
+
+
+def following_note(signals: dict, unit: str = "m") -> str | None:
+    """Why the axis did not follow its NC, when its final position is further from the NC's target than a tenth
+    of the programmed travel (at least 1 mm or 1 mrad), else None.
+
+    ``signals``: the run's ``plant.position`` and ``nc.x_ref`` [m, or rad on a rotary axis] and ``nc.speed_ref``
+    [rad/s], arrays of shape (n,). A position that moves against the speed reference is a sign convention (a
+    vendor FMU that counts the direction negative): the position loop closed with the wrong sign runs away."""
+    import numpy as np
+
+    pos, ref = np.asarray(signals["plant.position"], float), np.asarray(signals["nc.x_ref"], float)
+    error = abs(pos[-1] - ref[-1])
+    if not error > max(0.1 * float(np.ptp(ref)), 1e-3):  # NaN: the failed run says why
+        return None
+    text = f"the axis did not follow the NC: it ended {error:.4g} {unit} from the NC's target"
+    speed_ref = signals.get("nc.speed_ref")
+    if speed_ref is not None and float(np.diff(pos) @ np.asarray(speed_ref, float)[1:]) < 0:
+        return (text + "; its position moved against the NC's speed reference: a direction the plant FMU counts "
+                "negative? (map it with the opposite sign: plant.map.position.scale, see cosim info --map)")
+    return text + "; its speed did not follow the NC's speed reference (a limit, a fault or plant.map)"

@@ -36,7 +36,15 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from feeddrive.cosim.fmu_inspect import REAL_TYPES, check_archive, fmi_version, model_description, runnable, sha256
+from feeddrive.cosim.fmu_inspect import (
+    REAL_TYPES,
+    check_archive,
+    fixed_step_problem,
+    fmi_version,
+    model_description,
+    runnable,
+    sha256,
+)
 from feeddrive.cosim.fmu_ports import unit_of
 from feeddrive.cosim.unit_map import ROLE_UNITS, role_unit
 from feeddrive.cosim.yaml_source import from_validation
@@ -97,6 +105,13 @@ def _resolve_fmu(s: Any, k: int, spec: Any, cls: type, check_map: Any) -> Any:
     problem = runnable(md, cfg.interface, path.name)
     if problem:
         raise s.error((*where, "fmu" if problem[0] == "fmu" else "config"), problem[1])
+    # its rate as the master gives it (cosim/master.py): step_multiple ticks of the finest step, else the
+    # plant's rate for a part of the plant, else the recording step
+    oversample = s.plant.oversample if s.plant is not None else 1
+    ticks = cfg.step_multiple or (1 if cfg.map and s.nc is not None else oversample)
+    problem = fixed_step_problem(md, cfg.interface, s.step / oversample * ticks, path.name)
+    if problem:
+        raise s.error((*where, "config", "step_multiple") if cfg.step_multiple else ("step",), problem)
     try:
         check_archive(path, (md.coSimulation if cfg.interface == "cs" else md.modelExchange).modelIdentifier)
         hold = cfg.hold(md)
@@ -105,7 +120,7 @@ def _resolve_fmu(s: Any, k: int, spec: Any, cls: type, check_map: Any) -> Any:
     # a role map here may be partial (a plant split into FMUs): only its entries are checked, and each one
     # converted by its units as the plant's are (n_mot [rpm] -> speed x 0.10472)
     conversions: dict = {}
-    problems = [p for p in check_map(md, cfg.map, path.name, s.axis.kind, conversions) if p[0] != ("plant", "map")]
+    problems = [p for p in check_map(md, cfg.map, path.name, s.axis.kind, conversions, interface=cfg.interface) if p[0] != ("plant", "map")]
     if problems:
         key, message = problems[0]
         raise s.error((*where, "config", *key[1:]), message)
@@ -178,7 +193,7 @@ def _output_unit(s: Any, fmus: dict, descriptions: dict, source: str) -> str | N
 
 def _link_units(s: Any, specs: list, descriptions: dict) -> None:
     """Each FMU component's input links (``config._links``), their units compared and converted with pint."""
-    from feeddrive.cosim.unit_map import _affine
+    from feeddrive.cosim.unit_map import _affine, angle_mismatch
 
     fmus = {spec.name: spec for spec in specs if spec.fmu is not None}
     for k, spec in enumerate(specs):
@@ -199,12 +214,16 @@ def _link_units(s: Any, specs: list, descriptions: dict) -> None:
 
                 try:
                     scale, offset = _affine(su, None, unit)  # x_fmu = scale * source + offset
+                    angle = angle_mismatch(su, unit)
                 except pint.errors.DimensionalityError:
                     raise s.error(key, f"{src} -> {spec.name}.{port}: unit {su!r} does not convert to {unit!r} "
                                        f"(another dimension); expected a source in a unit convertible to {unit}") from None
                 except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError, AssertionError):
                     raise s.error(key, f"{src} -> {spec.name}.{port}: cannot compare units {su!r} and {unit!r} "
                                        "(unknown to pint); expected units pint knows (state them in the FMU)") from None
+                if angle is not None:  # pint converts Hz into rad/s by 1
+                    raise s.error(key, f"{src} -> {spec.name}.{port}: unit {su!r} into {unit!r}: {angle}; expected "
+                                       "units that say it (rpm: revolutions per minute, rad/s: radians per second)")
             links[port] = Link(port, unit, src, su, scale, offset)
         cfg._links = links
 

@@ -8,6 +8,7 @@ Failures are not kept. The model description is shared by the callers: treat it 
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import stat
 import zipfile
@@ -170,6 +171,22 @@ def runnable(md: Any, interface: str, name: str) -> tuple[str, str] | None:
         kind = {"cs": "Co-Simulation", "me": "Model Exchange"}[interface]
         return ("interface", f"{name} does not support {kind}; expected interface {'me' if interface == 'cs' else 'cs'}")
     return None
+
+
+def fixed_step_problem(md: Any, interface: str, h: float, name: str) -> str | None:
+    """Why an FMI 3.0 Co-Simulation FMU that declares a ``fixedInternalStepSize`` cannot be stepped every ``h``
+    seconds, or None: ``h`` must be a whole number of its internal steps. Otherwise its outputs change only at
+    its own steps (the Reference-FMUs' framework takes no partial step: Dahlquist, 0.1 s, stepped every 0.03 s
+    showed x(0.1) at t = 0.12) and every sample lags by up to one of them, silently."""
+    fixed = getattr(md.coSimulation, "fixedInternalStepSize", None) if interface == "cs" and md.coSimulation else None
+    if not fixed or float(fixed) <= 0:
+        return None
+    ratio = h / float(fixed)
+    if round(ratio) >= 1 and math.isclose(ratio, round(ratio), rel_tol=1e-9):
+        return None
+    return (f"{name} steps with a fixed internal step of {float(fixed):g} s (fixedInternalStepSize) and its "
+            f"communication step would be {h:g} s, not a multiple of it: its outputs would lag up to {float(fixed):g} s; "
+            f"expected a communication step that is a multiple of {float(fixed):g} s, or interface: me")
 
 
 def sha256(path: Path) -> str:

@@ -42,6 +42,11 @@ def mismatch(source_unit: str, input_unit: str) -> str | None:
         factor = float(a.to(b.units).magnitude)
     except pint.errors.DimensionalityError:
         return f"unit {source_unit!r} does not convert to {input_unit!r} (another dimension)"
+    from feeddrive.cosim.unit_map import angle_exponent
+
+    if angle_exponent(a) != angle_exponent(b):  # pint holds the radian dimensionless: Hz = rad/s for it
+        return (f"unit {source_unit!r} into {input_unit!r}: one counts an angle, the other not (revolutions or "
+                "radians?); expected the same unit on both sides")
     if abs(factor - 1.0) > 1e-12:
         return (f"1 {source_unit} = {factor:g} {input_unit}: the value would be taken in the wrong scale; "
                 "expected the same unit on both sides (convert in the FMU or with a map entry's scale)")

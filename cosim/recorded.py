@@ -171,9 +171,15 @@ def si_factor(unit: str, role: str, where: str) -> tuple[float, str]:
         raise DataError(f"{where}: unknown unit {unit!r}; expected a unit such as {', '.join(targets)}") from None
     for target in targets:
         try:
-            return float(q.to(target).magnitude), target
+            factor = float(q.to(target).magnitude)
         except pint.errors.DimensionalityError:
             continue
+        from feeddrive.cosim.unit_map import angle_mismatch
+
+        angle = angle_mismatch(unit, target)  # pint holds the radian dimensionless: [1/min] was rad/s x 1/60
+        if angle is not None:
+            raise DataError(f"{where}: {angle}; expected the unit that says it, e.g. [rpm] for revolutions per minute")
+        return factor, target
     raise DataError(f"{where}: unit {unit!r} is not a unit of role {role} (expected one convertible to "
                     f"{' or '.join(targets)})")
 

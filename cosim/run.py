@@ -171,6 +171,12 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         report["components"] = master.reports()
         report["wall_time_s"] = round(_time.perf_counter() - wall, 3)
         signals = recorder.signals()
+        if "plant.position" in signals and "nc.x_ref" in signals:
+            from feeddrive.cosim.axis import following_note
+
+            following = following_note(signals, "rad" if scenario.axis.kind == "rotary" else "m")
+            if following:
+                report["following"] = following
         if workers is not None:
             # report.html's template is loaded while the workers draw (its imports were made during the loop)
             paths["plots"] = workers.draw(plot_jobs(master, recorder.time, signals, out_dir / "plots", scenario.name,

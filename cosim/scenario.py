@@ -31,7 +31,14 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError
 
 from feeddrive.cosim import scenario_plant
 from feeddrive.cosim.axis import Axis, resolve_drive_chain
-from feeddrive.cosim.drive import SERVO, apply_drive, check_pole_pairs, second_sensor_phase, servo_oversample
+from feeddrive.cosim.drive import (
+    SERVO,
+    SERVO_CLASS,
+    apply_drive,
+    check_pole_pairs,
+    second_sensor_phase,
+    servo_oversample,
+)
 from feeddrive.cosim.errors import ScenarioError
 from feeddrive.cosim.fmu_inspect import REAL_TYPES
 from feeddrive.cosim.fmu_inspect import fmi_version as fmi_version  # re-exported: cosim info, the tests
@@ -244,9 +251,21 @@ def _servo_connections(s: Scenario) -> dict[str, str | float]:
     """The connections with a PMSM monitor's servo inputs wired to the ``servo`` component's outputs of the same
     names (those the scenario leaves unconnected); on a DC axis, or without a ``servo`` component, unchanged."""
     servo_monitor = s.monitor is not None and getattr(s.monitor.config, "drive", "dc") != "dc"
-    if not servo_monitor or not any(c.name == SERVO for c in s.components):
+    if not servo_monitor:
         return dict(s.connections)
     from feeddrive.cosim.monitor_servo import SERVO_INPUTS
+
+    if not any(c.name == SERVO for c in s.components):
+        # a vendor FMU on a PMSM axis without the servo sensors: the master's "input 'monitor.I_U' is not
+        # connected" named the symptom, not the missing component (nor a DC FMU on a PMSM axis)
+        missing = [p for p in SERVO_INPUTS if f"monitor.{p}" not in s.connections]
+        if missing:
+            key = ("axis", "drive", "kind") if s.axis.drive is not None else ("monitor", "drive")
+            raise s.error(key, f"a PMSM axis's monitor reads the servo drive's sensors ({', '.join(missing[:3])}, ...), "
+                               f"and no component provides them: expected a component named {SERVO} (class "
+                               f"{SERVO_CLASS}) wired to the plant FMU's dq outputs (README: A vendor's PMSM FMU), "
+                               f"or kind: dc if {Path(s.plant.fmu).name} is a DC drive")
+        return dict(s.connections)
 
     return {f"monitor.{port}": f"{SERVO}.{port}" for port in SERVO_INPUTS} | dict(s.connections)
 

@@ -11,7 +11,15 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator
 
 from feeddrive.cosim import fmu_inspect
-from feeddrive.cosim.fmu_inspect import REAL_TYPES, check_archive, fmi_version, model_description, runnable, sha256
+from feeddrive.cosim.fmu_inspect import (
+    REAL_TYPES,
+    check_archive,
+    fixed_step_problem,
+    fmi_version,
+    model_description,
+    runnable,
+    sha256,
+)
 from feeddrive.cosim.unit_map import Conversion, check_map
 from feeddrive.cosim.yaml_source import KeyPath
 
@@ -148,6 +156,9 @@ def resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     problem = runnable(md, p.interface, path.name)
     if problem:
         raise s.error(("plant", "fmu" if problem[0] == "fmu" else "interface"), problem[1])
+    problem = fixed_step_problem(md, p.interface, s.step / p.oversample, path.name)
+    if problem:
+        raise s.error(("step",), f"{problem} (step / plant.oversample)")
     try:
         check_archive(path, (md.coSimulation if p.interface == "cs" else md.modelExchange).modelIdentifier)
     except ValueError as exc:
@@ -155,7 +166,7 @@ def resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
     parts = {r for c in s.components if c.fmu is not None and isinstance(c.config, dict)
              for r in c.config.get("map") or {}}
     conversions: dict[str, Conversion] = {}
-    problems = check_map(md, role_map, path.name, s.axis.kind, conversions, parts)
+    problems = check_map(md, role_map, path.name, s.axis.kind, conversions, parts, p.interface)
     if problems:
         raise s.error(*problems[0])
     role_map = {r: e.model_copy(update={"scale": conversions[r].scale, "offset": conversions[r].offset})

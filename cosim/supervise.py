@@ -344,6 +344,11 @@ def _write_failure_report(scenario: Any, out_dir: Path, outcome: Outcome, messag
                            "signal": outcome.signal, "exit_code": outcome.exit_code, "limit": outcome.limit},
                "recorded_until_s": last_recorded_time(out_dir / "signals.csv"), "log": LOG_FILE}
     path.write_text(json.dumps(report, indent=2), encoding="utf-8")
+    # report.html too, as for a run that failed inside the child: a crash or hang left none (the README: every
+    # run's directory holds it, a failed run's with its status and error)
+    from feeddrive.cosim.run import _write_page
+
+    _write_page(out_dir, report)
 
 
 def last_recorded_time(signals_csv: Path) -> float | None:

@@ -72,10 +72,13 @@ class Conversion:
     offset: float
     declared: str | None = None
     display_unit: str | None = None
+    inverted: bool = False  # the entry's scale is the units' conversion with the opposite sign
 
     @property
     def note(self) -> str | None:
         """The stated assumption, when the units did not decide (printed by ``cosim info --map`` and run)."""
+        if self.inverted:
+            return f"{self.role} <- {self.var}: sign inverted as given, scale {self.scale:.6g} (the FMU's opposite direction)"
         if self.how == "assumed":
             return f"{self.role} <- {self.var}: unit not declared: taken as {self.role_unit}"
         if self.how == "given":
@@ -96,7 +99,7 @@ class Conversion:
             text += f"  (unit stated; the FMU declares {self.declared or 'none'})"
         if self.display_unit and self.display_unit != self.unit:
             text += f"  (displayUnit {self.display_unit})"
-        if self.how == "given":
+        if self.how == "given" or self.inverted:
             text += "  (" + self.note.split(": ", 1)[1] + ")"
         return text
 
@@ -135,6 +138,25 @@ def quantity(unit: str, base: Any = None) -> Any:
         return ureg.Quantity(1.0, _pint_text(unit))
     except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError, AssertionError):
         raise ValueError(f"unit {unit!r} is not a unit pint knows") from None
+
+
+def angle_exponent(q: Any) -> int:
+    """The power of radian in a pint quantity's root units (``rpm``: 1, ``Hz`` and ``1/min``: 0)."""
+    return int(dict(q.to_root_units().unit_items()).get("radian", 0))
+
+
+def angle_mismatch(unit: str, target: str, base: Any = None) -> str | None:
+    """Why ``unit`` cannot be read as ``target`` although pint converts it, or None.
+
+    pint holds the radian dimensionless, so it converts ``Hz``, ``1/s`` and ``1/min`` into ``rad/s`` by 1 and
+    1/60: a rate that does not say whether it counts revolutions or radians (``1/min`` on a German data sheet
+    is rpm, 2 pi times more) would be taken on trust. The powers of the angle in both units must agree."""
+    have, want = angle_exponent(quantity(unit, base)), angle_exponent(quantity(target))
+    if have == want:
+        return None
+    if have == 0:
+        return f"{unit} counts no angle where {target} counts radians (revolutions or radians?)"
+    return f"{unit} holds the angle to the power {have}, {target} to the power {want}"
 
 
 def _affine(unit: str, base: Any, target: str) -> tuple[float, float]:
@@ -201,13 +223,15 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
     key = "unit" if source == "stated" else "var"
     whose = f"{entry.var!r} is {'stated' if source == 'stated' else 'declared'} in {unit}"
     try:
-        if _own_unit(unit, base, target):
+        own, angle = _own_unit(unit, base, target), None
+        if own:
             a, b = 1.0, 0.0
         else:
             import pint
 
             quantity(unit, base)
             a, b = _affine(unit, base, target)  # role = a * y + b
+            angle = angle_mismatch(unit, target, base)
     except ValueError as exc:
         raise UnitProblem(key, f"{whose}, a unit pint does not know ({exc}); expected a unit convertible to {target} "
                                f"(state the variable's true unit with unit: '...')") from None
@@ -217,24 +241,37 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
         raise UnitProblem(key, f"{whose}, role {role!r} needs {target}: incompatible units; expected a "
                                f"variable in a unit convertible to {target}, or its true unit stated with "
                                "unit: '...'") from None
+    if angle is not None:
+        if given and quantity(unit, base).dimensionless:  # e.g. a rotary table's angle in turns, scale given
+            return Conversion(**common, how="given", scale=scale, offset=offset)
+        raise UnitProblem(key, f"{whose}, role {role!r} needs {target}: {angle}; expected its true unit stated "
+                               "with unit: '...', e.g. unit: 'rpm' for revolutions per minute")
     if role in INPUT_ROLES:  # the FMU receives x = (role - b) / a
         a, b = 1.0 / a, -b / a
-    if given:
+    # a vendor whose positive direction is the master's negative one (a motor mounted mirrored, an encoder
+    # counting down): the units' conversion with the opposite sign, stated by the scale, offset-free
+    inverted = (entry.scale is not None and math.isclose(scale, -a, rel_tol=SCALE_RTOL) and b == 0.0
+                and offset == 0.0)
+    if given and not inverted:
         bad_scale = entry.scale is not None and not math.isclose(scale, a, rel_tol=SCALE_RTOL)
         bad_offset = not math.isclose(offset, b, rel_tol=SCALE_RTOL, abs_tol=SCALE_RTOL * max(1.0, abs(b)))
         if bad_scale or bad_offset:
             what, have, want = ("scale", scale, a) if bad_scale else ("offset", offset, b)
             raise UnitProblem(what, f"{what} {have:.6g} contradicts the unit of {entry.var!r} ({source} {unit}; "
                                     f"{unit} -> {target} is {'x' if what == 'scale' else '+'} {want:.6g}); expected "
-                                    f"no {what} (the units convert), or the variable's true unit stated with unit: '...'")
-    return Conversion(**common, how="converted", scale=a, offset=b)
+                                    f"no {what} (the units convert), the conversion with the opposite sign "
+                                    f"(scale {-want:.6g}: a direction the FMU counts negative), or the variable's "
+                                    "true unit stated with unit: '...'")
+    return Conversion(**common, how="converted", scale=-a if inverted else a, offset=b, inverted=inverted)
 
 
 def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "linear",
-              conversions: dict[str, Conversion] | None = None, elsewhere: Any = ()) -> list[tuple[tuple, str]]:
+              conversions: dict[str, Conversion] | None = None, elsewhere: Any = (),
+              interface: str = "cs") -> list[tuple[tuple, str]]:
     """Problems of a role map against an FMU's model description, as ``(key path, message)`` pairs; the
     units of each entry are checked (``cosim.unit_map.convert``) and, given ``conversions``, filled in.
-    ``elsewhere``: roles that FMU components map (a plant split into several FMUs)."""
+    ``elsewhere``: roles that FMU components map (a plant split into several FMUs); ``interface``: ``cs`` or
+    ``me`` (in Model Exchange an input role needs a continuous input)."""
     from feeddrive.cosim.fmu_inspect import REAL_TYPES
 
     variables = {v.name: v for v in md.modelVariables}
@@ -255,6 +292,11 @@ def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "
             problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real (FMI 3.0: Float64)"))
         elif role in INPUT_ROLES and v.causality != "input":
             problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an input"))
+        elif role in INPUT_ROLES and interface == "me" and v.variability == "discrete":
+            # the FMU refused it at the first step (fmi3SetFloat64: only in initialization or event mode)
+            problems.append((path, f"{entry.var!r} is a discrete input: in Model Exchange it may change only in "
+                                   "event mode, which the master does not enter for an input; expected a continuous "
+                                   "input, or interface: cs"))
         elif role not in INPUT_ROLES and v.causality not in ("output", "local"):
             problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an output"))
         else:

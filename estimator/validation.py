@@ -274,7 +274,14 @@ def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
     sigma = noise_std(r)
     cut = n_win * m
     means = r[:cut].reshape(n_win, m).mean(axis=1)
-    levels = (0.5 * (x1 + x2))[:cut].reshape(n_win, m).mean(axis=1)
+    # the level is the pair's mean, unless one sensor reads the quantity with the opposite sign (a tachometer
+    # or a current probe mounted the other way round): the mean then cancels, the residue 2 x has no level to
+    # regress on and a pair that disagrees by 200 % passed as "none". Strongly anti-correlated sensors (a
+    # correlation below -0.5: never noise alone, ~1/sqrt(n)) take the second sensor's reading as the level, and
+    # the residue is a gain difference near -2 (sensor 1 reads about -1 times sensor 2)
+    anti = float(x1 @ x2) < -0.5 * float(np.sqrt(float(x1 @ x1) * float(x2 @ x2)))
+    level = x2 if anti else 0.5 * (x1 + x2)
+    levels = level[:cut].reshape(n_win, m).mean(axis=1)
     centers = np.arange(n_win) * m + (m - 1) / 2
     X = np.column_stack([levels, np.ones(n_win)])
     coef, *_ = np.linalg.lstsq(X, means, rcond=None)

@@ -77,7 +77,11 @@ def main(args: argparse.Namespace) -> int:
 
     for line in input_handling(md):
         print(f"  {line}")
-    missing = _missing_binary(path, md)
+    fixed = getattr(md.coSimulation, "fixedInternalStepSize", None) if md.coSimulation is not None else None
+    if fixed:  # cosim run refuses a communication step that is not a multiple of it (fmu_inspect.fixed_step_problem)
+        print(f"  Co-Simulation: fixed internal step {float(fixed):g} s (fixedInternalStepSize): the communication "
+              "step must be a multiple of it")
+    missing = _cannot_run(path, md)
     if missing:  # the variables are worth reading all the same (to write a map); running it is not possible
         print(f"cosim info: warning: {path}: {missing}; cosim run refuses it (exit 2)", file=sys.stderr)
     if args.map is None:
@@ -88,7 +92,8 @@ def main(args: argparse.Namespace) -> int:
         return 0
     role_map, error = load_plant_map(args.map)
     conversions: dict = {}
-    problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions)
+    problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions,
+                         interface=_plant_interface(args.map))
     print(f"map of {args.map} (role [SI unit] <- FMU variable [unit] x scale + offset; -> for the FMU's inputs)")
     for role, e in role_map.items():
         if role in conversions:
@@ -138,10 +143,25 @@ def _axis_kind(scenario: Path) -> str:
     return axis.get("kind", "linear") if isinstance(axis, dict) else "linear"
 
 
-def _missing_binary(path: Path, md) -> str | None:  # noqa: ANN001 - fmpy's ModelDescription
-    """Why the FMU cannot run here (no binary for this platform, naming those it has), or None."""
-    from feeddrive.cosim.fmu_inspect import check_archive
+def _plant_interface(scenario: Path) -> str:
+    """``plant.interface`` of a scenario file (``me``: an input role needs a continuous input), default cs."""
+    from feeddrive.cosim.yaml_source import read_yaml
 
+    data, _ = read_yaml(scenario)
+    plant = data.get("plant") if isinstance(data, dict) else None
+    return plant.get("interface", "cs") if isinstance(plant, dict) else "cs"
+
+
+def _cannot_run(path: Path, md) -> str | None:  # noqa: ANN001 - fmpy's ModelDescription
+    """Why the FMU cannot run here (Scheduled Execution only or clocks; no binary for this platform, naming
+    those it has), or None."""
+    from feeddrive.cosim.fmu_inspect import check_archive, runnable
+
+    # an FMI 3.0 FMU with neither Co-Simulation nor Model Exchange has no binary to look for
+    why = runnable(md, "cs" if md.coSimulation is not None else "me", path.name)
+    if why is not None:
+        return why[1]
+    problem = None
     for kind in (md.coSimulation, md.modelExchange):
         if kind is None:
             continue

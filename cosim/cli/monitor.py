@@ -168,7 +168,7 @@ def main(args: argparse.Namespace) -> int:
         from feeddrive.cosim.cli.estimate import model_units
 
         print(table(results, UNITS | model_units(drive)))
-        print(history_line({"axis": args.axis, "db": str(Path(args.db).resolve()),
+        print(history_line({"axis": args.axis, "db": args.db if args.db == ":memory:" else str(Path(args.db).resolve()),
                             "diagnosis_thresholds": thresholds}).strip())
     return 0
 

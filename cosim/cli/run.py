@@ -67,7 +67,7 @@ def main(args: argparse.Namespace) -> int:
     if args.db is not None:
         if scenario.monitor is None:
             raise InputError(f"--db {args.db}: the scenario {args.scenario} has no monitor (monitor: section)")
-        scenario = with_history(scenario, args.db.expanduser().resolve(), replace=True)
+        scenario = with_history(scenario, history_db(args.db), replace=True)
         if scenario is None:
             raise InputError(f"--db {args.db}: the scenario's monitor is a user class; its history is its own")
     out = args.out or _fresh_run_dir(Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}")
@@ -76,6 +76,12 @@ def main(args: argparse.Namespace) -> int:
                             default_history=Path(DEFAULT_DB))
     print(summary(result))
     return 0
+
+
+def history_db(db: Path) -> Path:
+    """``--db``'s file, absolute; ``:memory:`` (SQLite's name for no file) as it is: resolved, it became a file
+    ``./:memory:`` that every later ``--db :memory:`` run continued (a baseline learnt from other runs)."""
+    return db if str(db) == ":memory:" else db.expanduser().resolve()
 
 
 def history_line(monitor: dict) -> str | None:
@@ -121,7 +127,10 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
     lines = [f"{r['scenario']}: {r['stop_time_s']:.4g} s simulated in {r['wall_time_s']:.3g} s "
              f"({r['steps']} steps of {r['step_s']:.3g} s) -> {result.out_dir}"]
     if "plant.position" in s and "nc.x_ref" in s:
-        lines.append(f"  position: {s['plant.position'][-1]:.6f} m (NC target {s['nc.x_ref'][-1]:.6f} m)")
+        unit = "rad" if (r.get("drive_chain") or {}).get("kind") == "rotary" else "m"
+        lines.append(f"  position: {s['plant.position'][-1]:.6f} {unit} (NC target {s['nc.x_ref'][-1]:.6f} {unit})")
+        if r.get("following"):  # the axis did not follow its NC (cosim.axis.following_note, on every sample)
+            lines.append(f"  {r['following']}")
     for k, m in enumerate(r.get("motions") or [], 1):
         if isinstance(m, dict):
             params = m.get("parameters") or {}

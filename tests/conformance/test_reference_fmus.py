@@ -145,6 +145,21 @@ def test_clocks_is_refused_in_one_line(reference_fmus, tmp_path, capfd, interfac
     assert "Clocks.fmu supports only Scheduled Execution" in err[0] and "components[0].fmu" in err[0]
 
 
+def test_info_on_clocks_lists_its_variables_and_says_why_it_cannot_run(reference_fmus, tmp_path, capfd):
+    # it has neither Co-Simulation nor Model Exchange: there was no binary to look for, and a traceback
+    fmu = reference_fmus[3] / "Clocks.fmu"
+    assert main(["info", str(fmu)]) == 0
+    out, err = capfd.readouterr()
+    assert "Clocks, FMI 3.0" in out and "Traceback" not in err
+    assert err.strip().splitlines() == [f"cosim info: warning: {fmu}: Clocks.fmu supports only Scheduled Execution "
+                                        "(FMI 3.0 clocks); the master runs Co-Simulation and Model Exchange FMUs; "
+                                        "cosim run refuses it (exit 2)"]
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(yaml.safe_dump({"name": "s", "plant": {"fmu": str(fmu)}}))
+    assert main(["info", str(fmu), "--map", str(scenario)]) == 2
+    assert capfd.readouterr().err.strip().splitlines()[-1].startswith(f"cosim info: error: {fmu}: Clocks.fmu supports only")
+
+
 if __name__ == "__main__":  # the README's table: python tests/conformance/test_reference_fmus.py BUILD_DIR
     import sys
     import tempfile

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import yaml
 from faulty import MAP, MODES, build
+from markupsafe import escape
 
 from feeddrive.cosim.cli import main
 from feeddrive.cosim.component import Component
@@ -66,6 +67,8 @@ def test_a_failing_fmu_is_one_line_exit_1_and_keeps_its_signals(tmp_path, faulty
 
     report = json.loads((out / "report.json").read_text())
     assert report["status"] == status and line in report["error"]
+    page = (out / "report.html").read_text()  # a crash or hang had no page
+    assert f'id="status">{status}</span>' in page and str(escape(line)) in page
     table = read_signals(out / "signals.csv")
     t = table["time"]
     # every step up to the failure: the last row is t = 0.5 s (NaN: 0.5 s - h, the row before the bad outputs)

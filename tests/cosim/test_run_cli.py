@@ -71,6 +71,20 @@ def test_output_directory_is_never_overwritten_without_the_flag(tmp_path, feeddr
     assert (out / "signals.csv").read_text() == before  # deterministic rerun
 
 
+def test_db_memory_is_no_file(tmp_path, monkeypatch):
+    # --db :memory: was resolved as a path: a file ./:memory: that the next --db :memory: run continued
+    from feeddrive.cosim.cli.run import history_db, history_line
+    from feeddrive.cosim.run import with_history
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "short.yaml").write_text(SHORT.format(extra="monitor: {}\n"))
+    scenario = with_history(load_scenario(tmp_path / "short.yaml"), history_db(Path(":memory:")), replace=True)
+    assert scenario.monitor.config.db == ":memory:"
+    assert history_line({"axis": "X", "db": scenario.monitor.config.db}) == \
+        "  history: in memory (nothing kept after the run), axis X"
+    assert history_db(Path("h.sqlite")) == tmp_path / "h.sqlite"
+
+
 def test_fmu_error_mid_run_exits_1_with_one_line_and_partial_signals(tmp_path, feeddrive_fmu, capsys):
     path = tmp_path / "broken.yaml"
     path.write_text(SHORT.format(extra="events:\n  - {time: 0.05, target: plant.R, value: 0}\n"))

@@ -189,6 +189,28 @@ def test_tachometer_gain_fault_is_isolated_against_the_encoder():
     assert v.pairs["current"].residue.kind == "none"
 
 
+@pytest.mark.parametrize("sensor", ["w_tach", "Im2"])
+def test_a_sensor_mounted_the_other_way_round_is_a_gain_of_minus_one(sensor):
+    # the pair's mean cancelled: the residue test saw no level, passed the pair as healthy and the mean (~0)
+    # on to the estimator (a reversed tachometer read as "not enough excitation, |speed| < 0.002 rad/s")
+    v = validate(measure(plant_motion(), seed=6, **{sensor: (-1.0, 0.0)}))
+    pair = v.pairs["speed" if sensor == "w_tach" else "current"]
+    assert pair.residue.kind == "gain" and pair.residue.gain_diff == pytest.approx(-2.0, abs=2e-3)
+    fit = {f.sensor: f for f in pair.fits}
+    assert fit[sensor].faulty and fit[sensor].gain == pytest.approx(-1.0, abs=3e-3)
+    assert pair.trusted != sensor and not fit[pair.trusted].faulty and v.valid
+
+
+def test_noise_alone_is_never_read_as_a_reversed_sensor():
+    # a level taken from the pair's half difference would make r = x1 - x2 exactly -2 times it: a certain
+    # "gain -1" on every noise-only pair that happens to correlate negatively; only a strong anti-correlation counts
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        x1, x2 = 0.05 * rng.standard_normal(20000), 0.05 * rng.standard_normal(20000)
+        assert residue_test(x1, x2, H).kind == "none" or float(x1 @ x2) >= 0
+        assert abs(residue_test(x1, x2, H).gain_diff) < 1.0
+
+
 def test_voltage_reference_offset_is_isolated():
     v = validate(measure(plant_motion(), seed=7, u_ref=(1.0, 2.0)))
     volt = v.pairs["voltage"]
