@@ -131,8 +131,15 @@ def residue_check(m: Mapping) -> dict | None:
             decision = e["reason"]
         elif not finite(p):
             decision = "not computed"
+        elif level is not None and p < level:  # significant; a mismatch only when it is material (adequacy.py)
+            from feeddrive.estimator.adequacy import MIN_EFFECT
+
+            effect = e.get("effect")
+            decision = (f"significant but immaterial: {100 * effect:.2g} % of the {e.get('output')} signal "
+                        f"unexplained (< {100 * MIN_EFFECT:g} %)" if finite(effect) and effect < MIN_EFFECT
+                        else "reject: mismatch")
         else:
-            decision = "reject: mismatch" if level is not None and p < level else "pass"
+            decision = "pass"
         rows.append({"equation": f"{name} ({e.get('output')})", "terms": ", ".join(e.get("terms") or []) or "-",
                      "statistic": _n(e.get("statistic")), "p": _n(p),
                      "df": ", ".join(_dof(x) for x in e["df"]) if isinstance(e.get("df"), Sequence) else _dof(e.get("df")),

@@ -64,3 +64,17 @@ def test_the_residue_check_is_a_table_of_its_equations_at_the_adjusted_level():
     assert rows["mechanical (i)"]["decision"] == "reject: mismatch" and rows["mechanical (i)"]["bad"]
     assert rows["other (x)"]["decision"] == "not determined: Jt" and rows["other (x)"]["p"] == "not computed"
     assert views.residue_check({}) is None
+
+
+def test_a_significant_but_immaterial_lack_of_fit_is_not_a_red_reject_under_an_adequate_verdict():
+    """report.html showed 'Residue check: adequate' above an electrical row 'reject: mismatch' (p 9e-35 on a
+    lack of fit of 0.085 % of u): the verdict was right (immaterial below 1 %), the row said the opposite."""
+    adequacy = {"verdict": "adequate", "p_value": 1.85e-34, "alpha": 0.01,
+                "equations": {"electrical": {"output": "u", "p_value": 9.27e-35, "statistic": 60.0, "df": [3, 27],
+                                             "terms": ["offset (constant)"], "effect": 0.00085},
+                              "mechanical": {"output": "i", "p_value": 2.8e-26, "statistic": 40.0, "df": [6, 24],
+                                             "terms": ["offset (constant)"], "effect": 0.02}}}
+    rows = {r["equation"]: r for r in views.residue_check({"adequacy": adequacy})["rows"]}
+    assert rows["electrical (u)"]["decision"] == ("significant but immaterial: 0.085 % of the u signal unexplained "
+                                                  "(< 1 %)") and not rows["electrical (u)"]["bad"]
+    assert rows["mechanical (i)"]["decision"] == "reject: mismatch" and rows["mechanical (i)"]["bad"]  # 2 %: material
