@@ -219,6 +219,12 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     scenario._base_dir = base_dir
     from feeddrive.cosim import fmu_components
 
+    if scenario.stop_time is not None:  # the master runs whole steps: 1.0 s at 0.03 s would run 1.02 s, unsaid
+        n = scenario.stop_time / scenario.step
+        if abs(n - round(n)) > 1e-6 * max(1.0, n) and n > 1:
+            lo, hi = math.floor(n) * scenario.step, math.ceil(n) * scenario.step
+            raise scenario.error(("stop_time",), f"{scenario.stop_time:g} s is not a whole number of steps of "
+                                                 f"{scenario.step:g} s; expected e.g. {lo:.10g} or {hi:.10g}")
     if scenario.nc is None:
         fmu_components.check_components_only(scenario, given)
         return scenario.model_copy(update={"components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
