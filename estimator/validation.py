@@ -49,11 +49,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from feeddrive.estimator import lti
 from feeddrive.estimator.distributions import chi2_sf, t_ppf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec, decimation_factor, share_filtered
-from feeddrive.estimator.kernels import bilinear_first_order
+
+# the isolation (Fig. 6) lives in its own module; its names stay importable from here
+from feeddrive.estimator.isolation import KINDS, SensorFit, isolate, model_reference  # noqa: F401
 
 #: the redundant pairs: quantity -> (sensor 1, sensor 2)
 PAIRS: dict[str, tuple[str, str]] = {
@@ -61,7 +62,6 @@ PAIRS: dict[str, tuple[str, str]] = {
     "voltage": ("u", "u_ref"),
     "speed": ("w_tach", "w_enc"),
 }
-KINDS = ("none", "offset", "gain", "gain+offset")
 
 
 @dataclass(frozen=True)
@@ -134,24 +134,6 @@ class ResidueTest:
     centers: np.ndarray = field(repr=False)
     means: np.ndarray = field(repr=False)
     levels: np.ndarray = field(repr=False)
-
-
-@dataclass(frozen=True)
-class SensorFit:
-    """Isolation fit of one sensor against the model-based value (eq. 13, 14)."""
-
-    sensor: str
-    gain: float
-    gain_ci95: tuple[float, float]
-    offset: float
-    offset_ci95: tuple[float, float]
-    faulty: bool
-    kind: str
-    error_rms: float
-
-    def to_dict(self) -> dict:
-        return {"sensor": self.sensor, "kind": self.kind, "gain": self.gain, "gain_ci95": list(self.gain_ci95),
-                "offset": self.offset, "offset_ci95": list(self.offset_ci95)}
 
 
 @dataclass(frozen=True)
@@ -329,84 +311,6 @@ def gain_ratio(x1f: np.ndarray, x2f: np.ndarray, step: int = 1) -> float:
     if not keep.any():
         raise EstimatorInputError("gain_ratio: the second signal is constant; no gain ratio")
     return float(np.mean(d1[keep] / d2[keep]))
-
-
-def model_reference(quantity: str, filtered: Mapping[str, np.ndarray], h: float,
-                    electrical: Mapping[str, float]) -> np.ndarray:
-    """Model-based value of one quantity from the two others and eq. 1 (analytical redundancy).
-
-    Parameters
-    ----------
-    quantity : {"current", "voltage", "speed"}
-    filtered : mapping with filtered ``u`` [V], ``i`` [A], ``w`` [rad/s], arrays of shape (n,)
-        (only the two quantities other than ``quantity`` are read).
-    h : float
-        Sample time [s].
-    electrical : mapping with ``R`` [Ohm], ``L`` [H], ``K`` [V s/rad]
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        ``Ir_hat`` [A], ``u_hat`` [V] or ``w_hat`` [rad/s].
-    """
-    R, L, K = (float(electrical[k]) for k in ("R", "L", "K"))
-    if quantity == "current":
-        v = filtered["u"] - K * filtered["w"]
-        b, a = bilinear_first_order(L, R, h)
-        zi = lti.lfilter_zi(b, a) * v[0]  # start in steady state: i = v / R
-        return lti.lfilter(b, a, v, zi=zi)[0]
-    di = np.gradient(filtered["i"], h)
-    if quantity == "voltage":
-        return R * filtered["i"] + L * di + K * filtered["w"]
-    if quantity == "speed":
-        return (filtered["u"] - R * filtered["i"] - L * di) / K
-    raise EstimatorInputError(f"model_reference: quantity must be one of {tuple(PAIRS)}, got {quantity!r}")
-
-
-def isolate(x1f: np.ndarray, x2f: np.ndarray, reference: np.ndarray, names: tuple[str, str], h: float,
-            cutoff_hz: float, options: ValidationOptions = ValidationOptions()) -> tuple[SensorFit, SensorFit]:
-    """Fit each filtered sensor on the model-based value, ``xkf = ak x_hat + bk`` (eq. 13, 14).
-
-    Parameters
-    ----------
-    x1f, x2f, reference : ndarray, shape (n,)
-        Filtered sensors and the model-based value (``model_reference``).
-    names : (str, str)
-        Sensor names.
-    h : float
-        Sample time [s].
-    cutoff_hz : float
-        Cut-off of the filter applied to the signals [Hz]: the fit uses about 4 samples per
-        cut-off period and Newey-West errors over 4 cut-off periods, since the residuals are coloured.
-    options : ValidationOptions
-
-    Returns
-    -------
-    (SensorFit, SensorFit)
-    """
-    edge = int(round(options.edge_s / h))
-    step = max(1, int(1.0 / (4.0 * cutoff_hz * h)))
-    sl = slice(edge, x1f.size - edge, step)
-    ref = reference[sl]
-    if ref.size < 20:
-        raise EstimatorInputError(f"isolate: {ref.size} samples left after trimming {options.edge_s} s edges")
-    X = np.column_stack([ref, np.ones(ref.size)])
-    span = float(np.max(np.abs(ref)))
-    # not statsmodels.api (seconds of imports), and only here: isolating a faulty sensor is rare
-    from statsmodels.regression.linear_model import OLS
-
-    fits = []
-    for name, x in zip(names, (x1f, x2f)):
-        res = OLS(x[sl], X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
-        (a, b), ((alo, ahi), (blo, bhi)) = res.params, res.conf_int(0.05)  # reported: 95 % intervals
-        # decided at the level of every other test (alpha), not at the reported intervals' 5 %
-        (tlo_a, thi_a), (tlo_b, thi_b) = res.conf_int(options.alpha)
-        gain = not tlo_a <= 1.0 <= thi_a and abs(a - 1.0) > options.gain_tol
-        offset = not tlo_b <= 0.0 <= thi_b and abs(b) > options.offset_tol * span
-        err = float(np.sqrt(np.mean(((a - 1.0) * ref + b) ** 2)))
-        fits.append(SensorFit(name, float(a), (float(alo), float(ahi)), float(b), (float(blo), float(bhi)),
-                              bool(gain or offset), KINDS[int(offset) + 2 * int(gain)], err))
-    return fits[0], fits[1]
 
 
 def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrical: Mapping[str, float] | None,
