@@ -87,13 +87,13 @@ def test_cosim_run_tool_change_then_worn_axis_whatever_the_out_dir(tmp_path, mon
     printed = [next(ln for ln in example_runs["stdout"][name].splitlines() if ln.startswith("  history:"))
                for name in ("worn_axis", "tool_change")]
     # the second tool change writes elsewhere (--out): the history stays runs/history.sqlite (on main, --out
-    # elsewhere/run2 silently switched to elsewhere/history.sqlite); drawn without its figures (--no-figures)
+    # elsewhere/run2 silently switched to elsewhere/history.sqlite); drawn without its figures (--no-plots)
     assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "elsewhere/run2",
-                 "--no-figures"]) == 0
+                 "--no-plots"]) == 0
     summary = capsys.readouterr().out.splitlines()
     printed.append(next(ln for ln in summary if ln.startswith("  history:")))
     assert not Path("elsewhere/history.sqlite").exists()
-    # --no-figures: no plots/*.png and none listed, report.html still written, the same estimate (bit for bit)
+    # --no-plots: no plots/*.png and none listed, report.html still written, the same estimate (bit for bit)
     assert summary[-1].endswith("report.html, 0 plots") and not Path("elsewhere/run2/plots").exists()
     assert json.loads(Path("elsewhere/run2/report.json").read_text())["files"]["plots"] == []
     assert Path("elsewhere/run2/report.html").is_file()
@@ -122,7 +122,7 @@ def test_cosim_run_tool_change_then_worn_axis_whatever_the_out_dir(tmp_path, mon
     assert main(["history", "--axis", "X"]) == 0
     assert capsys.readouterr().out.startswith("axis X: 2 motion(s)")
     assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "run3", "--db", "other.sqlite",
-                 "--no-figures"]) == 0
+                 "--no-plots"]) == 0
     assert "  history: other.sqlite, axis X; learning the healthy baseline: 1 of 3" in capsys.readouterr().out
     with History("other.sqlite") as other, History("runs/history.sqlite") as default:
         assert len(other.motions("X")) == 1 and len(default.motions("X")) == 2
