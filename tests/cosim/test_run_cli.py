@@ -67,8 +67,10 @@ def test_output_directory_is_never_overwritten_without_the_flag(tmp_path, feeddr
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "is not empty" in err and "--overwrite" in err
     assert (out / "signals.csv").read_text() == before
-    assert main(["run", str(path), "--out", str(out), "--no-progress", "--overwrite"]) == 0
+    assert len(list((out / "plots").glob("*.png"))) == 2  # the motion's profiles and currents
+    assert main(["run", str(path), "--out", str(out), "--no-progress", "--overwrite", "--no-plots"]) == 0
     assert (out / "signals.csv").read_text() == before  # deterministic rerun
+    assert not list((out / "plots").glob("*.png"))  # no figure of the replaced run is left as if it were this one's
 
 
 def test_fmu_error_mid_run_exits_1_with_one_line_and_partial_signals(tmp_path, feeddrive_fmu, capsys):
