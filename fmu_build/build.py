@@ -1,6 +1,7 @@
 """Compile generated sources with the system C compiler, pack the FMU, and cache the built-in plant."""
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import os
@@ -9,6 +10,7 @@ import subprocess
 import sys
 import tempfile
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -154,7 +156,9 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, 
     The cache is ``<cache_dir>/<hash>/FeedDrive.fmu`` with ``cache_dir`` defaulting to
     ``$FEEDDRIVE_CACHE`` or ``~/.cache/feeddrive``. The hash covers everything the FMU is built
     from, so any change of the model rebuilds it. Safe for parallel processes: each builds in a
-    private temporary directory and moves the result in place atomically.
+    private temporary directory and moves the result in place atomically, and a process that finds another
+    building the same FMU (a lock file per cache key, ``<cache_dir>/locks``) waits for it and takes its FMU
+    rather than compile it a second time.
 
     Parameters
     ----------
@@ -192,11 +196,29 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, 
     target = root / cache_key(sources) / f"{model.name}.fmu"
     try:
         if not target.is_file():
-            _build(sources, target)
+            with _build_lock(root, target.parent.name):
+                if not target.is_file():  # another process may have built it while this one waited
+                    _build(sources, target)
         _write_atomically(index, f"{target.parent.name}/{target.name}\n")
     except OSError as exc:
         raise FMUBuildError(f"cannot write the FMU cache {target.parent}: {exc.strerror}") from exc
     return target
+
+
+@contextlib.contextmanager
+def _build_lock(root: Path, key: str) -> Iterator[None]:
+    """Hold ``<root>/locks/<key>`` exclusively (``flock``): one build per cache key at a time. The kernel drops the
+    lock when its process ends, so a killed build never blocks the next one; the file itself is left (empty)."""
+    import fcntl
+
+    folder = root / "locks"
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / key, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def _inputs_key(backlash: bool, fmi_version: int, motor: str) -> str:

@@ -49,6 +49,29 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items.sort(key=lambda item: (-seconds.get(item.nodeid.split("::")[0], 0.0), first[item.nodeid.split("::")[0]]))
 
 
+_BUSY: dict[str, list[float]] = {}
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    """Under xdist (in the controller): each worker's test time, first start and last stop (for the summary)."""
+    node = getattr(report, "node", None)
+    if node is not None:
+        busy = _BUSY.setdefault(node.gateway.id, [0.0, report.start, report.stop])
+        busy[0] += report.duration
+        busy[1], busy[2] = min(busy[1], report.start), max(busy[2], report.stop)
+
+
+def pytest_terminal_summary(terminalreporter) -> None:  # noqa: ANN001 - pytest's TerminalReporter
+    """One line per xdist worker: seconds in its tests (setup + call + teardown) and from its first test's start
+    to its last one's end. With ``--dist loadscope`` the run ends when the last worker does: an idle tail on
+    the other is a core unused (refresh tests/module_seconds.txt, split a long module)."""
+    if _BUSY:
+        end = max(stop for _, _, stop in _BUSY.values())
+        terminalreporter.write_line("worker busy: " + ", ".join(
+            f"{w} {busy:.1f} s in tests, {stop - start:.1f} s first to last, idle for the last {end - stop:.1f} s"
+            for w, (busy, start, stop) in sorted(_BUSY.items())))
+
+
 # pytest rewrites the asserts of every test module it imports (parse, rewrite, compile: ~8 s of CPU per process
 # for this suite's ~220 modules, each xdist worker again) and caches the result in tests/**/__pycache__ only when
 # bytecode may be written: with PYTHONDONTWRITEBYTECODE set (as on this machine and in CI) it redid the work in

@@ -19,7 +19,8 @@ end of the recording (``recorded.start_clock``; said in the console's ``time:`` 
 
 ``--out DIR`` writes ``report.json`` (the motions' results, the diagnosis thresholds, versions),
 ``plots/`` (the figures of the last ``keep_traces`` = 5 motions, as in a run, and the trends) and
-``report.html`` (cosim.report) into DIR.
+``report.html`` (cosim.report) into DIR; with ``--no-plots`` no figure (the same report.json and page without
+figures).
 """
 from __future__ import annotations
 
@@ -64,6 +65,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--axis", default="X", help="machine/axis id in the history (default X)")
     parser.add_argument("--plots", metavar="DIR", help="write the monitor plots of every motion into DIR")
     parser.add_argument("--out", metavar="DIR", help="write report.json, report.html and plots/ into DIR")
+    parser.add_argument("--no-plots", action="store_true",
+                        help="with --out: draw no plots/*.png (report.html shows none; the same results)")
     parser.add_argument("--overwrite", action="store_true", help="replace existing plot files")
     parser.add_argument("--drive", choices=("dc", "pmsm", "pmsm-spm"), default="dc",
                         help="the motor: dc (default) or a PMSM with the roles " + ", ".join(PMSM_ROLES)
@@ -155,7 +158,7 @@ def main(args: argparse.Namespace) -> int:
                   "components": {"monitor": {"budget_s": config.budget_s}}, "diagnosis_thresholds": thresholds,
                   "unit_notes": units, "motions": results}
         kept = traces[-config.keep_traces:] if config.keep_traces else []  # as the co-simulation monitor keeps
-        print(f"wrote {write_monitor_report(out, report, kept, motions, thresholds)}")
+        print(f"wrote {write_monitor_report(out, report, kept, motions, thresholds, plots=not args.no_plots)}")
     if args.json:
         print(json.dumps({"axis": args.axis, "db": args.db, **recording_json(rec, clock_source), "unit_notes": units,
                           "motions": results}, default=_jsonable))
@@ -199,16 +202,21 @@ def _out_folder(name: str, overwrite: bool) -> Path:
     return out
 
 
-def write_monitor_report(out: Path, report: dict, traces: list, motions: list[dict], thresholds: dict) -> Path:
-    """``out/plots/*.png``, ``out/report.json`` and ``out/report.html`` of one ``cosim monitor`` call."""
-    from feeddrive.cosim.monitor_plots import plot_monitor
+def write_monitor_report(out: Path, report: dict, traces: list, motions: list[dict], thresholds: dict, *,
+                         plots: bool = True) -> Path:
+    """``out/plots/*.png`` (none if not ``plots``), ``out/report.json`` and ``out/report.html`` of one
+    ``cosim monitor`` call."""
     from feeddrive.cosim.report import write_run_page
 
     for old in (out / "plots").glob("monitor_*.png"):
         old.unlink()
-    plots = plot_monitor(traces, motions, out / "plots", thresholds)
+    drawn = []
+    if plots:
+        from feeddrive.cosim.monitor_plots import plot_monitor
+
+        drawn = plot_monitor(traces, motions, out / "plots", thresholds)
     report["files"] = {"report": "report.json", "page": "report.html",
-                       "plots": [os.path.relpath(p, out) for p in plots]}
+                       "plots": [os.path.relpath(p, out) for p in drawn]}
     (out / "report.json").write_text(json.dumps(report, indent=2, default=_jsonable), encoding="utf-8")
     # the page is drawn from the JSON just written, so that it shows exactly report.json's values
     return write_run_page(out, json.loads((out / "report.json").read_text(encoding="utf-8")))

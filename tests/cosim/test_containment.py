@@ -92,10 +92,11 @@ def test_a_failing_fmu_is_one_line_exit_1_and_keeps_its_signals(tmp_path, faulty
 
 
 def test_healthy_run_is_unchanged_by_the_supervision(tmp_path, faulty_fmu, capfd):
-    """The same FMU without failure: exit 0, the whole run recorded, the summary printed by the parent."""
+    """The same FMU without failure: exit 0, the whole run recorded, the summary printed by the parent (no
+    figures: their drawing is not what the supervision changes; tests/cosim/test_run_cli.py's run draws them)."""
     path = scenario(tmp_path, faulty_fmu, "none")
     out = tmp_path / "out"
-    assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 0
+    assert main(["run", str(path), "--out", str(out), "--no-progress", "--no-plots"]) == 0
     captured = capfd.readouterr()
     table = read_signals(out / "signals.csv")  # the summary's last sample crossed the pipe intact
     assert f"  position: {table['plant.position'][-1]:.6f} m (NC target 0.010000 m)" in captured.out, captured.out
@@ -126,7 +127,7 @@ def test_supervise_returns_values_and_exceptions_and_whole_run_timeouts():
 def test_history_written_before_a_crash_is_kept(tmp_path, faulty_fmu, capfd):
     """A healthy run stores its motion; a crashing run on the same history loses nothing of it."""
     good = scenario(tmp_path, faulty_fmu, "none")
-    assert main(["run", str(good), "--out", str(tmp_path / "a"), "--no-progress"]) == 0
+    assert main(["run", str(good), "--out", str(tmp_path / "a"), "--no-progress", "--no-plots"]) == 0
     with sqlite3.connect(tmp_path / "history.sqlite") as db:
         before = db.execute("SELECT id, result FROM motions").fetchall()
     assert len(before) == 1
@@ -153,8 +154,8 @@ def test_two_cosim_runs_at_once_on_one_history_both_store_their_motions(tmp_path
 
     ctx = multiprocessing.get_context("fork")
     path = scenario(tmp_path, faulty_fmu, "none")
-    procs = [ctx.Process(target=_cli, args=(["run", str(path), "--out", str(tmp_path / f"out{k}"), "--no-progress"],))
-             for k in (1, 2)]
+    procs = [ctx.Process(target=_cli, args=(["run", str(path), "--out", str(tmp_path / f"out{k}"), "--no-progress",
+                                             "--no-plots"],)) for k in (1, 2)]
     for p in procs:
         p.start()
     for p in procs:

@@ -87,10 +87,16 @@ def test_cosim_run_tool_change_then_worn_axis_whatever_the_out_dir(tmp_path, mon
     printed = [next(ln for ln in example_runs["stdout"][name].splitlines() if ln.startswith("  history:"))
                for name in ("worn_axis", "tool_change")]
     # the second tool change writes elsewhere (--out): the history stays runs/history.sqlite (on main, --out
-    # elsewhere/run2 silently switched to elsewhere/history.sqlite)
-    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "elsewhere/run2"]) == 0
-    printed.append(next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("  history:")))
+    # elsewhere/run2 silently switched to elsewhere/history.sqlite); drawn without its figures (--no-plots)
+    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "elsewhere/run2",
+                 "--no-plots"]) == 0
+    summary = capsys.readouterr().out.splitlines()
+    printed.append(next(ln for ln in summary if ln.startswith("  history:")))
     assert not Path("elsewhere/history.sqlite").exists()
+    # --no-plots: no plots/*.png and none listed, report.html still written, the same estimate (bit for bit)
+    assert summary[-1].endswith("report.html, 0 plots") and not Path("elsewhere/run2/plots").exists()
+    assert json.loads(Path("elsewhere/run2/report.json").read_text())["files"]["plots"] == []
+    assert Path("elsewhere/run2/report.html").is_file()
     assert printed[0] == ("  history: runs/history.sqlite, axis worn-X; healthy baseline: the nominal parameters "
                           "(monitor.baseline: nominal)")
     assert printed[1].startswith("  history: runs/history.sqlite, axis X; learning the healthy baseline: 1 of 3")
@@ -100,6 +106,7 @@ def test_cosim_run_tool_change_then_worn_axis_whatever_the_out_dir(tmp_path, mon
     (again,) = json.loads(Path("elsewhere/run2/report.json").read_text())["motions"]
     # the second motion is checked against the first one's validated parameters
     assert [healthy["reference"], again["reference"]] == ["nominal", "last validated"]
+    assert again["parameters"] == healthy["parameters"]  # the same plant and noise: figures or not, the same fit
     (worn,) = next(m for k, m in reports.items() if k.startswith("worn-axis"))
     assert healthy["validated"] and healthy["diagnosis"] == []
     assert worn["validated"] and {d["fault"] for d in worn["diagnosis"]} == WEAR
@@ -114,7 +121,8 @@ def test_cosim_run_tool_change_then_worn_axis_whatever_the_out_dir(tmp_path, mon
     # `cosim history` finds them by default; --db puts a run's motions into another file, and only there
     assert main(["history", "--axis", "X"]) == 0
     assert capsys.readouterr().out.startswith("axis X: 2 motion(s)")
-    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "run3", "--db", "other.sqlite"]) == 0
+    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--no-progress", "--out", "run3", "--db", "other.sqlite",
+                 "--no-plots"]) == 0
     assert "  history: other.sqlite, axis X; learning the healthy baseline: 1 of 3" in capsys.readouterr().out
     with History("other.sqlite") as other, History("runs/history.sqlite") as default:
         assert len(other.motions("X")) == 1 and len(default.motions("X")) == 2

@@ -38,11 +38,16 @@ def recording(tmp_path_factory):
 
 
 def monitor(recording, tmp_path, capsys, *maps, extra=()):
+    """``cosim monitor --out`` without its figures (``--no-plots``: what these tests read is report.json):
+    (exit status, stdout, stderr, report.json's text)."""
     out = tmp_path / "out"
     code = main(["monitor", str(recording), "--map", "time=time", *maps, "--db", str(tmp_path / "h.sqlite"),
-                 "--out", str(out), "--segment", "none", *extra])
+                 "--out", str(out), "--segment", "none", "--no-plots", *extra])
     text = capsys.readouterr()
     report = (out / "report.json").read_text() if code == 0 else ""
+    if code == 0:  # the page is written, no figure is drawn or listed
+        assert (out / "report.html").is_file() and not list(out.glob("plots/*.png"))
+        assert json.loads(report)["files"]["plots"] == []
     return code, text.out, text.err, report
 
 

@@ -30,11 +30,10 @@ def read_csv(path: Path) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.slow
-def test_tool_change_example_runs_end_to_end(tmp_path, feeddrive_fmu, capsys):
-    out = tmp_path / "run"
-    assert main(["run", str(EXAMPLES / "tool_change.yaml"), "--out", str(out), "--no-progress"]) == 0
-    assert gc.isenabled()  # paused for the imports and the monitor's construction only
-    summary = capsys.readouterr().out
+def test_tool_change_example_runs_end_to_end(example_runs):
+    """The session's ``cosim run examples/tool_change.yaml`` (tests/conftest.py example_runs), read only."""
+    out = example_runs["out"]["tool_change"]
+    summary = example_runs["stdout"]["tool_change"]
     assert summary.startswith("tool-change: ") and "position:" in summary
     s = read_csv(out / "signals.csv")
     t, x, w, state = s["time [s]"], s["plant.position [m]"], s["plant.speed [rad/s]"], s["nc.state [1]"]
@@ -61,14 +60,17 @@ def test_output_directory_is_never_overwritten_without_the_flag(tmp_path, feeddr
     path.write_text(SHORT.format(extra="stop_time: 0.05\n"))
     out = tmp_path / "out"
     assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 0
+    assert gc.isenabled()  # paused for the imports and the scenario's load only
     before = (out / "signals.csv").read_text()
     capsys.readouterr()
     assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "is not empty" in err and "--overwrite" in err
     assert (out / "signals.csv").read_text() == before
-    assert main(["run", str(path), "--out", str(out), "--no-progress", "--overwrite"]) == 0
+    assert len(list((out / "plots").glob("*.png"))) == 2  # the motion's profiles and currents
+    assert main(["run", str(path), "--out", str(out), "--no-progress", "--overwrite", "--no-plots"]) == 0
     assert (out / "signals.csv").read_text() == before  # deterministic rerun
+    assert not list((out / "plots").glob("*.png"))  # no figure of the replaced run is left as if it were this one's
 
 
 def test_db_memory_is_no_file(tmp_path, monkeypatch):

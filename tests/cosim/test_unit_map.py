@@ -190,7 +190,7 @@ def test_a_variable_without_unit_is_a_stated_assumption(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "  speed [rad/s] <- w [?]  unit not declared: taken as rad/s\n" in out
     assert "  current [A] <- I [?] x 2  (unit not declared: scale 2 offset 0 as given)\n" in out
-    assert main(["run", str(path), "--out", str(tmp_path / "o"), "--no-progress"]) == 0  # in this process
+    assert main(["run", str(path), "--out", str(tmp_path / "o"), "--no-progress", "--no-plots"]) == 0  # in this process
     stdout = capsys.readouterr().out
     notes = [line for line in stdout.splitlines() if line.startswith("plant.map:")]
     assert notes == ["plant.map: speed_ref <- w_set: unit not declared: taken as rad/s",

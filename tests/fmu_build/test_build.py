@@ -105,12 +105,21 @@ def test_cache_is_reused_and_rebuilt_when_the_sources_change(tmp_path, monkeypat
     assert builtin_fmu(tmp_path) not in (first, second)
 
 
-def test_parallel_builds_into_one_cache_agree(tmp_path):
+def test_parallel_builds_into_one_cache_agree(tmp_path, monkeypatch):
+    """Two processes asking for the same FMU at once: one compiles it, the other waits for it (the cache key's
+    lock) and takes it; the compiler (a logging $CC) ran once."""
+    log = tmp_path / "cc.log"
+    cc = tmp_path / "logging-cc"
+    cc.write_text(f'#!/bin/sh\necho "$$" >> {log}\nexec cc "$@"\n')
+    cc.chmod(0o755)
+    monkeypatch.setenv("CC", str(cc))
+    cache = tmp_path / "cache"
     with ProcessPoolExecutor(2) as pool:
-        paths = list(pool.map(builtin_fmu, [tmp_path, tmp_path]))
+        paths = list(pool.map(builtin_fmu, [cache, cache]))
     assert paths[0] == paths[1]
     assert validate_fmu(str(paths[0])) == []
     assert [p.name for p in paths[0].parent.iterdir()] == ["FeedDrive.fmu"]  # no temporary left over
+    assert len(log.read_text().splitlines()) == 1
 
 
 def test_cli_builds_and_refuses_to_overwrite(tmp_path, capsys):
