@@ -1,0 +1,45 @@
+"""The per-motion path's shortcuts through LAPACK (issue 26) against the numpy calls they replace.
+
+Each takes the same LAPACK routines on the same numbers, so the results are the same bits on this machine;
+the tests allow 1e-12 relative, as the other kernels whose arithmetic could be ordered differently elsewhere
+(tests/estimator/test_speed.py). Timing is measured in benchmarks/, never asserted here.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from feeddrive.estimator.kernels import right_singular, thin_q
+
+
+def _matrices(rng: np.random.Generator):
+    """Tall matrices like the checks' (rows 2..8000, 1..12 columns, column scales over six decades), in both
+    memory orders, and a few not tall enough for gesdd's QR path, a rank-deficient and a zero column."""
+    for k in range(60):
+        m, n = int(rng.integers(2, 8000)), int(rng.integers(1, 13))
+        A = rng.standard_normal((m, n)) * np.logspace(0, rng.uniform(0, 6), n)
+        yield np.asfortranarray(A) if k % 2 else A
+    A = rng.standard_normal((500, 4))
+    yield np.column_stack([A, A[:, :1] + A[:, 1:2], np.zeros(500)])
+    yield rng.standard_normal((7, 6))
+
+
+def test_thin_q_is_numpys_reduced_qr() -> None:
+    rng = np.random.default_rng(11)
+    for A in _matrices(rng):
+        want = np.linalg.qr(A)[0]
+        got = thin_q(A)
+        assert got.shape == want.shape
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)  # orthonormal columns: unit scale
+
+
+def test_right_singular_is_numpys_svd_without_u() -> None:
+    rng = np.random.default_rng(12)
+    for A in _matrices(rng):
+        _, s_want, vt_want = np.linalg.svd(A, full_matrices=False)
+        s, vt = right_singular(A)
+        assert s.shape == s_want.shape and vt.shape == vt_want.shape
+        np.testing.assert_allclose(s, s_want, rtol=0, atol=1e-12 * s_want.max(initial=0.0))
+        # the vectors of singular values above rounding: the null space of a rank-deficient matrix is any basis
+        big = s_want > 1e-10 * s_want.max(initial=0.0)
+        np.testing.assert_allclose(vt[big], vt_want[big], rtol=0, atol=1e-12)
+    assert right_singular(np.zeros((5, 0)))[0].shape == (0,)
