@@ -127,6 +127,28 @@ def right_singular(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s, vt
 
 
+def pinv_rank(A: np.ndarray) -> tuple[np.ndarray, int]:
+    """``(np.linalg.pinv(A), np.linalg.matrix_rank(A))`` of ``A`` (m, n) from one SVD instead of two.
+
+    The pseudo-inverse is numpy's arithmetic on numpy's SVD (the same bits); the rank counts the same
+    singular values above numpy's tolerance ``max(s) max(m, n) eps``, here those of the SVD with vectors where
+    ``matrix_rank`` takes the values alone (equal to rounding: the count differs only for a singular value
+    within a rounding of the tolerance). A residue test asked for both of one matrix twice per motion.
+    """
+    A = np.asarray(A, dtype=float)
+    m, n = A.shape
+    if m == 0 or n == 0:
+        return np.linalg.pinv(A), 0
+    u, s, vt = np.linalg.svd(A, full_matrices=False)
+    rank = int(np.count_nonzero(s > s.max(initial=0) * (max(m, n) * np.finfo(s.dtype).eps)))
+    # numpy.linalg.pinv from here on (rcond 1e-15 of the largest singular value)
+    cutoff = np.asarray(1e-15)[..., np.newaxis] * np.amax(s, axis=-1, keepdims=True)
+    large = s > cutoff
+    s = np.divide(1, s, where=large, out=s)
+    s[~large] = 0
+    return np.matmul(np.transpose(vt), np.multiply(s[..., np.newaxis], np.transpose(u))), rank
+
+
 def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.ndarray:
     """``W^T Gamma W`` for one sample set of ``motion.stationary_score_covariance``, in the frequency domain.
 
@@ -342,8 +364,8 @@ def last_columns_f_test(fit, q: int) -> tuple[float, float, float, float]:  # no
     cov = np.asarray(fit.cov_params())[-q:, -q:]
     if np.isnan(cov).max():
         raise ValueError("r_matrix performs f_test for using dimensions that are asymptotically non-normal")
-    invcov = np.linalg.pinv(cov)
-    J = float(min(q, np.linalg.matrix_rank(cov)))
+    invcov, rank = pinv_rank(cov)
+    J = float(min(q, rank))
     F = float(np.squeeze(np.dot(np.dot(Rbq.T, invcov), Rbq))) / J
     df_denom = float(getattr(fit, "df_resid_inference", fit.df_resid))
     return F, J, df_denom, float(f_sf(F, J, df_denom))

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from feeddrive.estimator.kernels import right_singular, thin_q
+from feeddrive.estimator.kernels import pinv_rank, right_singular, thin_q
 
 
 def _matrices(rng: np.random.Generator):
@@ -43,3 +43,14 @@ def test_right_singular_is_numpys_svd_without_u() -> None:
         big = s_want > 1e-10 * s_want.max(initial=0.0)
         np.testing.assert_allclose(vt[big], vt_want[big], rtol=0, atol=1e-12)
     assert right_singular(np.zeros((5, 0)))[0].shape == (0,)
+
+
+def test_pinv_rank_is_numpys_pinv_and_matrix_rank() -> None:
+    rng = np.random.default_rng(13)
+    cases = [rng.standard_normal((int(rng.integers(1, 200)), int(rng.integers(1, 30)))) for _ in range(60)]
+    B = rng.standard_normal((120, 5))
+    cases += [np.column_stack([B, B @ rng.standard_normal((5, 3))]), np.zeros((4, 3)), np.diag([1.0, 1e-20, 0.0])]
+    for A in cases:
+        pinv, rank = pinv_rank(A)
+        np.testing.assert_array_equal(pinv, np.linalg.pinv(A))  # numpy's arithmetic on numpy's SVD: the same bits
+        assert rank == np.linalg.matrix_rank(A)
