@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from feeddrive.estimator.kernels import pinv_rank, right_singular, thin_q
+from feeddrive.estimator.linear_fit import NORMAL_MAX_CONDITION, ls_theta
 
 
 def _matrices(rng: np.random.Generator):
@@ -54,3 +55,34 @@ def test_pinv_rank_is_numpys_pinv_and_matrix_rank() -> None:
         pinv, rank = pinv_rank(A)
         np.testing.assert_array_equal(pinv, np.linalg.pinv(A))  # numpy's arithmetic on numpy's SVD: the same bits
         assert rank == np.linalg.matrix_rank(A)
+
+
+def _scaled_regressor(rng: np.random.Generator, n: int, p: int, cond: float) -> np.ndarray:
+    """Unit-norm columns whose condition number is about ``cond`` (two columns made nearly collinear)."""
+    X = rng.standard_normal((n, p))
+    X[:, 1] = X[:, 0] + X[:, 1] * (2.0 / cond)
+    return X / np.linalg.norm(X, axis=0)
+
+
+def test_ls_from_the_gram_matrix_is_lstsq_when_well_conditioned() -> None:
+    """_solve's LS from the eigendecomposition of its Gram matrix: lstsq's solution to 1e-12 up to the condition
+    number it is used at, and lstsq itself (the same bits) above it or for several sample sets alike."""
+    rng = np.random.default_rng(14)
+    seen = []
+    for k in range(40):
+        p = int(rng.integers(2, 6))
+        Xs = [_scaled_regressor(rng, int(rng.integers(200, 3000)), p, float(rng.uniform(1.0, 3 * NORMAL_MAX_CONDITION)))
+              for _ in range(1 + k % 2)]
+        scale = np.sqrt(sum(np.einsum("ij,ij->j", X, X) for X in Xs))
+        Xs = [X / scale for X in Xs]
+        ys = [X @ rng.standard_normal(p) * 10.0 ** rng.uniform(-3, 3) + rng.standard_normal(len(X)) for X in Xs]
+        eig, V = np.linalg.eigh(sum(X.T @ X for X in Xs))
+        cond = float(np.sqrt(eig[-1] / eig[0]))
+        want = np.linalg.lstsq(np.vstack(Xs), np.concatenate(ys), rcond=None)[0]
+        got = ls_theta(Xs, ys, eig, V, cond)
+        if cond > NORMAL_MAX_CONDITION:
+            np.testing.assert_array_equal(got, want)
+        else:
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.linalg.norm(want))
+        seen.append(cond <= NORMAL_MAX_CONDITION)
+    assert 10 < sum(seen) < 35  # both branches exercised
