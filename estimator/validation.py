@@ -53,7 +53,7 @@ from feeddrive.estimator import lti
 from feeddrive.estimator.distributions import chi2_sf, t_ppf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec, decimation_factor, share_filtered
-from feeddrive.estimator.kernels import bilinear_first_order
+from feeddrive.estimator.kernels import bilinear_first_order, line_fit
 
 #: the redundant pairs: quantity -> (sensor 1, sensor 2)
 PAIRS: dict[str, tuple[str, str]] = {
@@ -276,13 +276,11 @@ def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
     means = r[:cut].reshape(n_win, m).mean(axis=1)
     levels = (0.5 * (x1 + x2))[:cut].reshape(n_win, m).mean(axis=1)
     centers = np.arange(n_win) * m + (m - 1) / 2
-    X = np.column_stack([levels, np.ones(n_win)])
-    coef, *_ = np.linalg.lstsq(X, means, rcond=None)
-    resid = means - X @ coef
+    coef, resid, gram_inv = line_fit(levels, means)
     dof = n_win - 2
     var_hf = sigma**2 / m
     scale = max(float(resid @ resid) / dof, var_hf, np.finfo(float).tiny)
-    cov = scale * np.linalg.pinv(X.T @ X)
+    cov = scale * gram_inv
     se = np.sqrt(np.diag(cov))
     tq = t_ppf(0.975, dof)
     p = 2 * t_sf(np.abs(coef) / np.where(se > 0, se, np.inf), dof)

@@ -6,9 +6,11 @@ the tests allow 1e-12 relative, as the other kernels whose arithmetic could be o
 """
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 
-from feeddrive.estimator.kernels import pinv_rank, right_singular, thin_q
+from feeddrive.estimator.kernels import line_fit, pinv_rank, right_singular, thin_q
 from feeddrive.estimator.linear_fit import NORMAL_MAX_CONDITION, ls_theta
 
 
@@ -86,3 +88,33 @@ def test_ls_from_the_gram_matrix_is_lstsq_when_well_conditioned() -> None:
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.linalg.norm(want))
         seen.append(cond <= NORMAL_MAX_CONDITION)
     assert 10 < sum(seen) < 35  # both branches exercised
+
+
+def test_line_fit_is_lstsq_and_pinv_of_the_two_column_regressor() -> None:
+    """validation.residue_test's window regression ``means ~ a levels + b``: lstsq's coefficients and residue and
+    pinv(X^T X) to 1e-12, levels around zero or away from it (cond(X) up to ~200); a constant level goes to lstsq
+    and pinv themselves."""
+    rng = np.random.default_rng(15)
+    for k in range(60):
+        n = int(rng.integers(8, 400))
+        spread = 10.0 ** rng.uniform(-3, 3)  # a sensor's window levels: their mean up to 100 times their spread
+        x = rng.standard_normal(n) * spread + (spread * 10.0 ** rng.uniform(-2, 2) if k % 2 else 0.0)
+        y = 10.0 ** rng.uniform(-4, 1) * x + rng.standard_normal(n) * 10.0 ** rng.uniform(-6, 0) + rng.uniform(-1, 1)
+        X = np.column_stack([x, np.ones(n)])
+        coef, resid, gram_inv = line_fit(x, y)
+        want = np.linalg.lstsq(X, y, rcond=None)[0]
+        np.testing.assert_allclose(coef, want, rtol=1e-12, atol=1e-12 * np.abs(y).max())
+        np.testing.assert_allclose(resid, y - X @ want, rtol=0, atol=1e-12 * np.abs(y).max())
+        # (X^T X)^-1 exactly (rational arithmetic on the same floats): pinv(X^T X) itself errs by cond(X)^2 eps,
+        # 1e-11 where the levels are far from zero against their spread; the closed form is within 1e-12
+        sxx, sx = sum(Fraction(v) ** 2 for v in x), sum(Fraction(v) for v in x)
+        det = n * sxx - sx * sx
+        exact = np.array([[float(n / det), float(-sx / det)], [float(-sx / det), float(sxx / det)]])
+        np.testing.assert_allclose(gram_inv, exact, rtol=1e-12, atol=0)
+        if np.linalg.cond(X) < 1e2:
+            np.testing.assert_allclose(gram_inv, np.linalg.pinv(X.T @ X), rtol=1e-12, atol=0)
+    x = np.full(20, 3.0)
+    coef, resid, gram_inv = line_fit(x, np.arange(20.0))
+    X = np.column_stack([x, np.ones(20)])
+    np.testing.assert_array_equal(coef, np.linalg.lstsq(X, np.arange(20.0), rcond=None)[0])
+    np.testing.assert_array_equal(gram_inv, np.linalg.pinv(X.T @ X))
