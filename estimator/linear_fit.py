@@ -85,6 +85,21 @@ def ls_theta(Xs: list[np.ndarray], ys: list[np.ndarray], eig: np.ndarray, V: np.
     return np.linalg.lstsq(X, y, rcond=None)[0]
 
 
+def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``numpy.linalg.lstsq(A, b, rcond=None)[0]`` for a full-rank ``A`` (n, p) and ``b`` (n,): from the Gram matrix
+    of the unit-norm columns when their condition number is at most ``NORMAL_MAX_CONDITION`` (``ls_theta``, the
+    same solution to 1e-12), else lstsq itself."""
+    norms = np.sqrt(np.einsum("ij,ij->j", A, A))
+    if not np.all(norms > 0) or not np.all(np.isfinite(norms)):
+        return np.linalg.lstsq(A, b, rcond=None)[0]
+    As = A / norms
+    eig, V = np.linalg.eigh(As.T @ As)
+    cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
+    if cond > NORMAL_MAX_CONDITION:
+        return np.linalg.lstsq(A, b, rcond=None)[0]
+    return ls_theta([As], [b], eig, V, cond) / norms
+
+
 def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
            reference: np.ndarray | None = None, note: str = "", covariance: bool = True,
            memo: dict | None = None) -> _Fit:

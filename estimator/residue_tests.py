@@ -16,6 +16,7 @@ from feeddrive.estimator.distributions import chi2_sf, f_sf, norm_isf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.glsar import glsar_fit
 from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test, pinv_rank
+from feeddrive.estimator.linear_fit import lstsq
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
 MAX_AR = 12
@@ -286,7 +287,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
                                   segment_covariance)
     Zfull = Z[:, [bool(Z[:, j].any()) for j in range(Z.shape[1])]]  # the non-zero columns (a column at a time:
     # a reduction along the rows of a C-ordered (n, k) array costs ~7x more)
-    e = residue - Zfull @ np.linalg.lstsq(Zfull, residue, rcond=None)[0]
+    e = residue - Zfull @ lstsq(Zfull, residue)  # all samples: from the Gram matrix when well conditioned
     rms = float(np.sqrt(np.mean(e ** 2)))
     if noise_std is not None and noise_std > 0:
         dof = float(y.size)  # the residue is correlated over about a block: one degree of freedom per block

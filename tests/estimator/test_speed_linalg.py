@@ -11,7 +11,7 @@ from fractions import Fraction
 import numpy as np
 
 from feeddrive.estimator.kernels import line_fit, pinv_rank, right_singular, thin_q
-from feeddrive.estimator.linear_fit import NORMAL_MAX_CONDITION, ls_theta
+from feeddrive.estimator.linear_fit import NORMAL_MAX_CONDITION, ls_theta, lstsq
 
 
 def _matrices(rng: np.random.Generator):
@@ -118,3 +118,19 @@ def test_line_fit_is_lstsq_and_pinv_of_the_two_column_regressor() -> None:
     X = np.column_stack([x, np.ones(20)])
     np.testing.assert_array_equal(coef, np.linalg.lstsq(X, np.arange(20.0), rcond=None)[0])
     np.testing.assert_array_equal(gram_inv, np.linalg.pinv(X.T @ X))
+
+
+def test_lstsq_of_unscaled_columns_is_numpys() -> None:
+    """linear_fit.lstsq (the model check's residue less its nuisance part): numpy's lstsq to 1e-12 on columns of
+    any scale, the same bits where the unit-norm columns' condition number is above NORMAL_MAX_CONDITION."""
+    rng = np.random.default_rng(16)
+    for k in range(30):
+        p = int(rng.integers(2, 7))
+        A = _scaled_regressor(rng, int(rng.integers(100, 3000)), p, float(rng.uniform(1.0, 3 * NORMAL_MAX_CONDITION)))
+        A = A * 10.0 ** rng.uniform(-4, 4, p)
+        b = A @ rng.standard_normal(p) + rng.standard_normal(len(A))
+        want = np.linalg.lstsq(A, b, rcond=None)[0]
+        np.testing.assert_allclose(A @ lstsq(A, b), A @ want, rtol=0, atol=1e-12 * np.linalg.norm(A @ want))
+        np.testing.assert_allclose(lstsq(A, b), want, rtol=1e-12 * NORMAL_MAX_CONDITION)
+    A = np.column_stack([np.ones(50), np.zeros(50)])  # a zero column: numpy's minimum-norm answer
+    np.testing.assert_array_equal(lstsq(A, np.arange(50.0)), np.linalg.lstsq(A, np.arange(50.0), rcond=None)[0])
