@@ -24,7 +24,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from feeddrive.estimator.distributions import chi2_sf, norm_ppf
-from feeddrive.estimator.linear_fit import ls_theta
+from feeddrive.estimator.kernels import ls_theta
 
 #: Smallest ratio of the two time constants for the second lag to matter to L.
 MIN_LAG_RATIO = 0.1

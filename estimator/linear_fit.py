@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from feeddrive.estimator.errors import NotEnoughExcitation
+from feeddrive.estimator.kernels import ls_theta
 from feeddrive.estimator.motion import EstimationOptions, parameter_covariance, stationary_score_covariance
 from feeddrive.estimator.regression import Regression
 
@@ -54,50 +55,6 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
     y1, Phi1 = reg.evaluate({k: np.full(1, v) for k, v in proxy.items()})
     Phi = np.repeat(np.vstack([y1, Phi1.T]), n, axis=1)[1:].T
     return np.sqrt(np.einsum("ij,ij->j", Phi, Phi))
-
-
-#: largest condition number of the column-scaled regressor whose LS solution is taken from its Gram matrix's
-#: eigendecomposition (the normal equations, refined once; their error ~ cond^2 eps before the refinement, 6e-13
-#: here, its square after); above it lstsq
-NORMAL_MAX_CONDITION = 50.0
-
-
-def ls_theta(Xs: list[np.ndarray], ys: list[np.ndarray], eig: np.ndarray, V: np.ndarray, cond: float) -> np.ndarray:
-    """Least squares of the stacked ``ys`` on the stacked ``Xs`` (each (n_k, p), columns scaled to unit norm).
-
-    ``eig`` (p,) ascending and ``V`` (p, p) are the eigendecomposition of the Gram matrix ``sum X^T X`` that
-    ``_solve`` computed for the condition number ``cond``. A well-conditioned regressor (``cond`` at most
-    ``NORMAL_MAX_CONDITION``) is solved from it, ``V diag(1 / eig) V^T sum X^T y`` (one pass over the samples
-    instead of lstsq's SVD: 0.4 ms of 0.45 at 11426 x 3), refined once on its residue; the same solution to
-    1e-12 (~1e-15 relative at the tool change's cond 5.8, tests/estimator/test_speed_linalg.py); otherwise
-    ``numpy.linalg.lstsq``.
-    """
-    if cond <= NORMAL_MAX_CONDITION and eig.size == Xs[0].shape[1] and eig[0] > 0:
-        def solve(b: np.ndarray) -> np.ndarray:
-            return V @ ((V.T @ b) / eig)
-
-        theta = solve(sum(X.T @ y for X, y in zip(Xs, ys)))
-        # one step of refinement on the residue: the normal equations' error (cond^2 eps times the residue's
-        # size relative to the fit's) becomes second order, lstsq's accuracy for any residue
-        return theta + solve(sum(X.T @ (y - X @ theta) for X, y in zip(Xs, ys)))
-    X = Xs[0] if len(Xs) == 1 else np.vstack(Xs)
-    y = ys[0] if len(ys) == 1 else np.concatenate(ys)
-    return np.linalg.lstsq(X, y, rcond=None)[0]
-
-
-def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``numpy.linalg.lstsq(A, b, rcond=None)[0]`` for a full-rank ``A`` (n, p) and ``b`` (n,): from the Gram matrix
-    of the unit-norm columns when their condition number is at most ``NORMAL_MAX_CONDITION`` (``ls_theta``, the
-    same solution to 1e-12), else lstsq itself."""
-    norms = np.sqrt(np.einsum("ij,ij->j", A, A))
-    if not np.all(norms > 0) or not np.all(np.isfinite(norms)):
-        return np.linalg.lstsq(A, b, rcond=None)[0]
-    As = A / norms
-    eig, V = np.linalg.eigh(As.T @ As)
-    cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
-    if cond > NORMAL_MAX_CONDITION:
-        return np.linalg.lstsq(A, b, rcond=None)[0]
-    return ls_theta([As], [b], eig, V, cond) / norms
 
 
 def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,

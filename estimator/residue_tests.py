@@ -15,8 +15,7 @@ from scipy import linalg
 from feeddrive.estimator.distributions import chi2_sf, f_sf, norm_isf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.glsar import glsar_fit
-from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test, pinv_rank
-from feeddrive.estimator.linear_fit import lstsq
+from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test, lstsq, pinv_rank
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
 MAX_AR = 12

@@ -10,8 +10,15 @@ from fractions import Fraction
 
 import numpy as np
 
-from feeddrive.estimator.kernels import line_fit, pinv_rank, right_singular, thin_q
-from feeddrive.estimator.linear_fit import NORMAL_MAX_CONDITION, ls_theta, lstsq
+from feeddrive.estimator.kernels import (
+    NORMAL_MAX_CONDITION,
+    line_fit,
+    ls_theta,
+    lstsq,
+    pinv_rank,
+    right_singular,
+    thin_q,
+)
 
 
 def _matrices(rng: np.random.Generator):
@@ -134,3 +141,25 @@ def test_lstsq_of_unscaled_columns_is_numpys() -> None:
         np.testing.assert_allclose(lstsq(A, b), want, rtol=1e-12 * NORMAL_MAX_CONDITION)
     A = np.column_stack([np.ones(50), np.zeros(50)])  # a zero column: numpy's minimum-norm answer
     np.testing.assert_array_equal(lstsq(A, np.arange(50.0)), np.linalg.lstsq(A, np.arange(50.0), rcond=None)[0])
+
+
+def test_the_spline_without_its_c_loops_is_the_same(monkeypatch) -> None:
+    """simulation._spline in C (estimator.spline_c) and in numpy: the same bits, both scipy's CubicSpline's
+    (tests/estimator/test_speed.py compares the C path with scipy)."""
+    from feeddrive.estimator import simulation, spline_c
+
+    rng = np.random.default_rng(17)
+    x = np.arange(0, 2901, 2.0)
+    x[-1] -= 1.0
+    Y = np.cumsum(rng.standard_normal((2, x.size)), axis=1)
+    at = np.arange(x[-1] + 1) + 1 / 6
+    compiled = simulation._spline(x, Y, at)
+    assert spline_c.available()
+    monkeypatch.setenv("FEEDDRIVE_NO_COMPILED_SPLINE", "1")
+    spline_c._library.cache_clear()
+    try:
+        assert not spline_c.available()
+        np.testing.assert_array_equal(simulation._spline(x, Y, at), compiled)
+    finally:
+        monkeypatch.delenv("FEEDDRIVE_NO_COMPILED_SPLINE")
+        spline_c._library.cache_clear()
