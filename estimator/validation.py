@@ -249,7 +249,7 @@ def _median_in_place(a: np.ndarray) -> float:
 
 
 def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
-                 options: ValidationOptions = ValidationOptions()) -> ResidueTest:
+                 options: ValidationOptions = ValidationOptions(), mean: np.ndarray | None = None) -> ResidueTest:
     """Detect and classify a disagreement between two sensors of one quantity (eq. 10).
 
     Parameters
@@ -259,6 +259,8 @@ def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
     h : float
         Sample time [s].
     options : ValidationOptions
+    mean : ndarray, shape (n,), optional
+        ``0.5 * (x1 + x2)`` when the caller has it (validate_measurements passes the pair's mean on).
 
     Returns
     -------
@@ -274,7 +276,7 @@ def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
     sigma = noise_std(r)
     cut = n_win * m
     means = r[:cut].reshape(n_win, m).mean(axis=1)
-    levels = (0.5 * (x1 + x2))[:cut].reshape(n_win, m).mean(axis=1)
+    levels = (0.5 * (x1 + x2) if mean is None else mean)[:cut].reshape(n_win, m).mean(axis=1)
     centers = np.arange(n_win) * m + (m - 1) / 2
     coef, resid, gram_inv = line_fit(levels, means)
     dof = n_win - 2
@@ -457,8 +459,9 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
     residues, best = {}, {}  # best: quantity symbol -> (raw, filtered) signal to pass on
     for q, (s1, s2) in PAIRS.items():
         if s2 in raw:
-            residues[q] = residue_test(raw[s1], raw[s2], h, options)
-            best[symbol[q]] = (0.5 * (raw[s1] + raw[s2]), 0.5 * (filt[s1] + filt[s2]))
+            mean = 0.5 * (raw[s1] + raw[s2])
+            residues[q] = residue_test(raw[s1], raw[s2], h, options, mean)
+            best[symbol[q]] = (mean, 0.5 * (filt[s1] + filt[s2]))
         else:
             best[symbol[q]] = (raw[s1], filt[s1])
     pairs = {}
