@@ -2,7 +2,8 @@
 
 The healthy tool change of examples/tool_change.yaml (one 3.5 s motion at 10 kHz, 34879 samples) is
 co-simulated once; ``MonitorPipeline.process`` (measurement validation, the residue check, LS + IV,
-the paper's model check, diagnosis, history in memory; no plots) is then timed ``--repeat`` times and
+the paper's model check, diagnosis, history in memory; no plots) is then timed ``--repeat`` times (each on a
+history opened and a pipeline built before its clock starts, as the monitor does once per run) and
 the best CPU time (``time.process_time``: what the monitor's budget judges, and what a busy shared
 machine disturbs least) and wall time are printed, with each stage's share (the stages' functions
 wrapped with timers in the same runs) and the ratio against one ``numpy.linalg.lstsq`` of the
@@ -90,27 +91,36 @@ def main() -> int:
         lstsq.append(time.process_time() - cpu)
     base = min(lstsq)
 
-    def run() -> dict:
+    def run(clock: list[float] | None = None) -> dict:
+        """One motion's ``process`` on a new history (the motion is the first of its axis, every repeat alike);
+        ``clock`` receives (CPU, wall) of ``process`` alone: the history is opened and the pipeline built once per
+        run of the monitor, not per motion, so they are outside the figure (opening the in-memory history and
+        building the pipeline were ~2 ms of it before)."""
         clear_filter_memo()  # a new motion's signals: nothing filtered yet
         with History(":memory:") as history:
             pipeline = MonitorPipeline(config, history, "X")
             pipeline.estimation_options = replace(pipeline.estimation_options, decimation=decimation)
-            return pipeline.process(signals, h, 0.0, 1, 0.0).result
+            tic, cpu = time.perf_counter(), time.process_time()
+            result = pipeline.process(signals, h, 0.0, 1, 0.0).result
+            if clock is not None:
+                clock += [time.process_time() - cpu, time.perf_counter() - tic]
+            return result
 
     result = run()  # warm: the compiled rollouts loaded, CasADi functions built
-    best, wall, stages = np.inf, np.inf, {}
+    best, wall, stages, whole = np.inf, np.inf, {}, np.inf
     originals = {s: getattr(monitor, s) for s in STAGES}
     try:
         for _ in range(args.repeat):
             spent: dict[str, float] = defaultdict(float)
             for s in STAGES:
                 setattr(monitor, s, timed(s, originals[s], spent))
-            tic, cpu = time.perf_counter(), time.process_time()
-            run()
-            cpu, tic = time.process_time() - cpu, time.perf_counter() - tic
-            wall = min(wall, tic)
-            if cpu < best:
-                best, stages = cpu, dict(spent)
+            clock: list[float] = []
+            cpu = time.process_time()
+            run(clock)
+            whole = min(whole, time.process_time() - cpu)
+            wall = min(wall, clock[1])
+            if clock[0] < best:
+                best, stages = clock[0], dict(spent)
     finally:
         for s in STAGES:
             setattr(monitor, s, originals[s])
@@ -118,7 +128,7 @@ def main() -> int:
           f"{decimation}: estimated at {result['estimation_rate_hz']:.0f} Hz")
     print(f"one lstsq ({len(y)} x {Phi.shape[1]}): {1e3 * base:.2f} ms CPU")
     print(f"monitor per motion: {1e3 * best:.1f} ms CPU ({best / base:.0f} x lstsq), best wall {1e3 * wall:.1f} ms; "
-          f"target {TARGET_MS:.0f} ms")
+          f"target {TARGET_MS:.0f} ms (with opening the history and building the pipeline: {1e3 * whole:.1f} ms)")
     for s in STAGES:
         print(f"  {s:22} {1e3 * stages.get(s, 0.0):7.1f} ms  {stages.get(s, 0.0) / base:6.0f} x lstsq")
     other = best - sum(stages.values())

@@ -47,7 +47,7 @@ from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_f
 from feeddrive.estimator.distributions import f_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
-from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms
+from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms, right_singular, thin_q
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
 MIN_DIRECTION = 1e-3
@@ -190,9 +190,9 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     # nuisance: what the model's regressors cannot represent, orthonormal; orthogonal to the instruments,
     # not to the regressors, whose noise (the derivative's) would pass into the directions and bias them
     Nn = N / nonzero_norms(N)
-    Q = np.linalg.qr(Zs)[0] if Zs.shape[1] else np.zeros((n, 0))
+    Q = thin_q(Zs) if Zs.shape[1] else np.zeros((n, 0))
     R_ = Nn - Q @ (Q.T @ Nn)
-    _, s, Vt = np.linalg.svd(R_, full_matrices=False)
+    s, Vt = right_singular(R_)  # the left singular vectors (n x q) are not needed
     keep = s > MIN_DIRECTION
     q = int(keep.sum())
     if q == 0:

@@ -24,6 +24,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from feeddrive.estimator.distributions import chi2_sf, norm_ppf
+from feeddrive.estimator.kernels import ls_theta
 
 #: Smallest ratio of the two time constants for the second lag to matter to L.
 MIN_LAG_RATIO = 0.1
@@ -141,13 +142,17 @@ def _augmented(y: np.ndarray, X: np.ndarray, block: int) -> tuple[np.ndarray, np
     scale = np.linalg.norm(X, axis=0)
     scale[scale == 0] = 1.0
     Xs = X / scale
-    theta, *_ = np.linalg.lstsq(Xs, y, rcond=None)
-    cov = _newey_west_cov(Xs, y - Xs @ theta, max(1, int(block)))
+    gram = Xs.T @ Xs
+    eig, V = np.linalg.eigh(gram)
+    cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
+    theta = ls_theta([Xs], [y], eig, V, cond)  # lstsq's solution (from the Gram matrix when well conditioned)
+    cov = _newey_west_cov(Xs, y - Xs @ theta, max(1, int(block)), gram)
     return theta / scale, cov / np.outer(scale, scale)
 
 
-def _newey_west_cov(X: np.ndarray, e: np.ndarray, lags: int) -> np.ndarray:
-    """The coefficients' Newey-West (Bartlett) covariance over ``lags`` lags, shape (p, p) (see _newey_west_t)."""
+def _newey_west_cov(X: np.ndarray, e: np.ndarray, lags: int, gram: np.ndarray | None = None) -> np.ndarray:
+    """The coefficients' Newey-West (Bartlett) covariance over ``lags`` lags, shape (p, p) (see _newey_west_t);
+    ``gram``: ``X.T @ X`` when the caller has it."""
     n, p = X.shape
     S = X * e[:, None]
     m = lags + 1
@@ -155,7 +160,7 @@ def _newey_west_cov(X: np.ndarray, e: np.ndarray, lags: int) -> np.ndarray:
     np.cumsum(S, axis=0, out=C[m + 1:n + m + 1])
     C[n + m + 1:] = C[n + m]
     B = C[m:] - C[:-m]
-    G = np.linalg.pinv(X.T @ X)
+    G = np.linalg.pinv(X.T @ X if gram is None else gram)
     return G @ (B.T @ B / m) @ G * n / (n - p)
 
 

@@ -66,7 +66,7 @@ def ar_order_bic(x: np.ndarray, maxlag: int) -> int:
     ones = np.ones(nobs)
     if nobs > maxlag + 1:
         sv = np.linalg.svd(X, compute_uv=False)
-        q, _ = np.linalg.qr(X)
+        q = thin_q(X)
         spans_one = np.linalg.norm(ones - q @ (q.T @ ones)) < 1e-6 * np.sqrt(nobs)
         regular = sv[-1] > 1e-8 * sv[0] and not spans_one and np.ptp(X, axis=0).min() > 0
     else:
@@ -90,6 +90,131 @@ def ar_order_bic(x: np.ndarray, maxlag: int) -> int:
         if ic < best_ic:  # the first of equal values, as statsmodels' stable sort
             best, best_ic = order, ic
     return best
+
+
+def thin_q(A: np.ndarray) -> np.ndarray:
+    """``np.linalg.qr(A)[0]``: the orthonormal factor (m, k), k = min(m, n), of ``A`` (m, n).
+
+    The same LAPACK routines (geqrf, orgqr) through ``scipy.linalg.qr(mode="economic")``: numpy's reduced QR
+    took 1.3 ms on the residue check's 6101 x 6 instruments, scipy's 0.3 ms. The same bits here
+    (tests/estimator/test_speed.py compares the two to 1e-12).
+    """
+    from scipy.linalg import qr  # here: the monitor's path imports scipy lazily
+
+    return qr(A, mode="economic", check_finite=False)[0]
+
+
+def right_singular(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.linalg.svd(A, full_matrices=False)[1:]``: the singular values (k,) and right singular vectors
+    ``Vt`` (k, n) of ``A`` (m, n), without the left ones (m, k).
+
+    For ``m >= 11 n / 6`` LAPACK's gesdd itself factors ``A = Q R`` first and decomposes ``R``; here ``R`` is
+    decomposed by the same gesdd without forming ``Q`` and ``U = Q U_R``, the two products over the m rows
+    that were most of the time (6101 x 6: 0.7 -> 0.2 ms). The same values (tests/estimator/test_speed.py
+    compares the two to 1e-12); a matrix not that tall goes to numpy's svd.
+    """
+    m, n = A.shape
+    if n == 0 or m < int(n * 11 / 6) or not np.all(np.isfinite(A)):  # gesdd's own threshold (MNTHR)
+        return np.linalg.svd(A, full_matrices=False)[1:]
+    from scipy.linalg import lapack  # here: the monitor's path imports scipy lazily
+
+    qr, _, _, info = lapack.dgeqrf(np.asarray(A, dtype=float))
+    if info != 0:  # pragma: no cover - geqrf fails only on an illegal argument
+        return np.linalg.svd(A, full_matrices=False)[1:]
+    _, s, vt, info = lapack.dgesdd(np.triu(qr[:n]), compute_uv=1, full_matrices=0)
+    if info != 0:  # not converged: numpy raises its LinAlgError for the same matrix
+        return np.linalg.svd(A, full_matrices=False)[1:]
+    return s, vt
+
+
+def pinv_rank(A: np.ndarray) -> tuple[np.ndarray, int]:
+    """``(np.linalg.pinv(A), np.linalg.matrix_rank(A))`` of ``A`` (m, n) from one SVD instead of two.
+
+    The pseudo-inverse is numpy's arithmetic on numpy's SVD (the same bits); the rank counts the same
+    singular values above numpy's tolerance ``max(s) max(m, n) eps``, here those of the SVD with vectors where
+    ``matrix_rank`` takes the values alone (equal to rounding: the count differs only for a singular value
+    within a rounding of the tolerance). A residue test asked for both of one matrix twice per motion.
+    """
+    A = np.asarray(A, dtype=float)
+    m, n = A.shape
+    if m == 0 or n == 0:
+        return np.linalg.pinv(A), 0
+    u, s, vt = np.linalg.svd(A, full_matrices=False)
+    rank = int(np.count_nonzero(s > s.max(initial=0) * (max(m, n) * np.finfo(s.dtype).eps)))
+    # numpy.linalg.pinv from here on (rcond 1e-15 of the largest singular value)
+    cutoff = np.asarray(1e-15)[..., np.newaxis] * np.amax(s, axis=-1, keepdims=True)
+    large = s > cutoff
+    s = np.divide(1, s, where=large, out=s)
+    s[~large] = 0
+    return np.matmul(np.transpose(vt), np.multiply(s[..., np.newaxis], np.transpose(u))), rank
+
+
+def line_fit(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least squares of ``y ~ a x + b`` (both (k,)): ``[a, b]``, the residue (k,) and ``(X^T X)^-1`` (2, 2) of
+    ``X = [x 1]``.
+
+    In closed form on the centred ``x`` (the slope's sum over the centred products, the intercept from the means:
+    ``lstsq`` and ``pinv``'s solution to ~1e-15 relative, tests/estimator/test_speed_linalg.py) instead of two LAPACK
+    calls on a 2-column matrix, which cost 0.3 ms of each sensor pair's 0.5 ms inside the monitor's treatment (``validation.residue_test``). A
+    constant ``x`` (a rank-deficient ``X``) goes to ``lstsq`` and ``pinv`` themselves (their minimum-norm answer).
+    """
+    k = x.size
+    mx, my = x.sum() / k, y.sum() / k
+    dx = x - mx
+    sxx = float(dx @ dx)
+    if not sxx > 1e-12 * k * (mx * mx + 1.0):
+        X = np.column_stack([x, np.ones(k)])
+        coef = np.linalg.lstsq(X, y, rcond=None)[0]
+        return coef, y - X @ coef, np.linalg.pinv(X.T @ X)
+    a = float(dx @ (y - my)) / sxx
+    b = my - a * mx
+    # (X^T X)^-1 = [[1, -mx], [-mx, sxx / k + mx^2]] / sxx, its determinant k sxx
+    gram_inv = np.array([[1.0, -mx], [-mx, sxx / k + mx * mx]]) / sxx
+    return np.array([a, b]), y - (a * x + b), gram_inv
+
+
+#: largest condition number of the column-scaled regressor whose LS solution is taken from its Gram matrix's
+#: eigendecomposition (the normal equations, refined once; their error ~ cond^2 eps before the refinement, 6e-13
+#: here, its square after); above it lstsq
+NORMAL_MAX_CONDITION = 50.0
+
+
+def ls_theta(Xs: list[np.ndarray], ys: list[np.ndarray], eig: np.ndarray, V: np.ndarray, cond: float) -> np.ndarray:
+    """Least squares of the stacked ``ys`` on the stacked ``Xs`` (each (n_k, p), columns scaled to unit norm).
+
+    ``eig`` (p,) ascending and ``V`` (p, p) are the eigendecomposition of the Gram matrix ``sum X^T X`` that
+    ``linear_fit._solve`` computed for the condition number ``cond``. A well-conditioned regressor (``cond`` at most
+    ``NORMAL_MAX_CONDITION``) is solved from it, ``V diag(1 / eig) V^T sum X^T y`` (one pass over the samples
+    instead of lstsq's SVD: 0.4 ms of 0.45 at 11426 x 3), refined once on its residue; the same solution to
+    1e-12 (~1e-15 relative at the tool change's cond 5.8, tests/estimator/test_speed_linalg.py); otherwise
+    ``numpy.linalg.lstsq``.
+    """
+    if cond <= NORMAL_MAX_CONDITION and eig.size == Xs[0].shape[1] and eig[0] > 0:
+        def solve(b: np.ndarray) -> np.ndarray:
+            return V @ ((V.T @ b) / eig)
+
+        theta = solve(sum(X.T @ y for X, y in zip(Xs, ys)))
+        # one step of refinement on the residue: the normal equations' error (cond^2 eps times the residue's
+        # size relative to the fit's) becomes second order, lstsq's accuracy for any residue
+        return theta + solve(sum(X.T @ (y - X @ theta) for X, y in zip(Xs, ys)))
+    X = Xs[0] if len(Xs) == 1 else np.vstack(Xs)
+    y = ys[0] if len(ys) == 1 else np.concatenate(ys)
+    return np.linalg.lstsq(X, y, rcond=None)[0]
+
+
+def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``numpy.linalg.lstsq(A, b, rcond=None)[0]`` for a full-rank ``A`` (n, p) and ``b`` (n,): from the Gram matrix
+    of the unit-norm columns when their condition number is at most ``NORMAL_MAX_CONDITION`` (``ls_theta``, the
+    same solution to 1e-12), else lstsq itself."""
+    norms = np.sqrt(np.einsum("ij,ij->j", A, A))
+    if not np.all(norms > 0) or not np.all(np.isfinite(norms)):
+        return np.linalg.lstsq(A, b, rcond=None)[0]
+    As = A / norms
+    eig, V = np.linalg.eigh(As.T @ As)
+    cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
+    if cond > NORMAL_MAX_CONDITION:
+        return np.linalg.lstsq(A, b, rcond=None)[0]
+    return ls_theta([As], [b], eig, V, cond) / norms
 
 
 def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.ndarray:
@@ -307,8 +432,8 @@ def last_columns_f_test(fit, q: int) -> tuple[float, float, float, float]:  # no
     cov = np.asarray(fit.cov_params())[-q:, -q:]
     if np.isnan(cov).max():
         raise ValueError("r_matrix performs f_test for using dimensions that are asymptotically non-normal")
-    invcov = np.linalg.pinv(cov)
-    J = float(min(q, np.linalg.matrix_rank(cov)))
+    invcov, rank = pinv_rank(cov)
+    J = float(min(q, rank))
     F = float(np.squeeze(np.dot(np.dot(Rbq.T, invcov), Rbq))) / J
     df_denom = float(getattr(fit, "df_resid_inference", fit.df_resid))
     return F, J, df_denom, float(f_sf(F, J, df_denom))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from feeddrive.estimator.errors import NotEnoughExcitation
+from feeddrive.estimator.kernels import ls_theta
 from feeddrive.estimator.motion import EstimationOptions, parameter_covariance, stationary_score_covariance
 from feeddrive.estimator.regression import Regression
 
@@ -105,7 +106,8 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         scale[empty] = 1.0
         Xs = [X / scale for X in Xr]
         # singular values of the scaled regressor from its p x p Gram matrix (cheap; fine up to cond ~1e7)
-        eig, V = np.linalg.eigh(sum(X.T @ X for X in Xs)[np.ix_(~empty, ~empty)])
+        gram = sum(X.T @ X for X in Xs)
+        eig, V = np.linalg.eigh(gram[np.ix_(~empty, ~empty)])
         if memo is not None:  # the objects themselves kept: an id is only unique while its object lives
             memo["regressors"] = (same, (index, Xr, ys, scale, empty, Xs, eig, V))
     sv, Vt = np.sqrt(np.clip(eig[::-1], 0, None)), V[:, ::-1].T
@@ -118,7 +120,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
             raise NotEnoughExcitation(bad, f"{reg.equation} regressor condition number {cond:.3g} > "
                                       f"{options.max_condition:.3g} (constant speed, no speed reversal?)", cond)
         Ws = Xs
-        theta_s = np.linalg.lstsq(np.vstack(Xs), np.concatenate(ys), rcond=None)[0]
+        theta_s = ls_theta(Xs, ys, eig, V, cond)
     else:
         Zr = [rows(Z, r) for _, _, Z, r in parts]
         zscale = np.sqrt(sum(np.einsum("ij,ij->j", Z, Z) for Z in Zr)).clip(1e-300)
@@ -126,7 +128,8 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         theta_s = np.linalg.solve(sum(W.T @ X for W, X in zip(Ws, Xs)), sum(W.T @ y for W, y in zip(Ws, ys)))
     def complete() -> _Fit:
         """The fit with its covariance, from this solve's arrays."""
-        A = sum(W.T @ X for W, X in zip(Ws, Xs))
+        # LS: the Gram matrix of the condition number (the same sum, the same bits)
+        A = gram if Ws is Xs and not hit else sum(W.T @ X for W, X in zip(Ws, Xs))
         n = min(len(y) for y, *_ in parts)
         G = np.zeros((n, p))
         res2 = out2 = 0.0

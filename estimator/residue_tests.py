@@ -15,7 +15,7 @@ from scipy import linalg
 from feeddrive.estimator.distributions import chi2_sf, f_sf, norm_isf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.glsar import glsar_fit
-from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test
+from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test, lstsq, pinv_rank
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
 MAX_AR = 12
@@ -57,9 +57,9 @@ def ljung_box(x: np.ndarray, lags: int) -> float:
 def ols_f_test(y: np.ndarray, X: np.ndarray, R: np.ndarray) -> tuple[float, tuple[float, float], float]:
     """F-test of ``R beta = 0`` in the OLS fit of ``y`` on ``X`` (statsmodels' ``OLS(y, X).fit().f_test(R)``:
     pseudo-inverse fit, residual variance on ``n - rank(X)`` degrees of freedom). Returns (F, (q, dof), p)."""
-    pinv = np.linalg.pinv(X)
+    pinv, rank = pinv_rank(X)
     beta = pinv @ y
-    dof = float(X.shape[0] - np.linalg.matrix_rank(X))
+    dof = float(X.shape[0] - rank)
     scale = float(np.sum((y - X @ beta) ** 2) / dof)
     rb = R @ beta
     q = float(R.shape[0])
@@ -286,7 +286,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
                                   segment_covariance)
     Zfull = Z[:, [bool(Z[:, j].any()) for j in range(Z.shape[1])]]  # the non-zero columns (a column at a time:
     # a reduction along the rows of a C-ordered (n, k) array costs ~7x more)
-    e = residue - Zfull @ np.linalg.lstsq(Zfull, residue, rcond=None)[0]
+    e = residue - Zfull @ lstsq(Zfull, residue)  # all samples: from the Gram matrix when well conditioned
     rms = float(np.sqrt(np.mean(e ** 2)))
     if noise_std is not None and noise_std > 0:
         dof = float(y.size)  # the residue is correlated over about a block: one degree of freedom per block

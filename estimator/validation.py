@@ -55,6 +55,7 @@ from feeddrive.estimator.filtering import FilterSpec, decimation_factor, share_f
 
 # the isolation (Fig. 6) lives in its own module; its names stay importable from here
 from feeddrive.estimator.isolation import KINDS, SensorFit, isolate, model_reference  # noqa: F401
+from feeddrive.estimator.kernels import line_fit
 
 #: the redundant pairs: quantity -> (sensor 1, sensor 2)
 PAIRS: dict[str, tuple[str, str]] = {
@@ -231,7 +232,7 @@ def _median_in_place(a: np.ndarray) -> float:
 
 
 def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
-                 options: ValidationOptions = ValidationOptions()) -> ResidueTest:
+                 options: ValidationOptions = ValidationOptions(), mean: np.ndarray | None = None) -> ResidueTest:
     """Detect and classify a disagreement between two sensors of one quantity (eq. 10).
 
     Parameters
@@ -241,6 +242,8 @@ def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
     h : float
         Sample time [s].
     options : ValidationOptions
+    mean : ndarray, shape (n,), optional
+        ``0.5 * (x1 + x2)`` when the caller has it (validate_measurements passes the pair's mean on).
 
     Returns
     -------
@@ -262,16 +265,14 @@ def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
     # correlation below -0.5: never noise alone, ~1/sqrt(n)) take the second sensor's reading as the level, and
     # the residue is a gain difference near -2 (sensor 1 reads about -1 times sensor 2)
     anti = float(x1 @ x2) < -0.5 * float(np.sqrt(float(x1 @ x1) * float(x2 @ x2)))
-    level = x2 if anti else 0.5 * (x1 + x2)
+    level = x2 if anti else (0.5 * (x1 + x2) if mean is None else mean)  # the caller's mean when it has one
     levels = level[:cut].reshape(n_win, m).mean(axis=1)
     centers = np.arange(n_win) * m + (m - 1) / 2
-    X = np.column_stack([levels, np.ones(n_win)])
-    coef, *_ = np.linalg.lstsq(X, means, rcond=None)
-    resid = means - X @ coef
+    coef, resid, gram_inv = line_fit(levels, means)
     dof = n_win - 2
     var_hf = sigma**2 / m
     scale = max(float(resid @ resid) / dof, var_hf, np.finfo(float).tiny)
-    cov = scale * np.linalg.pinv(X.T @ X)
+    cov = scale * gram_inv
     se = np.sqrt(np.diag(cov))
     tq = t_ppf(0.975, dof)
     p = 2 * t_sf(np.abs(coef) / np.where(se > 0, se, np.inf), dof)
@@ -372,8 +373,9 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
     residues, best = {}, {}  # best: quantity symbol -> (raw, filtered) signal to pass on
     for q, (s1, s2) in PAIRS.items():
         if s2 in raw:
-            residues[q] = residue_test(raw[s1], raw[s2], h, options)
-            best[symbol[q]] = (0.5 * (raw[s1] + raw[s2]), 0.5 * (filt[s1] + filt[s2]))
+            mean = 0.5 * (raw[s1] + raw[s2])
+            residues[q] = residue_test(raw[s1], raw[s2], h, options, mean)
+            best[symbol[q]] = (mean, 0.5 * (filt[s1] + filt[s2]))
         else:
             best[symbol[q]] = (raw[s1], filt[s1])
     pairs = {}
