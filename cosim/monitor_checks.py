@@ -282,11 +282,12 @@ def note_not_validated(result: dict, flags: dict, valid: bool, mismatch: bool, w
     """Append to ``result["notes"]`` each reason why the motion's parameters were not validated (``why``: the
     model check's verdict when it had no power; ``hint``: the flags' likely cause, ``MotionEstimate.hint``).
     Shared by the DC and the servo drive's paths."""
-    if flags:
-        result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values())
-                               + (f"; {hint}" if hint else ""))
-        if hint:
-            result["hint"] = hint
+    if flags and hint:  # the cause first: it says what to do; the impossible values after it
+        result["notes"].append(f"not validated: {hint}; the estimate is physically impossible: "
+                               + "; ".join(flags.values()))
+        result["hint"] = hint
+    elif flags:
+        result["notes"].append("not validated: physically impossible estimate: " + "; ".join(flags.values()))
     if not valid:
         result["notes"].append("not validated: a measurement could not be trusted (no diagnosis)")
     if mismatch:

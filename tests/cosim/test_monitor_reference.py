@@ -74,8 +74,10 @@ def test_a_reversed_current_measurement_says_so_in_the_verdict():
     m = mt.motion(22)
     res = first_motion(m | {"Im1": -m["Im1"], "Im2": -m["Im2"]}, nominal=mt.NOMINAL)  # both: they agree
     line = verdict_line(res)
-    assert line.startswith("not validated: physically impossible estimate: R = -0.")
-    assert "the current's sign is the opposite of the model's convention" in line
+    # the cause first, then the impossible values
+    assert line.startswith("not validated: the current's sign is the opposite of the model's convention: with it "
+                           "negated every parameter is physically possible (R 0.")
+    assert "; the estimate is physically impossible: R = -0." in line
     quoted_r = float(line.split("physically possible (R ")[1].split(",")[0])
     assert quoted_r == pytest.approx(0.6, rel=0.01)
     # only the reasons it was not validated: no note about the isolation's reference, no "no power"
