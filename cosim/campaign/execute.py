@@ -221,7 +221,7 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
 
     Each run's record is written as the run ends, not when its task does: the task publishes it as an event of
     this campaign's topic (``zygote.run_batch``, ``Worker.log_event``), which the scheduler forwards here
-    (``_Arrivals``). Ctrl-C (which also stops a ``local_cluster``'s workers) then loses only the runs in
+    (cosim/campaign/arrivals.py). Ctrl-C (which also stops a ``local_cluster``'s workers) then loses only the runs in
     progress, where it lost up to a whole task's finished runs (``MAX_BATCH``). The task's result, its records
     as each run's ``execute`` made them, stays the reference: it replaces the published copy in ``on_done``'s
     records without writing it again, and records a run whose event was lost. A task whose workers kept dying
@@ -230,11 +230,12 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
     """
     from distributed.scheduler import KilledWorker
 
+    from feeddrive.cosim.campaign.arrivals import Arrivals
     from feeddrive.cosim.campaign.zygote import run_batch  # the runs forked from their worker's zygote, if any
 
     payload, by_key, running = _pickled(run), {}, set()
     queue = list(reversed(batches(specs, _threads(client))))
-    arrivals = _Arrivals(client)
+    arrivals = Arrivals(client)
 
     def submit() -> Any:
         batch = queue.pop()
@@ -287,77 +288,6 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
         finally:
             arrivals.close()
             client.cancel(list(running))
-
-
-class _Arrivals:
-    """The records a campaign's Dask tasks publish as each run ends (``zygote.run_batch``), received here.
-
-    The client calls ``arrive`` in its event loop's thread; the campaign's thread takes them in ``wait`` (as the
-    tasks complete) and ``drain``. ``recorded`` holds the ids of the runs recorded so far.
-    """
-
-    def __init__(self, client: Any) -> None:
-        import collections
-        import uuid
-
-        self.client, self.topic, self.recorded = client, f"feeddrive-campaign-{uuid.uuid4().hex}", set()
-        self.records: collections.deque[str] = collections.deque()
-        self.pending: Any = None
-        client.subscribe_topic(self.topic, self.arrive)
-
-    def arrive(self, event: tuple[float, str]) -> None:
-        """In the client's event loop: one run's record (JSON text); wakes the campaign's thread."""
-        self.records.append(event[1])
-        condition = getattr(self.pending, "thread_condition", None)
-        if condition is not None:
-            with condition:
-                condition.notify_all()
-
-    def completed(self, futures: list) -> Any:
-        from distributed import as_completed
-
-        self.pending = as_completed(futures)
-        return self.pending
-
-    def drain(self) -> list[dict]:
-        """The records arrived since the last call, in their order."""
-        out = []
-        while self.records:
-            out.append(json.loads(self.records.popleft()))
-        return out
-
-    def wait(self, pending: Any, arrived: Callable[[dict], None]):
-        """The tasks of ``pending`` as they complete; ``arrived(record)`` for each published record meanwhile."""
-        condition = getattr(pending, "thread_condition", None)
-        while True:
-            for rec in self.drain():
-                arrived(rec)
-            ready = pending.next_batch(block=False) if pending.has_ready() else []
-            if ready:
-                yield from ready
-            elif pending.is_empty():
-                return
-            elif condition is None:
-                yield next(pending)
-            else:
-                with condition:  # notified by a task's completion and by ``arrive``; the timeout is a safety net
-                    if not self.records and not pending.has_ready():
-                        condition.wait(timeout=0.5)
-
-    def close(self) -> None:
-        """Stop receiving, and drop the topic's events the scheduler kept (a long-lived one would keep them all)."""
-        try:
-            self.client.unsubscribe_topic(self.topic)
-            self.client.run_on_scheduler(_forget_topic, self.topic)
-        except Exception:  # noqa: BLE001, S110 - a closing or unreachable scheduler: nothing left to stop
-            pass
-
-
-def _forget_topic(topic: str, dask_scheduler: Any = None) -> None:
-    """On the scheduler: forget the events of ``topic`` (a campaign's records, already received)."""
-    topics = getattr(getattr(dask_scheduler, "_broker", None), "_topics", None)
-    if isinstance(topics, dict):
-        topics.pop(topic, None)
 
 
 def _queues(client: Any, runs: int) -> bool:
