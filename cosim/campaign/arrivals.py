@@ -13,6 +13,10 @@ import uuid
 from collections.abc import Callable, Iterator
 from typing import Any
 
+#: the most records this campaign leaves stored on the scheduler (its topic's events, already received here):
+#: beyond, they are dropped there (``prune``), where a campaign of large records (many motions) held up to 1000
+KEPT = 64
+
 
 class Arrivals:
     """The records a campaign's Dask tasks publish as each run ends (``zygote.run_batch``), received here.
@@ -25,6 +29,7 @@ class Arrivals:
         self.client, self.topic, self.recorded = client, f"feeddrive-campaign-{uuid.uuid4().hex}", set()
         self.records: collections.deque[str] = collections.deque()
         self.pending: Any = None
+        self.pruned = 0  # len(recorded) at the last prune
         client.subscribe_topic(self.topic, self.arrive)
 
     def arrive(self, event: tuple[float, str]) -> None:
@@ -66,6 +71,16 @@ class Arrivals:
                     if not self.records and not pending.has_ready():
                         condition.wait(timeout=0.5)
 
+    def prune(self) -> None:
+        """Drop the events the scheduler keeps of this topic once ``KEPT`` more were recorded (a round trip)."""
+        if len(self.recorded) - self.pruned < KEPT:
+            return
+        self.pruned = len(self.recorded)
+        try:
+            self.client.run_on_scheduler(_forget_topic, self.topic, True)
+        except Exception:  # noqa: BLE001, S110 - a busy or unreachable scheduler: dropped at the end, or never
+            pass
+
     def close(self) -> None:
         """Stop receiving, and drop the topic's events the scheduler kept (a long-lived one would keep them all)."""
         try:
@@ -75,8 +90,13 @@ class Arrivals:
             pass
 
 
-def _forget_topic(topic: str, dask_scheduler: Any = None) -> None:
-    """On the scheduler: forget the events of ``topic`` (a campaign's records, already received)."""
+def _forget_topic(topic: str, keep_subscribers: bool = False, dask_scheduler: Any = None) -> None:
+    """On the scheduler: forget the events of ``topic`` (a campaign's records, already received); with
+    ``keep_subscribers`` only its events (the campaign goes on), else the topic."""
     topics = getattr(getattr(dask_scheduler, "_broker", None), "_topics", None)
-    if isinstance(topics, dict):
-        topics.pop(topic, None)
+    if not isinstance(topics, dict) or topic not in topics:
+        return
+    if keep_subscribers:
+        topics[topic].events.clear()
+    else:
+        topics.pop(topic)

@@ -281,6 +281,7 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
                 records = [_lost(spec, f"crashed: Dask workers died running it ({exc})") for spec in batch]
             for rec in records:
                 record(rec, True)
+            arrivals.prune()
     finally:
         try:  # interrupted: the runs that ended meanwhile, recorded before the others are given up
             for rec in arrivals.drain():
