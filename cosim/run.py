@@ -55,6 +55,10 @@ class OutputExistsError(InputError):
     """The output directory is not empty and overwriting was not asked for."""
 
 
+#: the YAML dumper of resolved.yaml: safe, in C when PyYAML was built with libyaml
+_SAFE_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
 @dataclass
 class RunResult:
     """What a run produced.
@@ -157,7 +161,8 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         master.setup()
         resolved = scenario.to_dict() | {"stop_time": float(f"{master.stop_time:.12g}"),  # drop n*h rounding
                                          "connections": master.connections}
-        paths["resolved"].write_text(yaml.safe_dump(resolved, sort_keys=False), encoding="utf-8")
+        # libyaml's emitter when PyYAML has it: the same text, 1.4 ms instead of 11 ms of every run (a campaign's too)
+        paths["resolved"].write_text(yaml.dump(resolved, Dumper=_SAFE_DUMPER, sort_keys=False), encoding="utf-8")
         report |= {"step_s": master.h, "stop_time_s": master.stop_time, "steps": master.n_steps}
         if signals:
             master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies

@@ -219,38 +219,52 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
     too (the scheduler blames every task on a dead worker). That leaves each worker idle between its tasks
     for a round trip through this process, longer when this process is busy (issue 26).
 
-    The records are the runs' own, as each run's ``execute`` made them; a task's come together when it ends.
-    A task whose workers kept dying (``KilledWorker``) is cut into single runs, run again one by one: only the
-    run that kills its worker is recorded as crashed.
+    Each run's record is written as the run ends, not when its task does: the task publishes it as an event of
+    this campaign's topic (``zygote.run_batch``, ``Worker.log_event``), which the scheduler forwards here
+    (cosim/campaign/arrivals.py). Ctrl-C (which also stops a ``local_cluster``'s workers) then loses only the runs in
+    progress, where it lost up to a whole task's finished runs (``MAX_BATCH``). The task's result, its records
+    as each run's ``execute`` made them, stays the reference: it replaces the published copy in ``on_done``'s
+    records without writing it again, and records a run whose event was lost. A task whose workers kept dying
+    (``KilledWorker``) is cut into its runs not yet recorded, run again one by one: only the run that kills its
+    worker is recorded as crashed.
     """
-    from distributed import as_completed as dask_completed
     from distributed.scheduler import KilledWorker
 
+    from feeddrive.cosim.campaign.arrivals import Arrivals
     from feeddrive.cosim.campaign.zygote import run_batch  # the runs forked from their worker's zygote, if any
 
     payload, by_key, running = _pickled(run), {}, set()
     queue = list(reversed(batches(specs, _threads(client))))
+    arrivals = Arrivals(client)
 
     def submit() -> Any:
         batch = queue.pop()
-        future = client.submit(run_batch, payload, batch, timeout, key=f"campaign-{batch[0].id}-{len(batch)}",
-                               pure=False)
+        future = client.submit(run_batch, payload, batch, timeout, arrivals.topic,
+                               key=f"campaign-{batch[0].id}-{len(batch)}", pure=False)
         by_key[future.key] = batch
         running.add(future)
         return future
+
+    def record(rec: dict, final: bool) -> None:
+        if rec["id"] not in arrivals.recorded:
+            arrivals.recorded.add(rec["id"])
+            on_done(rec)
+        elif final:  # published and written already: the task's own copy in the records
+            on_done(rec, written=True)
 
     try:
         if _queues(client, len(queue)):
             queue.reverse()
             futures = client.map(run_batch, [payload] * len(queue), queue, [timeout] * len(queue),
+                                 [arrivals.topic] * len(queue),
                                  key=[f"campaign-{batch[0].id}-{len(batch)}" for batch in queue], pure=False)
             by_key |= {f.key: batch for f, batch in zip(futures, queue)}
             running |= set(futures)
             queue.clear()
-            pending = dask_completed(futures)
+            pending = arrivals.completed(futures)
         else:
-            pending = dask_completed([submit() for _ in range(min(len(queue), _threads(client)))])
-        for future in pending:
+            pending = arrivals.completed([submit() for _ in range(min(len(queue), _threads(client)))])
+        for future in arrivals.wait(pending, lambda rec: record(rec, False)):
             running.discard(future)
             free = _threads(client) - len(running) if queue else 0  # workers may have come or gone
             for _ in range(min(len(queue), max(free, 0 if running else 1))):
@@ -258,17 +272,23 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
             try:
                 records = future.result()
             except KilledWorker as exc:  # the scheduler gave up after its allowed-failures: no endless retry
-                batch = by_key[future.key]
+                batch = [spec for spec in by_key[future.key] if spec.id not in arrivals.recorded]
                 if len(batch) > 1:  # which of its runs killed the workers: each alone
                     queue[:0] = [[spec] for spec in reversed(batch)]
                     if not running:
                         pending.add(submit())
                     continue
-                records = [_lost(batch[0], f"crashed: Dask workers died running it ({exc})")]
-            for record in records:
-                on_done(record)
+                records = [_lost(spec, f"crashed: Dask workers died running it ({exc})") for spec in batch]
+            for rec in records:
+                record(rec, True)
+            arrivals.prune()
     finally:
-        client.cancel(list(running))
+        try:  # interrupted: the runs that ended meanwhile, recorded before the others are given up
+            for rec in arrivals.drain():
+                record(rec, False)
+        finally:
+            arrivals.close()
+            client.cancel(list(running))
 
 
 def _queues(client: Any, runs: int) -> bool:
@@ -400,10 +420,12 @@ def _execute(campaign: Campaign, fn: str | Callable, pending: list[RunSpec], tot
 
     bar = tqdm(total=total, initial=len(finished), desc=campaign.name, unit="run", disable=not progress)
 
-    def on_done(record: dict) -> None:
-        _write_atomic(out / "runs" / f"{record['id']}.json", json.dumps(record, indent=1))
+    def on_done(record: dict, written: bool = False) -> None:
+        """A finished run's record: written (atomic), kept, counted; only kept when ``written`` already."""
+        if not written:
+            _write_atomic(out / "runs" / f"{record['id']}.json", json.dumps(record, indent=1))
+            bar.update(1)
         finished[record["id"]] = record
-        bar.update(1)
 
     try:
         if not pending:

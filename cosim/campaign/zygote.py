@@ -254,9 +254,11 @@ def _loaded(run: bytes | str) -> Any:  # pragma: no cover - runs in a zygote
     return _LOADED[0][1]
 
 
-def run_batch(run: bytes | str, specs: list, timeout: float | None = None) -> list[dict[str, Any]]:
+def run_batch(run: bytes | str, specs: list, timeout: float | None = None,
+              topic: str | None = None) -> list[dict[str, Any]]:
     """A campaign's Dask task: its runs one after the other, each ``execute``-d in this worker thread's zygote;
-    their records, in order.
+    their records, in order, each also published as it ends as an event of ``topic`` (JSON text: the campaign
+    writes it then, not when the task ends, cosim/campaign/execute.py ``_dask``).
 
     The run function comes pickled (``load_run``) and is unpickled here, inside the task, not by the worker as
     it reads the scheduler's message: a function the worker cannot import (its module only on the campaign's
@@ -279,15 +281,32 @@ def run_batch(run: bytes | str, specs: list, timeout: float | None = None) -> li
         link = _link()
         if link is None:
             records.append(execute(fn, spec, timeout))
+            _publish(topic, records[-1])
             continue
         try:
             kind, value = link.ask(pickle.dumps(("run", run, spec, timeout), protocol=pickle.HIGHEST_PROTOCOL))
         except (OSError, EOFError) as exc:
             _drop(link)
             records.append(_lost(spec, f"crashed: its zygote process died ({exc or type(exc).__name__}); not retried"))
+            _publish(topic, records[-1])
             continue
         records.append(value if kind == "ok" else execute(fn, spec, timeout))
+        _publish(topic, records[-1])
     return records
+
+
+def _publish(topic: str | None, record: dict[str, Any]) -> None:
+    """Send a finished run's record to the campaign now, through the scheduler (``Worker.log_event``)."""
+    if topic is None:
+        return
+    import json
+
+    from distributed import get_worker
+
+    try:
+        get_worker().log_event(topic, json.dumps(record))
+    except (ValueError, TypeError):  # not in a worker (a task run inline), an unwritable record: the task's result
+        pass
 
 
 def zygote_cpu() -> tuple[float, float]:

@@ -179,6 +179,11 @@ warm_toy_run.prepare = lambda: PREPARED.append(os.getpid())
 DISPATCH: list[tuple[str, str, int]] = []
 
 
+#: (topic, run id, the topic's events then stored) of each record a campaign's task published on the scheduler
+#: of the ``local_cluster`` test
+PUBLISHED: list[tuple[str, str, int]] = []
+
+
 class _Dispatch:
     """A scheduler plugin recording how the scheduler hands out a campaign's runs (``DISPATCH``)."""
 
@@ -188,6 +193,11 @@ class _Dispatch:
     def __init__(self, scheduler):
         self.scheduler = scheduler
 
+    def log_event(self, topic, msg):
+        if topic.startswith("feeddrive-campaign-"):  # a run's record, published as the run ended
+            stored = len(self.scheduler.get_events(topic))
+            PUBLISHED.append((topic, json.loads(msg)["id"], stored))
+
     def transition(self, key, start, finish, *args, **kwargs):
         if str(key).startswith("campaign-") and not str(key).startswith("campaign-prepare") \
                 and finish in ("queued", "processing"):
@@ -196,7 +206,7 @@ class _Dispatch:
 
 
 @pytest.mark.slow
-def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
+def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path, monkeypatch):
     """``local_cluster``: worker processes (not threads) forked from this process after the run's prepare hook
     ran here, so they start with its imports; the campaign's records are the serial run's. Its scheduler
     keeps the tasks (the 12 runs in 7 tasks, all submitted at once, more than twice its 2 threads) and gives
@@ -211,17 +221,24 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
 
     c = campaign(tmp_path, fail_if_Cd=1.3)
     serial = run_campaign(c, tmp_path / "serial", run=warm_toy_run, plots=False)
+    serial_ids = [r["id"] for r in serial.records]
     with tqdm(total=1, disable=False, file=open(os.devnull, "w")) as bar:  # noqa: SIM115 - closed by tqdm
         bar.update(1)
     monitor = tqdm.monitor  # a thread that takes tqdm's lock every 10 s: stopped before the zygote server's fork
     assert monitor is not None and monitor.is_alive()
     PREPARED.clear()
     DISPATCH.clear()
+    PUBLISHED.clear()
+    monkeypatch.setattr("feeddrive.cosim.campaign.arrivals.KEPT", 2)  # the scheduler's copies pruned every 2 runs
     with local_cluster(2, run=warm_toy_run) as cluster, Client(cluster) as client:
         cluster.scheduler.add_plugin(type("Dispatch", (_Dispatch, SchedulerPlugin), {})(cluster.scheduler))
         seen = client.run(lambda: (os.getpid(), list(PREPARED)))
         dask = run_campaign(c, tmp_path / "dask", scheduler=cluster.scheduler_address, run=warm_toy_run, plots=False)
         dispatch = list(DISPATCH)  # this campaign's runs
+        # each run's record came as an event of the campaign's own topic as the run ended (cosim/campaign/
+        # arrivals.py), whose copies the scheduler dropped as the campaign went (KEPT) and at its end
+        published = list(PUBLISHED)
+        assert not [topic for topic in client.get_events() if topic.startswith("feeddrive-campaign-")]
         server, server_pid = cluster.zygote_server, cluster.zygote_server.pid
         assert not monitor.is_alive() and "tqdm_monitor" not in server.threads_at_fork
         check_runs_forked_from_zygotes(cluster, client, tmp_path)  # on this cluster: its start is the test's time
@@ -234,6 +251,9 @@ def test_local_cluster_forks_warm_workers_with_the_same_records(tmp_path):
     processing = [n for _, state, n in dispatch if state == "processing"]
     assert len(processing) == 7 and max(processing) == 1
     assert sum(state == "queued" for _, state, _ in dispatch) >= 5  # all but the first task of each worker
+    assert len({p[0] for p in published}) == 1 and sorted(p[1] for p in published) == sorted(serial_ids)
+    stored = [p[2] for p in published]
+    assert max(stored) < len(stored) and any(b < a for a, b in zip(stored, stored[1:]))  # pruned on the way
     assert dask.aggregates == serial.aggregates
     assert [(r["id"], r["status"], r["result"]) for r in dask.records] == \
            [(r["id"], r["status"], r["result"]) for r in serial.records]

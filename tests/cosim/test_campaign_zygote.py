@@ -33,6 +33,21 @@ def kill_my_zygote(spec):
     return where_am_i(spec)
 
 
+def interrupt_at(spec):
+    """Ctrl-C to the campaign's process (``toy.pid``) at run ``toy.at``, once the runs before it are on disk
+    (``toy.runs``, waited for up to 10 s: in the same Dask task, they are there only if written as each ended)."""
+    import signal
+    import time
+
+    toy = spec.scenario["toy"]
+    if spec.index == toy["at"]:
+        deadline = time.monotonic() + 10.0
+        while len(list(Path(toy["runs"]).glob("*.json"))) < toy["at"] and time.monotonic() < deadline:
+            time.sleep(0.01)
+        os.kill(toy["pid"], signal.SIGINT)
+    return where_am_i(spec)
+
+
 def _add_path(path: str) -> None:
     sys.path.insert(0, path)
 
@@ -100,6 +115,28 @@ def test_a_zygote_killed_under_a_run_fails_that_run_only(tmp_path):
     assert [r["status"] for r in res.records] == ["ok", "failed", "ok"]
     assert res.records[1]["reason"].startswith("crashed: its zygote process died")
     assert res.records[0]["result"]["parent"] != res.records[2]["result"]["parent"]
+
+
+def test_ctrl_c_keeps_the_runs_that_ended_in_an_unfinished_dask_task(tmp_path):
+    """The first Dask task holds runs 0-5 (``batches``: 6, 3, 2, 1 of 12 runs on 1 thread); run 3 sends Ctrl-C to
+    this process once runs 0-2 are on disk. They are there as each ended (published by the task, written by the
+    campaign, cosim/campaign/execute.py ``_dask``), not when the task would have; the campaign stops with
+    KeyboardInterrupt, the runs not started are not recorded."""
+    import signal
+
+    import pytest
+
+    out = tmp_path / "out"
+    c = Campaign(name="i", run="test_campaign_zygote:interrupt_at", repetitions=12,
+                 base={"name": "s", "toy": {"at": 3, "pid": os.getpid(), "runs": str(out / "runs")}})
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)  # pytest-xdist's workers may ignore it
+    try:
+        with local_cluster(1, run=interrupt_at) as cluster, pytest.raises(KeyboardInterrupt):
+            run_campaign(c, out, scheduler=cluster.scheduler_address, plots=False)
+    finally:
+        signal.signal(signal.SIGINT, handler)
+    recorded = sorted(int(f.name.split("-")[0]) for f in (out / "runs").glob("*.json"))
+    assert recorded[:3] == [0, 1, 2] and recorded in ([0, 1, 2], [0, 1, 2, 3])
 
 
 def test_records_come_straight_from_the_workers_of_a_scheduler_on_loopback_only():

@@ -53,6 +53,8 @@ def test_tool_change_example_runs_end_to_end(example_runs):
     assert Path(resolved["plant"]["fmu"]).is_absolute() and resolved["stop_time"] == pytest.approx(t[-1])
     assert resolved["connections"]["nc.position"] == "plant.position"
     assert load_scenario(out / "scenario.resolved.yaml").to_dict() == resolved  # reproducible as written
+    # written by libyaml's emitter (cosim/run.py _SAFE_DUMPER): the pure-Python safe dumper's text, byte for byte
+    assert (out / "scenario.resolved.yaml").read_text() == yaml.safe_dump(resolved, sort_keys=False)
 
 
 def test_output_directory_is_never_overwritten_without_the_flag(tmp_path, feeddrive_fmu, capsys):
