@@ -257,12 +257,16 @@ def _prepare() -> None:
     for name in RUN_IMPORTS:
         importlib.import_module(name)
     _registry()
+    from feeddrive.estimator import spline_c
+
+    spline_c.available()  # its C library built (or found) and loaded here, not in every forked run
 
 
 #: modules every co-simulation run with a monitor imports (some lazily, in the run): imported by ``prepare``
 RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.estimator.estimate",
                "statsmodels.regression.linear_model", "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
                "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
+               "feeddrive.estimator.spline_c",
                "multiprocessing.synchronize", "feeddrive.cosim.sensors_servo", "feeddrive.estimator.redundancy_servo",
                # imported by the estimator's functions when first called (estimator.distributions, .kernels)
                "scipy.special", "scipy.fft")
