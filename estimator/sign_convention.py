@@ -5,7 +5,8 @@ FMU whose torque is positive as a load turns every estimate of some equations ne
 DC drive's fit gives ``-R, -L, K, -Jt, -ft, -Cd``; with ``w -> -w`` only ``K < 0``; with ``u -> -u`` all six.
 Each pattern is what one quantity's reversal does to the regressions, so rather than tabulate them per motor
 the least squares fit is made again with each measured quantity negated in turn (model-generic: a PMSM's
-``u_d, u_q`` or ``i_d, i_q`` are negated together, as a reversed phase sequence or sensor does). When exactly
+``u_d, u_q`` or ``i_d, i_q`` are negated together, as a current or voltage chain counting the other way
+does; a reversed phase sequence is not this and gets no hint). When exactly
 the negations of one quantity (or of either of two: only their relative sign is seen) make every given
 parameter physically possible, that is said, with the values it gives. Nothing is changed in the estimate:
 it stays flagged and is never validated; the hint only says where to look.
