@@ -111,6 +111,10 @@ def _rate(num: int, den: int) -> float | None:
     return num / den if den else None
 
 
+#: the detection table's row of the runs whose axis did not follow its NC (report.json ``following``)
+UNFOLLOWED = "(did not follow its NC)"
+
+
 def aggregate(records: list[dict]) -> Aggregates:
     """Detection and estimation statistics of a campaign.
 
@@ -134,8 +138,10 @@ def aggregate(records: list[dict]) -> Aggregates:
     relative error ``e = (value - truth) / truth``; ``bias_pct`` = 100 mean(e), ``rms_pct`` =
     100 sqrt(mean(e^2)), ``coverage`` = fraction of motions whose ``ci95`` holds the truth.
 
-    Failed runs are counted in ``failed`` and left out of every rate; runs without a monitor (no motion
-    has a ``validated`` verdict) are left out of the detection table.
+    Failed runs are counted in ``failed`` and left out of every rate, and so are the runs whose axis did not
+    follow its NC (``following``: a sign or a loop the map got wrong; their verdicts judge the set-up, not the
+    drive), in their own row; runs without a monitor (no motion has a ``validated`` verdict) are left out of
+    the detection table.
     """
     classes: dict[str, list[dict]] = {}
     failed: dict[str, int] = {}
@@ -145,6 +151,9 @@ def aggregate(records: list[dict]) -> Aggregates:
             failed["(failed)"] = failed.get("(failed)", 0) + 1
             continue
         result = record["result"]
+        if result.get("following"):  # the axis did not follow its NC (a sign or a loop the map got wrong): its
+            failed[UNFOLLOWED] = failed.get(UNFOLLOWED, 0) + 1  # verdicts judge the set-up, not the drive
+            continue
         if any(m.get("validated") is not None for m in result.get("motions", [])):  # runs without a monitor
             outcome = _run_outcome(result)                                           # detect nothing
             classes.setdefault(outcome["class"], []).append(outcome)
@@ -178,8 +187,8 @@ def aggregate(records: list[dict]) -> Aggregates:
                     "false_alarm_rate": _rate(sum(r["false_alarm"] for r in runs), n),
                     "mean_delay_motions": float(np.mean([r["delay"] for r in det])) if det else None}
         detection.append(row)
-    if failed:
-        detection.append({"fault_class": "(failed)", "runs": failed["(failed)"]} | dict.fromkeys(
+    for cls, n in sorted(failed.items()):
+        detection.append({"fault_class": cls, "runs": n} | dict.fromkeys(
             ("detected", "isolated", "detection_rate", "isolation_rate", "false_alarm_rate", "mean_delay_motions")))
     order = {p: n for n, p in enumerate(PHYSICAL)}
     estimation = []
@@ -223,7 +232,7 @@ def detection_curves(records: list[dict], keys: list[str]) -> dict[str, dict]:
         ``false_alarm`` (over the fault-free runs at x, None where none), ``runs`` (counted at x) and
         ``others`` (the other keys' fault-free values).
     """
-    outcomes = [(r["overrides"], _run_outcome(r["result"])) for r in records]
+    outcomes = [(r["overrides"], _run_outcome(r["result"])) for r in records if not r["result"].get("following")]
     neutral = {}
     for key in keys:
         values = sorted({o[key] for o, _ in outcomes if key in o})
@@ -261,7 +270,7 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> lis
     written = []
     keys = sorted({k for r in ok for k, v in r["overrides"].items() if isinstance(v, (int, float))})
     sweep_keys = [k for k in keys if len({r["overrides"].get(k) for r in ok}) <= max(10, len(ok) // 3)]
-    if sweep_keys and any(row["fault_class"] not in ("healthy", "(failed)") for row in aggregates.detection):
+    if sweep_keys and any(row["fault_class"] not in ("healthy", "(failed)", UNFOLLOWED) for row in aggregates.detection):
         curves = detection_curves(ok, sweep_keys)
         fig, axes = plt.subplots(1, len(sweep_keys), figsize=(5.2 * len(sweep_keys), 4.2), squeeze=False)
         for ax, key in zip(axes[0], sweep_keys):

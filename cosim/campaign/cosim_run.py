@@ -195,7 +195,10 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
             entry["methods"], entry["estimation_error"] = {}, " ".join(str(exc).split())
         entry |= {key: monitor[k][key] for key in MONITOR_KEYS if key in monitor.get(k, {})}
         motions.append(entry)
-    return {"truth": truth0, "injected": injected, "motions": motions, "wall_time_s": res.report.get("wall_time_s")}
+    out = {"truth": truth0, "injected": injected, "motions": motions, "wall_time_s": res.report.get("wall_time_s")}
+    if res.report.get("following"):  # the axis did not follow its NC: the aggregate sets the run apart
+        out["following"] = res.report["following"]
+    return out
 
 
 def _methods(spec: RunSpec) -> list[str]:

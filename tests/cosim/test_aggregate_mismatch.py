@@ -53,3 +53,15 @@ def test_backlash_is_recorded_as_an_injected_plant_fault():
     spec = expand(healthy)[0]
     assert _injected(scenario_from_dict(spec.scenario, base_dir=spec.base_dir), nominal, nominal,
                      model.variables) == {"plant": {}, "sensors": {}}
+
+
+def test_a_run_whose_axis_did_not_follow_its_nc_is_set_apart():
+    """A vendor plant whose position counts the other way ran the table away (report.json ``following``); its
+    red motions judge the set-up, not the drive: its own row, out of the false-alarm rate."""
+    runaway = record(1, {"plant": {}, "sensors": {}}, ["model mismatch"])
+    runaway["result"]["following"] = "the axis did not follow its NC: final position 1.58 m from the target"
+    records = [record(0, {"plant": {}, "sensors": {}}, ["healthy"]), runaway,
+               record(2, {"plant": {}, "sensors": {}}, ["healthy"])]
+    rows = {r["fault_class"]: r for r in aggregate(records).detection}
+    assert rows["healthy"]["runs"] == 2 and rows["healthy"]["false_alarm_rate"] == 0.0
+    assert rows["(did not follow its NC)"]["runs"] == 1 and rows["(did not follow its NC)"]["false_alarm_rate"] is None
