@@ -70,7 +70,9 @@ def test_workers_draw_in_order_in_other_processes_and_leave_nothing_behind(tmp_p
     assert int(here.read_text()) == os.getpid()
     pids = {int((tmp_path / f"f{k}.txt").read_text()) for k in range(5)}
     assert os.getpid() not in pids and 1 <= len(pids) <= 2
-    assert _children(os.getpid()) == before  # the first worker was waited for, the others were its children
+    # the first worker was waited for, the others were its children: no new child is left. A child an earlier
+    # test in this xdist worker left exiting (a run's drawing processes close without waiting) may be gone now.
+    assert _children(os.getpid()) <= before
 
 
 def _all_children(pid: int) -> set[int]:
