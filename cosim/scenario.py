@@ -339,8 +339,7 @@ def _monitor_spec(raw: Any, data: dict, base_dir: Path, source: str, lines: dict
         implied["second_sensor_on"] = second
     raw = resolve_files(raw, base_dir) if isinstance(raw, dict) else raw  # a relative db or baseline FILE
     plant = data.get("plant") if isinstance(data.get("plant"), dict) else {}
-    motor = {"builtin": ("dc",), "builtin-backlash": ("dc",), "builtin-pmsm": ("pmsm", "pmsm-spm")}.get(
-        plant.get("fmu", "builtin"), ())
+    motor = scenario_plant.BUILTIN_DRIVES.get(plant.get("fmu", "builtin"), ())
     if "nominal" in fields and (stated or implied.get("drive", "dc")) in motor:  # a built-in plant's design values
         from feeddrive.models.drives import drive_model
 

@@ -67,6 +67,8 @@ class MapEntry(Strict):
 #: servo drive (``models.pmsm_drive()``). Each with its default role map.
 BUILTIN_MAPS = {"builtin": BUILTIN_MAP, "builtin-backlash": BUILTIN_MAP, "builtin-pmsm": PMSM_MAP}
 BUILTIN_PLANTS = tuple(BUILTIN_MAPS)
+#: the monitor drives each built-in plant is a model of (its design values are the monitor's nominal ones)
+BUILTIN_DRIVES = {"builtin": ("dc",), "builtin-backlash": ("dc",), "builtin-pmsm": ("pmsm", "pmsm-spm")}
 
 
 class PlantConfig(Strict):
@@ -125,7 +127,7 @@ def resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         from feeddrive.fmu_build import builtin_fmu
 
         path = Path(builtin_fmu(backlash=p.fmu == "builtin-backlash",
-                                motor="pmsm" if p.fmu == "builtin-pmsm" else "dc")).resolve()
+                                motor=BUILTIN_DRIVES[p.fmu][0])).resolve()
         # the built-in x is the table travel in the unit of its pitch: rad on a rotary axis, whatever it declares
         role_map = {r: MapEntry(var=v, unit="rad" if r == "position" and s.axis.kind == "rotary" else None)
                     for r, v in BUILTIN_MAPS[p.fmu].items()} | dict(p.map)

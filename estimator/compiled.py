@@ -69,6 +69,22 @@ def _build(source: str) -> Path:
     return target
 
 
+def load_library(source: str, off: str, signatures: dict[str, list]) -> ctypes.CDLL | None:
+    """``source`` built into the cache (``_build``) and loaded, each named function given its argument types
+    (returning void); None without a compiler or with the environment variable ``off`` set: the caller keeps
+    its numpy path (the filters of ``lti``, the spline of ``spline_c``)."""
+    if os.environ.get(off):
+        return None
+    try:
+        lib = ctypes.CDLL(str(_build(source)))
+    except (OSError, subprocess.SubprocessError):
+        return None
+    for name, argtypes in signatures.items():
+        fn = getattr(lib, name)
+        fn.argtypes, fn.restype = argtypes, None
+    return lib
+
+
 @lru_cache(maxsize=32)
 def compiled_step(step: ca.Function, key: str):
     """``run(x0 (nx,), S (ns, steps), p (np,), h) -> X (nx, steps)`` of the RK4 ``step`` compiled as C, or

@@ -23,8 +23,6 @@ record then costs ~300 Python steps instead of 35 000, at the rounding of a sum 
 from __future__ import annotations
 
 import ctypes
-import os
-import subprocess
 from functools import lru_cache
 
 import numpy as np
@@ -322,18 +320,11 @@ void fd_lfilter(long n, long nb, const double* b, const double* a, const double*
 def _library() -> ctypes.CDLL | None:
     """The C loops, built once into the cache (estimator.compiled); None without a compiler or with
     ``$FEEDDRIVE_NO_COMPILED_FILTERS`` set (the block-wise numpy evaluation then)."""
-    if os.environ.get("FEEDDRIVE_NO_COMPILED_FILTERS"):
-        return None
-    from feeddrive.estimator.compiled import _build
+    from feeddrive.estimator.compiled import load_library  # casadi with it: only when first filtering
 
-    try:
-        lib = ctypes.CDLL(str(_build(_SOURCE)))
-    except (OSError, subprocess.SubprocessError):
-        return None
     dp, n = ctypes.c_void_p, ctypes.c_long  # the arrays by address (_ptr)
-    lib.fd_sosfilt.argtypes, lib.fd_sosfilt.restype = [n, n, n, dp, dp, dp, n], None
-    lib.fd_lfilter.argtypes, lib.fd_lfilter.restype = [n, n, dp, dp, dp, dp, dp], None
-    return lib
+    return load_library(_SOURCE, "FEEDDRIVE_NO_COMPILED_FILTERS",
+                        {"fd_sosfilt": [n, n, n, dp, dp, dp, n], "fd_lfilter": [n, n, dp, dp, dp, dp, dp]})
 
 
 #: rows per call of the C sosfilt: its states live on the C stack (a vector per row pair and section state)

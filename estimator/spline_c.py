@@ -12,8 +12,6 @@ with ``-ffp-contract=off`` by ``estimator.compiled``: no fused multiply-add), so
 from __future__ import annotations
 
 import ctypes
-import os
-import subprocess
 from functools import lru_cache
 
 import numpy as np
@@ -68,18 +66,11 @@ void fd_spline_eval(long q, const double* x, const double* y, const double* s, c
 
 @lru_cache(maxsize=1)
 def _library() -> ctypes.CDLL | None:
-    if os.environ.get("FEEDDRIVE_NO_COMPILED_SPLINE"):
-        return None
-    from feeddrive.estimator.compiled import _build
+    from feeddrive.estimator.compiled import load_library
 
-    try:
-        lib = ctypes.CDLL(str(_build(_SOURCE)))
-    except (OSError, subprocess.SubprocessError):
-        return None
     dp, n = ctypes.c_void_p, ctypes.c_long  # the arrays by address
-    lib.fd_spline_system.argtypes, lib.fd_spline_system.restype = [n] + [dp] * 8, None
-    lib.fd_spline_eval.argtypes, lib.fd_spline_eval.restype = [n] + [dp] * 8, None
-    return lib
+    return load_library(_SOURCE, "FEEDDRIVE_NO_COMPILED_SPLINE",
+                        {"fd_spline_system": [n] + [dp] * 8, "fd_spline_eval": [n] + [dp] * 8})
 
 
 def available() -> bool:

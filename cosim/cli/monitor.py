@@ -125,19 +125,18 @@ def main(args: argparse.Namespace) -> int:
     ends = [clock0 + rec.time(seg.stop - 1) - rec.t0 for seg in segments]  # each motion's machine time
     if args.db == DEFAULT_DB:
         Path(DEFAULT_DB).parent.mkdir(exist_ok=True)
-    with History(args.db) as history:  # a replay would count the same motions twice in the baseline and trends
-        stored = history.stored_at(args.axis, ends)
-    if stored:
-        again = [k for k, t in enumerate(ends, 1) if any(abs(t - st) <= 1e-3 for _, st in stored)]
-        raise InputError(f"{args.db}: axis {args.axis} already holds motion {', '.join(map(str, again))} of the "
-                         f"{len(ends)} of {rec.path} (history id {', '.join(str(i) for i, _ in stored)}: the same "
-                         f"machine times, "
-                         f"{clock_source.split(' (')[0]}); storing them again would count them twice in the baseline "
-                         "and the trends: use another --axis or --db (--db :memory: to look without storing)")
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     config = config.model_copy(update={"scenario": str(rec.path), "filter_cutoff_hz": filter_cutoff(args, rec.h)})
     traces = []
     with History(args.db) as history:
+        stored = history.stored_at(args.axis, ends)  # a replay would count its motions twice (baseline, trends)
+        if stored:
+            again = [k for k, t in enumerate(ends, 1) if any(abs(t - st) <= 1e-3 for _, st in stored)]
+            raise InputError(f"{args.db}: axis {args.axis} already holds motion {', '.join(map(str, again))} of "
+                             f"the {len(ends)} of {rec.path} (history id {', '.join(str(i) for i, _ in stored)}: "
+                             f"the same machine times, {clock_source.split(' (')[0]}); storing them again would "
+                             "count them twice in the baseline and the trends: use another --axis or --db (--db "
+                             ":memory: to look without storing)")
         pipeline = MonitorPipeline(config, history, args.axis)
         for k, seg in enumerate(segments, 1):
             part = {name: x[seg.start:seg.stop] for name, x in sig.items()}
