@@ -206,6 +206,9 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     monitor = report["components"].get("monitor")
     if isinstance(monitor, dict) and "motions" in monitor:
         report["motions"] = monitor["motions"]
+        held = _held_input_note(scenario, report)
+        if held:
+            report["held_inputs"] = held
     report["files"] = {k: ([os.path.relpath(p, out_dir) for p in v] if k == "plots" else v.name)
                        for k, v in paths.items()}
     paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
@@ -279,6 +282,17 @@ def column_sampling(scenario: Scenario, names: Sequence[str]) -> dict[str, Sampl
         else:
             out[name] = Sampling("instant", 1 / h)
     return out
+
+
+def _held_input_note(scenario: Scenario, report: dict) -> str | None:
+    """cosim.held_inputs' note for this run: its plant's input hold, oversampling and voltage/current sampling."""
+    from feeddrive.cosim.held_inputs import held_input_note
+
+    sensors, plant = scenario.sensors, report["components"].get("plant")
+    if not isinstance(plant, dict) or not hasattr(sensors, "voltage") or not hasattr(sensors, "current"):
+        return None  # a user's plant component or the servo drive's own sensors: nothing known of its sampling
+    sampling = {"voltage": sensors.voltage.sampling, "current": sensors.current[0].sampling}
+    return held_input_note(plant.get("input_hold"), scenario.plant.oversample, sampling, report["motions"])
 
 
 def _write_page(out_dir: Path, report: dict) -> None:

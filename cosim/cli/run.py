@@ -159,6 +159,8 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
                 lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
             if m.get("error"):
                 lines.append(f"    {m['error']}")
+    if r.get("held_inputs"):  # a rejection the set-up's sampling explains (cosim/held_inputs.py)
+        lines.append(f"  set-up: {r['held_inputs']}")
     line = history_line((r.get("components") or {}).get("monitor"))
     if line:
         lines.append(line)
