@@ -126,7 +126,7 @@ def _unit(name: str) -> str:
 
 def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
     """A few lines: simulated time and speed, final position against the NC's target, motions, files."""
-    from feeddrive.cosim.report.verdict import verdict_line
+    from feeddrive.cosim.report.verdict import fault_values, verdict_line
 
     r, s = result.report, result.signals
     lines = [f"{r['scenario']}: {r['stop_time_s']:.4g} s simulated in {r['wall_time_s']:.3g} s "
@@ -152,7 +152,7 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
 
                 lines.append(f"    {servo_line(m['servo_checks'])}")
             for f in m.get("sensor_faults") or []:
-                lines.append(f"    sensor fault: {f['sensor']} {f['kind']} (gain {f['gain']:.4g}, offset {f['offset']:.4g})")
+                lines.append(f"    sensor fault: {f.get('sensor', '?')} {f.get('kind', 'fault')} ({fault_values(f)})")
             if isinstance(m.get("mismatch"), dict) and not m["mismatch"].get("passed", True):
                 lines.append(f"    model mismatch ({m['mismatch']['test']} test): parameters not validated")
             for d in m.get("diagnosis") or []:

@@ -35,15 +35,21 @@ def finite(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
-def fault_text(f: Mapping) -> str:
-    """``Im1 gain 1.030, offset 0.200 A`` (the isolated sensor fault, report.json ``sensor_faults[k]``)."""
+def fault_values(f: Mapping) -> str:
+    """``gain 1.030, offset 0.200 A`` of an isolated sensor fault (report.json ``sensor_faults[k]``); what is not
+    finite is left out (``kind`` when nothing is)."""
     unit = SENSORS.get(str(f.get("sensor")).split(" or ")[0], ("", ""))[1]  # "Im1 or Im2": not isolated, same unit
     parts = []
     if finite(f.get("gain")):
         parts.append(f"gain {f['gain']:.4g}")
     if finite(f.get("offset")):
         parts.append(f"offset {f['offset']:.3g}{' ' + unit if unit else ''}")
-    return f"{f.get('sensor', '?')} {', '.join(parts) or f.get('kind', 'fault')}"
+    return ", ".join(parts) or str(f.get("kind", "fault"))
+
+
+def fault_text(f: Mapping) -> str:
+    """``Im1 gain 1.030, offset 0.200 A`` (the isolated sensor fault, report.json ``sensor_faults[k]``)."""
+    return f"{f.get('sensor', '?')} {fault_values(f)}"
 
 
 def _kind_of(text: str) -> str:

@@ -134,7 +134,7 @@ def test_summary_names_the_sensor_fault(example_runs):
     ``cosim run`` of the example, tests/conftest.py)."""
     lines = example_runs["stdout"]["current_sensor_fault"].splitlines()
     faults = [ln.strip() for ln in lines if ln.strip().startswith("sensor fault:")]
-    assert len(faults) == 1 and faults[0].startswith("sensor fault: Im1 gain+offset (gain 1.03, offset 0.2")
+    assert len(faults) == 1 and faults[0] == "sensor fault: Im1 gain+offset (gain 1.03, offset 0.2 A)"
     # the motion's first line is its verdict, which names the fault
     assert any(ln.startswith("  motion 2: sensor fault: Im1 gain 1.03, offset 0.2 A") for ln in lines)
     assert lines.index(next(ln for ln in lines if ln.startswith("  motion 2:"))) < lines.index(
