@@ -113,6 +113,15 @@ def _rate(num: int, den: int) -> float | None:
 
 #: the detection table's row of the runs whose axis did not follow its NC (report.json ``following``)
 UNFOLLOWED = "(did not follow its NC)"
+#: ... and of the runs whose model checks rejected a held-input plant sampled once per step (``held_inputs``)
+UNAVERAGED = "(held inputs sampled per step)"
+#: report.json keys that say a run's verdicts judge its set-up, not the drive -> the run's own row
+SET_APART = {"following": UNFOLLOWED, "held_inputs": UNAVERAGED}
+
+
+def set_apart(result: dict) -> str | None:
+    """The row of a run whose verdicts judge its set-up (``SET_APART``), or None."""
+    return next((row for key, row in SET_APART.items() if result.get(key)), None)
 
 
 def aggregate(records: list[dict]) -> Aggregates:
@@ -139,8 +148,9 @@ def aggregate(records: list[dict]) -> Aggregates:
     100 sqrt(mean(e^2)), ``coverage`` = fraction of motions whose ``ci95`` holds the truth.
 
     Failed runs are counted in ``failed`` and left out of every rate, and so are the runs whose axis did not
-    follow its NC (``following``: a sign or a loop the map got wrong; their verdicts judge the set-up, not the
-    drive), in their own row; runs without a monitor (no motion has a ``validated`` verdict) are left out of
+    follow its NC (``following``: a sign or a loop the map got wrong) and those whose model checks rejected a
+    held-input plant sampled once per step (``held_inputs``, cosim/held_inputs.py): their verdicts judge the
+    set-up, not the drive; each in its own row. Runs without a monitor (no motion has a ``validated`` verdict) are left out of
     the detection table.
     """
     classes: dict[str, list[dict]] = {}
@@ -151,8 +161,9 @@ def aggregate(records: list[dict]) -> Aggregates:
             failed["(failed)"] = failed.get("(failed)", 0) + 1
             continue
         result = record["result"]
-        if result.get("following"):  # the axis did not follow its NC (a sign or a loop the map got wrong): its
-            failed[UNFOLLOWED] = failed.get(UNFOLLOWED, 0) + 1  # verdicts judge the set-up, not the drive
+        apart = set_apart(result)  # the axis did not follow its NC (a sign or a loop the map got wrong), or its
+        if apart:                  # held-input plant was sampled once per step: its verdicts judge the set-up
+            failed[apart] = failed.get(apart, 0) + 1
             continue
         if any(m.get("validated") is not None for m in result.get("motions", [])):  # runs without a monitor
             outcome = _run_outcome(result)                                           # detect nothing
@@ -232,7 +243,7 @@ def detection_curves(records: list[dict], keys: list[str]) -> dict[str, dict]:
         ``false_alarm`` (over the fault-free runs at x, None where none), ``runs`` (counted at x) and
         ``others`` (the other keys' fault-free values).
     """
-    outcomes = [(r["overrides"], _run_outcome(r["result"])) for r in records if not r["result"].get("following")]
+    outcomes = [(r["overrides"], _run_outcome(r["result"])) for r in records if not set_apart(r["result"])]
     neutral = {}
     for key in keys:
         values = sorted({o[key] for o, _ in outcomes if key in o})
@@ -270,7 +281,7 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> lis
     written = []
     keys = sorted({k for r in ok for k, v in r["overrides"].items() if isinstance(v, (int, float))})
     sweep_keys = [k for k in keys if len({r["overrides"].get(k) for r in ok}) <= max(10, len(ok) // 3)]
-    if sweep_keys and any(row["fault_class"] not in ("healthy", "(failed)", UNFOLLOWED) for row in aggregates.detection):
+    if sweep_keys and any(row["fault_class"] not in ("healthy", "(failed)", *SET_APART.values()) for row in aggregates.detection):
         curves = detection_curves(ok, sweep_keys)
         fig, axes = plt.subplots(1, len(sweep_keys), figsize=(5.2 * len(sweep_keys), 4.2), squeeze=False)
         for ax, key in zip(axes[0], sweep_keys):

@@ -196,8 +196,9 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
         entry |= {key: monitor[k][key] for key in MONITOR_KEYS if key in monitor.get(k, {})}
         motions.append(entry)
     out = {"truth": truth0, "injected": injected, "motions": motions, "wall_time_s": res.report.get("wall_time_s")}
-    if res.report.get("following"):  # the axis did not follow its NC: the aggregate sets the run apart
-        out["following"] = res.report["following"]
+    for key in ("following", "held_inputs"):  # verdicts that judge the set-up: the aggregate sets the run apart
+        if res.report.get(key):
+            out[key] = res.report[key]
     return out
 
 

@@ -65,3 +65,15 @@ def test_a_run_whose_axis_did_not_follow_its_nc_is_set_apart():
     rows = {r["fault_class"]: r for r in aggregate(records).detection}
     assert rows["healthy"]["runs"] == 2 and rows["healthy"]["false_alarm_rate"] == 0.0
     assert rows["(did not follow its NC)"]["runs"] == 1 and rows["(did not follow its NC)"]["false_alarm_rate"] is None
+
+
+def test_a_held_input_plant_sampled_per_step_is_set_apart():
+    """Its model checks reject because of the sampling (report.json ``held_inputs``, cosim/held_inputs.py): its own
+    row, out of the false-alarm rate, as a run that did not follow its NC."""
+    held = record(1, {"plant": {}, "sensors": {}}, ["model mismatch"])
+    held["result"]["held_inputs"] = "motion 1: the model check rejects a plant that holds its inputs over each step"
+    records = [record(0, {"plant": {}, "sensors": {}}, ["healthy"]), held]
+    rows = {r["fault_class"]: r for r in aggregate(records).detection}
+    assert rows["healthy"]["runs"] == 1 and rows["healthy"]["false_alarm_rate"] == 0.0
+    assert rows["(held inputs sampled per step)"]["runs"] == 1
+    assert rows["(held inputs sampled per step)"]["false_alarm_rate"] is None
