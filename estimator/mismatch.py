@@ -41,8 +41,12 @@ data, so that their level is their false-alarm rate:
 * **size**: the residue, with those nuisance regressors removed, must be no larger than the noise of
   the sensor (``noise``: from its first differences, for a sensor the redundancy confirmed). Statistic
   ``F = mean(e^2) / sigma^2``, one-sided F-test with (decimated blocks, noise samples) degrees of
-  freedom. Filtering only lowers the noise, so a model that explains the motion leaves a residue well
-  below one sensor noise; a friction step of +10 % during the motion leaves several times it.
+  freedom. Filtering lowers the sensor's own noise, so a model that explains the motion leaves a residue
+  below it; a friction step of +10 % during the motion leaves several times it. The current residue also
+  carries the voltage's and the speed's noise through the simulation (``1 / (L s + R)``, filtered): its
+  sigma^2 adds that variance (``input_noise_variance``, where the voltage's noise is known). At 10 kHz the
+  filter leaves little of it; at 1 kHz (a 100 Hz cut-off is a fifth of the band) it was 1.4 times the
+  current sensor's own noise, and the size test rejected the healthy built-in plant (F = 2.1, p = 1e-13).
 
 * **peak** (speed residue only, where both sensor pairs confirmed their noise): is one block far
   outside the others? ``residue_tests.peak_test``:
@@ -99,8 +103,9 @@ class ResidueCheck:
     tests : dict of str to TestResult
         ``independence`` and, with a noise level, ``size``.
     rms, noise_std : float
-        RMS of the residue without its nuisance part, and the sensor noise it is compared with (NaN
-        without one), in the signal's unit.
+        RMS of the residue without its nuisance part, and the noise it is compared with (NaN without one),
+        in the signal's unit: the sensor's, and for the current also what the simulation passes of the
+        voltage's and the speed's noise.
     simulated, residue : ndarray, shape (n,)
         Simulated signal and ``measured - simulated`` (filtered; NaN on the samples not tested: the
         filter's transients at both ends and, for the speed, outside the segments).
@@ -258,14 +263,14 @@ def check_signals(v: MeasurementValidation, signals: Mapping[str, np.ndarray | N
     sensor's noise through the model, is uncorrelated with them on a healthy motion. With the mean of both
     the residue and the regressors shared the noise, and the test rejected healthy motions. Elsewhere (no
     redundancy, a faulty or corrected sensor) the validated signal is used and has no instrument. The noise
-    [A, rad/s] is that of the first sensor, from its first differences (``validation.noise_std``), only where
+    [V, A, rad/s] is that of the first sensor, from its first differences (``validation.noise_std``), only where
     the redundancy confirmed it.
 
     Returns
     -------
     inputs : dict with ``u``, ``i``, ``w`` of ndarray, shape (n,)
     instruments : dict of str to ndarray, shape (n,)
-    noise : dict with ``current``, ``speed`` (those measured)
+    noise : dict with ``voltage``, ``current``, ``speed`` (those confirmed)
     """
     symbol = {"voltage": "u", "current": "i", "speed": "w"}
     inputs = {"u": v.u, "i": v.i, "w": v.w}
@@ -279,9 +284,29 @@ def check_signals(v: MeasurementValidation, signals: Mapping[str, np.ndarray | N
         x = np.asarray(signals[s1], dtype=float)
         inputs[symbol[quantity]] = x
         instruments[symbol[quantity]] = np.asarray(signals[s2], dtype=float)
-        if quantity in ("current", "speed"):
-            noise[quantity] = noise_std(x)
+        noise[quantity] = noise_std(x)
     return inputs, instruments, noise
+
+
+def input_noise_variance(filter: FilterSpec, h: float, step: int, L: float, R: float, sigma_v: float,
+                         points: int = 2048) -> float:
+    """Variance [A^2] that a white noise of std ``sigma_v`` [V] on ``v = u - K w`` at the record's period ``h``
+    [s] leaves in the simulated current: through the monitor's filter at ``h``, every ``step``-th sample kept,
+    then the Tustin ``1 / (L s + R)`` at ``h step`` (``isolation.model_reference``). The power gain is
+    integrated over the record's band (midpoint rule, ``points`` frequencies); the filter's cut-off is far
+    below the decimated Nyquist frequency (``check_rate_factor``), so what the decimation folds is neglected.
+    ``sigma_v^2 = sigma_u^2 + K^2 sigma_w^2`` for independent voltage and speed sensor noises."""
+    w = (np.arange(points) + 0.5) * (np.pi / points)  # rad per record sample
+    z1, z2 = np.exp(-1j * w), np.exp(-2j * w)
+    gain = np.ones(points)
+    for b0, b1, b2, _, a1, a2 in filter.sos(h):
+        gain *= np.abs((b0 + b1 * z1 + b2 * z2) / (1 + a1 * z1 + a2 * z2)) ** 2
+    if filter.zero_phase:  # forward and backward: the magnitude squared twice
+        gain *= gain
+    b, a = bilinear_first_order(L, R, h * step)
+    zd = np.exp(-1j * w * step)
+    gain *= np.abs((b[0] + b[1] * zd) / (a[0] + a[1] * zd)) ** 2
+    return float(sigma_v ** 2 * np.mean(gain))
 
 
 def _read_only(x: np.ndarray) -> np.ndarray:
@@ -343,7 +368,9 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         The covariance's parameters (``MotionEstimate.names``); required with ``covariance``.
     noise : mapping, optional
         Sensor noise standard deviation of the raw ``i`` [A] and ``w`` [rad/s] given (keys ``current``,
-        ``speed``), from the redundant sensors; a missing key: no size test for that residue.
+        ``speed``), from the redundant sensors; a missing key: no size test for that residue. With
+        ``voltage`` [V] too, the current's size test counts the voltage's and the speed's noise that the
+        simulation passes into its residue (``input_noise_variance``).
     noise_dof : float
         Degrees of freedom of those noise estimates (number of samples they come from).
     speed_threshold : float or None
@@ -414,6 +441,11 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         ratio = (params["K"] * tb / params["Jt"] * noise["current"] / noise["speed"]) ** 2
         # the independence and the peak tests whiten the same segments: each size built once
         null_covariance = lru_cache(maxsize=None)(lambda nb: _read_only(integrated_noise_covariance(nb, rho, ratio)))
+    if noise.get("current", 0) > 0 and noise.get("voltage", 0) > 0:
+        # the simulated current carries the filtered voltage and speed noise: the residue's null is both
+        sigma_v2 = noise["voltage"] ** 2 + (params["K"] * noise.get("speed", 0.0)) ** 2
+        noise["current"] = float(np.sqrt(noise["current"] ** 2 + input_noise_variance(
+            filter, record_h, step, params["L"], params["R"], np.sqrt(sigma_v2))))
     checks = {}
     for name, (x, simulate) in simulators.items():
         simulated = simulate(params, f)

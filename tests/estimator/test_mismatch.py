@@ -12,10 +12,13 @@ import pytest
 from scipy import signal
 
 from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.estimate import MotionData, estimate_motion
+from feeddrive.estimator.isolation import model_reference
 from feeddrive.estimator.mismatch import (
     check_model,
     check_signals,
+    input_noise_variance,
     residue_tests,
     sensitivity_directions,
     simulate_segments,
@@ -71,6 +74,7 @@ def test_check_signals_take_the_first_sensors_and_the_second_as_instruments():
     assert inputs["i"] is meas["Im1"] and instruments["i"] is meas["Im2"] and instruments["w"] is meas["w_enc"]
     assert noise["current"] == pytest.approx(_plant.NOISE["Im1"], rel=0.05)
     assert noise["speed"] == pytest.approx(_plant.NOISE["w_tach"], rel=0.05)
+    assert noise["voltage"] == pytest.approx(_plant.NOISE["u"], rel=0.05)  # its share of the current residue
     faulty = measure(plant_motion(), 1, Im2=(1.05, 0.0))
     v = validate(faulty)
     inputs, instruments, noise = check_signals(v, faulty)
@@ -143,6 +147,21 @@ def test_size_test_against_the_noise():
     assert big["size"].p_value < 1e-10 and rms == pytest.approx(1.5 * sigma, rel=0.02)
     none, *_ = residue_tests("current", filtered, np.zeros((n, 0)), x, H, 0.01)
     assert set(none) == {"independence"}
+
+
+@pytest.mark.parametrize(("h", "cutoff", "step"), [(1e-3, 100.0, 1), (1e-4, 100.0, 5), (1e-4, 500.0, 1)])
+def test_the_voltage_noise_in_the_simulated_current_is_its_power_gain(h, cutoff, step):
+    """White voltage noise through the filter, every step-th sample, and the Tustin 1 / (L s + R): the variance
+    of 4 x 10^5 simulated samples within 4 % of ``input_noise_variance``'s integral of the power gain (their
+    own scatter, measured over seeds: 0.1 % at 1 kHz, 1.3 % and 1.7 % at 10 kHz; the mean of three runs of
+    2 x 10^6 samples is within 0.3 % of it in each case). At 1 kHz it is 0.083 A for 0.2 V."""
+    rng = np.random.default_rng(7)
+    n, sigma, L, R = 400_000, 0.2, 4.0e-3, 0.6
+    filt = FilterSpec(cutoff)
+    f = filt.apply({"u": sigma * rng.standard_normal(n), "i": np.zeros(n), "w": np.zeros(n)}, h)
+    current = model_reference("current", {k: x[::step] for k, x in f.items()}, h * step, {"R": R, "L": L, "K": 1.05})
+    simulated = float(np.var(current[2000 // step:-2000 // step]))  # away from the filter's and the start's transients
+    assert input_noise_variance(filt, h, step, L, R, sigma) == pytest.approx(simulated, rel=0.04)
 
 
 def test_segment_simulation_is_the_analytic_first_order_response():
