@@ -12,8 +12,8 @@ import pytest
 from scipy import signal
 
 from feeddrive.estimator.errors import EstimatorInputError
-from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.estimate import MotionData, estimate_motion
+from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.isolation import model_reference
 from feeddrive.estimator.mismatch import (
     check_model,
