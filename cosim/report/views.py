@@ -12,7 +12,7 @@ from feeddrive.cosim.report.verdict import SENSORS, fault_text, finite
 #: (signal, test) -> what the test asks, and its statistic (estimator/mismatch.py)
 TESTS = {
     "independence": ("independent of past inputs", "F"),
-    "size": ("no larger than the sensor noise", "F = mean(e²) / σ²"),
+    "size": ("no larger than its noise σ", "F = mean(e²) / σ²"),
     "peak": ("no block far outside the others", "max |z| (MAD units)"),
 }
 SIGNAL_UNITS = {"current": "A", "speed": "rad/s", "voltage": "V"}
