@@ -5,7 +5,7 @@ current minus the current simulated from the filtered voltage and speed) carries
 through 1 / (L s + R): 0.08 A for the 0.2 V default, more than the current sensor's own 0.05 A. The size test
 compared the residue with the current sensor's noise alone: F = 2.3 to 3.4 on 20 of 20 seeds, "model mismatch"
 on a healthy motor (`estimator.mismatch.input_noise_variance` now adds that share; 3 of 60 seeds rejected
-after, by the current independence test: the instantaneous 1 kHz samples' own error, README "Limits")."""
+after, by the current independence test: the instantaneous 1 kHz samples' own error, README "Known limitations")."""
 from __future__ import annotations
 
 from pathlib import Path
