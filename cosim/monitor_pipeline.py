@@ -142,7 +142,8 @@ class MonitorPipeline:
         mismatch = False
         if (n - 1) * h < self.config.min_motion_s:
             result["error"] = (f"motion of {(n - 1) * h:.3g} s is shorter than "
-                               f"min_motion_s = {self.config.min_motion_s} s (set it with --min-motion)")
+                               f"min_motion_s = {self.config.min_motion_s} s (a scenario's monitor.min_motion_s, "
+                               "cosim monitor's --min-motion)")
         else:
             try:
                 mismatch = self._identify(signals, h, start, trace)

@@ -140,8 +140,10 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
         if isinstance(m, dict):
             params = m.get("parameters") or {}
             text = " ".join(f"{p}={v['value']:.4g}" for p, v in params.items() if isinstance(v, dict) and "value" in v)
-            lines.append(f"  motion {k}: {verdict_line(m)}")  # the verdict first (cosim/report/verdict.py)
-            lines.append(f"    {'validated' if m.get('validated') else 'not validated'} {text}".rstrip())
+            verdict = verdict_line(m)
+            lines.append(f"  motion {k}: {verdict}")  # the verdict first (cosim/report/verdict.py)
+            if text:  # a motion not estimated has no values: its verdict says why
+                lines.append(f"    {'validated' if m.get('validated') else 'not validated'} {text}")
             for name, why in (m.get("refused") or {}).items():  # no number: the rule that refused it
                 lines.append(f"    {name} refused: {why}")
             if m.get("known"):  # fixed, not estimated (monitor.known), as cosim monitor's --known
@@ -157,7 +159,7 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
                 lines.append(f"    model mismatch ({m['mismatch']['test']} test): parameters not validated")
             for d in m.get("diagnosis") or []:
                 lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
-            if m.get("error"):
+            if m.get("error") and m["error"] not in verdict:
                 lines.append(f"    {m['error']}")
     if r.get("held_inputs"):  # a rejection the set-up's sampling explains (cosim/held_inputs.py)
         lines.append(f"  set-up: {r['held_inputs']}")
