@@ -1,0 +1,46 @@
+"""Verdicts on real recordings as a new user gets them (../shared/realdata, audit 2): right, or saying why not.
+
+Skipped with the reason where ../shared/realdata is absent.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from feeddrive.cosim.cli import main as cosim
+
+REALDATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata"
+HSM = REALDATA / "hsm150"
+pytestmark = pytest.mark.skipif(not HSM.is_dir(), reason=f"real recordings not found: {HSM}")
+HSM_MAP = ["time=data[:,0] [s]", "speed=data[:,3] [rad/s]", "torque=data[:,5] [N.m]"]
+
+
+def monitor(capsys: pytest.CaptureFixture, *args: object) -> tuple[int, dict | None, str]:
+    code = cosim(["monitor", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, (json.loads(out) if code == 0 else None), err
+
+
+def test_a_motion_whose_every_parameter_is_refused_is_not_estimated_and_stays_out_of_the_baseline(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """HSM150 repeat 2 at the monitor's 100 Hz cut-off: Jt, ft and Cd are each refused (IV's halves alias at
+    1 kHz). The motion was "healthy", validated, and counted as healthy baseline motion 2 of 3 with no
+    parameter at all; the history's trends page said its baseline was the mean of 3 motions while only one
+    held values. Nothing given is nothing validated: "not estimated", with every refusal's reason kept."""
+    db = tmp_path / "h.sqlite"
+    code, first, err = monitor(capsys, HSM / "idf_pos_0.06_1.mat", "--map", *HSM_MAP, "--segment", "none",
+                               "--db", db, "--axis", "hsm", "--json", "--start-time", "2024-01-01T10:00:00")
+    assert code == 0, err
+    (m1,) = first["motions"]
+    assert m1["verdict"] == "healthy" and {"ft", "Cd"} <= set(m1["parameters"])
+    code, second, err = monitor(capsys, HSM / "idf_pos_0.06_2.mat", "--map", *HSM_MAP, "--segment", "none",
+                                "--db", db, "--axis", "hsm", "--json", "--start-time", "2024-01-01T11:00:00")
+    assert code == 0, err
+    (m2,) = second["motions"]
+    assert m2["parameters"] == {} and {"Jt", "ft", "Cd"} <= set(m2["refused"])  # the case this test is about
+    assert not m2["validated"]
+    assert m2["verdict"].startswith("not estimated: every parameter refused (Jt, ft, Cd)"), m2["verdict"]
+    assert m2["adequacy"]["verdict"] == "adequate"  # the residue check is still reported
+    assert not any(n.startswith("healthy baseline") for n in m2["notes"]), m2["notes"]
