@@ -74,8 +74,11 @@ def si_factor(unit: str, role: str, where: str) -> tuple[float, str]:
         if angle is not None:
             raise DataError(f"{where}: {angle}; expected the unit that says it, e.g. [rpm] for revolutions per minute")
         return factor, target
+    # a percentage or per-unit value (of a rated torque, current, speed): its scale is the machine's, not pint's
+    rated = (f"; a fraction of a rated value needs its scale: --map '{role}=COLUMN*SCALE [{targets[0].replace('*', '.')}]'"
+             " (SCALE = rated value / 100 for %)") if q.dimensionless else ""
     raise DataError(f"{where}: unit {unit!r} is not a unit of role {role} (expected one convertible to "
-                    f"{' or '.join(targets)})")
+                    f"{' or '.join(targets)}){rated}")
 
 
 #: a scale within this relative distance of the header unit's own factor to SI agrees with it (rounded constants)
@@ -141,8 +144,10 @@ def _scaled_factor(spec: str, scale: float, stated: str | None, header: str, rol
     if header:
         try:
             head_factor, head_si = si_factor(header, role, where)
-        except DataError:
-            head_si = ""
+        except DataError:  # not the role's unit (%, counts): the scale makes it one, which the map must state
+            raise DataError(f"{where}: the header says [{header}], not a unit of {role}, and the map's scale "
+                            f"{scale:.6g} gives no unit; state the unit of the scaled values: --map "
+                            f"'{role}={spec} [UNIT]', e.g. [{SI_UNITS[role][0].replace('*', '.')}]") from None
     if not head_si:
         return scale, ""
     if abs(scale / head_factor - 1.0) <= SCALE_AGREES:
