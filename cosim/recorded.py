@@ -301,8 +301,8 @@ def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: 
 
 
 def assumed_units(rec: Recording) -> tuple[str, ...]:
-    """One line per position, speed or torque signal whose unit nothing states (header, map or ``--pitch``):
-    what it is taken as, on the side the other columns state (the motor's when none does), and how to state it."""
+    """One line per signal whose unit nothing states (header, map or ``--pitch``): what it is taken as (a position,
+    speed or torque on the side the other columns state, the motor's when none does), and how to state it."""
     side = rec.side or "motor"
     out = []
     if rec.timing.get("unit_stated") is False:  # a time in ms taken for s made Jt 1e6 times too large, unsaid
@@ -310,11 +310,17 @@ def assumed_units(rec: Recording) -> tuple[str, ...]:
         out.append(f"time: {source} states no unit (not in the header, not in the map): taken as s (a step of "
                    f"{rec.h:.6g} s, {1 / rec.h:.6g} Hz); state it: --map 'time={source.strip(chr(39))} [UNIT]' "
                    f"(e.g. ms)")
-    for role in MECHANICAL:
-        if role in rec.signals and not rec.units.get(role):
+    for role in rec.signals:
+        if rec.units.get(role) or len(SI_UNITS.get(role, ())) == 0:
+            continue
+        if role in MECHANICAL:
             unit = dict(zip(("motor", "table"), SI_UNITS[role]))[side].replace("*", ".")  # N.m, as printed elsewhere
-            out.append(f"{role}: {rec.columns[role]!r} states no unit (not in the header, not in the map): taken as "
-                       f"{unit} ({side} side); state it: --map '{role}={rec.columns[role]}*SCALE [UNIT]'")
+            taken, example = f"{unit} ({side} side)", ""
+        else:  # a current in mA taken for A made R and K 1000 times too small, unsaid and physically possible
+            taken = SI_UNITS[role][0]
+            example = {"A": " (e.g. mA)", "V": " (e.g. mV)"}.get(taken, "")
+        out.append(f"{role}: {rec.columns[role]!r} states no unit (not in the header, not in the map): taken as "
+                   f"{taken}; state it: --map '{role}={rec.columns[role]}*SCALE [UNIT]'{example}")
     return tuple(out)
 
 

@@ -40,3 +40,24 @@ def test_an_unscaled_percentage_is_refused_with_the_scale_it_needs(percent_csv) 
     with pytest.raises(DataError, match=r"unit '%' is not a unit of role torque .*a fraction of a rated value needs "
                                          r"its scale: --map 'torque=COLUMN\*SCALE \[N\.m\]'"):
         load_recording(path, {"time": "t", "speed": "w", "torque": "T"})
+
+
+def test_a_current_or_voltage_with_no_unit_anywhere_is_said_taken_as_a_or_v(tmp_path: Path) -> None:
+    """The Quanser motor's current mapped as ``data[:,3]*1000`` (mA, no unit) gave R = 0.0095 Ohm, 1000 times the
+    manual's 8.4 Ohm too small and physically possible, with not a word; only a position, speed or torque
+    without a unit was said. Now every unit taken as SI is said; one stated is converted and not said."""
+    path = tmp_path / "bench.csv"
+    t = np.arange(20) * 1e-3
+    np.savetxt(path, np.column_stack([t, 1 + t, 1e3 * (0.1 + t), t]), delimiter=",", header="t [s],u,i,w [rad/s]",
+               comments="", fmt="%.10g")
+    from feeddrive.cosim.recorded import assumed_units
+
+    rec = load_recording(path, {"time": "t", "voltage": "u", "current1": "i", "speed": "w"})
+    assert assumed_units(rec) == (
+        "voltage: 'u' states no unit (not in the header, not in the map): taken as V; state it: "
+        "--map 'voltage=u*SCALE [UNIT]' (e.g. mV)",
+        "current1: 'i' states no unit (not in the header, not in the map): taken as A; state it: "
+        "--map 'current1=i*SCALE [UNIT]' (e.g. mA)")
+    rec = load_recording(path, {"time": "t", "voltage": "u [V]", "current1": "i [mA]", "speed": "w"})
+    assert assumed_units(rec) == ()
+    np.testing.assert_allclose(rec.signals["current1"], 0.1 + t, rtol=1e-12)
