@@ -340,8 +340,9 @@ def motions(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None,
 def start_clock(rec: Recording, start_time: str | None = None) -> tuple[float, str]:
     """Calendar time of the recording's first sample [s since 1970 UTC] and where it came from.
 
-    In order: ``--start-time`` (ISO 8601; without a zone, UTC), the time column's calendar time stamps,
-    else the file's modification time taken as the end of the recording (said so).
+    In order: ``--start-time`` (ISO 8601; without a zone, UTC), the time column's calendar time stamps, a run's
+    own signals.csv's ``start_utc`` (signals.meta.json: the machine time of its first row), else the file's
+    modification time taken as the end of the recording (said so).
     """
     if start_time is not None:
         try:
@@ -353,6 +354,14 @@ def start_clock(rec: Recording, start_time: str | None = None) -> tuple[float, s
         return t.timestamp(), f"--start-time {start_time}"
     if rec.clock is not None:
         return rec.clock, f"time stamps of {rec.timing.get('source', 'the time column')} in {rec.path}"
+    from feeddrive.cosim.recorder import sidecar_start
+
+    try:  # a run's own signals.csv: its first row's machine time (a copy's modification time would date it anew)
+        run = sidecar_start(rec.path)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    if run is not None:
+        return run[0], f"start_utc of {run[1]} (the machine time of the run's first row)"
     end = rec.time(rec.n - 1) - rec.t0
     return (rec.path.stat().st_mtime - end,
             f"file modification time of {rec.path} (taken as the end of the recording; set --start-time ISO)")
