@@ -233,8 +233,8 @@ class MonitorPipeline:
         if est.result.message:  # a fallback (IV -> LS) is stated with its reason
             result["notes"].append(est.result.message)
         if not params:  # every parameter refused: nothing to validate, to diagnose or to add to the baseline
-            result["error"] = (f"every parameter refused ({', '.join(est.refused) or 'none given'}): each one's reason "
-                               "in refused")
+            result["error"] = (f"every parameter refused ({', '.join(est.refused) or 'none given'}), each with its "
+                               "reason: nothing to validate")
             return adequacy is not None and adequacy.mismatch
         flags = dict(est.flags)
         if flags:  # outside the physical range or the user's bounds: reported, never validated
