@@ -173,7 +173,8 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     path, what = source.path, "column" if not hasattr(source, "tree") else "variable"
     columns, signals, units, lengths, time_sig = {}, {}, {}, {}, None
     for role, spec in role_map.items():
-        sig = source.resolve(split_map(spec)[0], role)
+        whole = spec.strip()  # a CSV header given whole, with its unit ("I [A]" beside "I [mA]")
+        sig = source.resolve(whole if whole in getattr(source, "header", ()) else split_map(spec)[0], role)
         where = f"{path}: {what} {sig.label!r} (role {role})"
         factor, si = column_factor(spec, sig.unit, role, where)
         with np.errstate(over="ignore", invalid="ignore"):

@@ -147,9 +147,12 @@ class CsvSource(Source):
             self.n_rows = arrow[0]
         self.header = [h.strip() for h in header]
         self.index: dict[str, int] = {}
+        #: name without its unit -> the headers it names (``I`` -> ``I [A]``, ``I [mA]``: a converted copy beside it)
+        self.named: dict[str, list[str]] = {}
         for k, h in enumerate(self.header):
             self.index.setdefault(h, k)
             self.index.setdefault(bare(h), k)
+            self.named.setdefault(bare(h), []).append(h)
         sep = {"\t": "tab"}.get(self.sep, self.sep)
         self.kind = f"CSV ('{sep}' separated, decimal '{self.dec}')"
 
@@ -216,6 +219,10 @@ class CsvSource(Source):
                       origin.timestamp() if absolute else 0.0)
 
     def resolve(self, expr: str, role: str) -> Signal:
+        same = self.named.get(bare(expr), []) if expr.strip() not in self.header else []
+        if len(same) > 1:  # the first one taken silently could be the mA copy read as A
+            raise DataError(f"{self.path}: column {expr!r} (role {role}) names {len(same)} columns, "
+                            f"{', '.join(map(repr, same))}; expected one: name it whole, e.g. --map '{role}={same[0]}'")
         k = self.index.get(expr.strip(), self.index.get(bare(expr)))
         if k is None:
             raise DataError(f"{self.path}: column {expr!r} (role {role}) not found; columns are {self.header} "

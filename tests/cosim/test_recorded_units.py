@@ -61,3 +61,18 @@ def test_a_current_or_voltage_with_no_unit_anywhere_is_said_taken_as_a_or_v(tmp_
     rec = load_recording(path, {"time": "t", "voltage": "u [V]", "current1": "i [mA]", "speed": "w"})
     assert assumed_units(rec) == ()
     np.testing.assert_allclose(rec.signals["current1"], 0.1 + t, rtol=1e-12)
+
+
+def test_a_name_that_fits_two_columns_is_refused_naming_both(tmp_path: Path) -> None:
+    """A pandas copy of the current in mA beside the current in A (``I [A]``, ``I [mA]``): ``current1=I`` took the
+    first one silently, whichever it was. Refused, naming both; each is taken when named whole."""
+    path = tmp_path / "two.csv"
+    t = np.arange(20) * 1e-3
+    np.savetxt(path, np.column_stack([t, 0.1 + t, 1e3 * (0.1 + t)]), delimiter=",", header="t [s],I [A],I [mA]",
+               comments="", fmt="%.10g")
+    with pytest.raises(DataError, match=r"column 'I' \(role current1\) names 2 columns, 'I \[A\]', 'I \[mA\]'; "
+                                         r"expected one: name it whole, e.g. --map 'current1=I \[A\]'"):
+        load_recording(path, {"time": "t", "current1": "I"})
+    for name in ("I [A]", "I [mA]", "I [mA]*0.001 [A]"):
+        rec = load_recording(path, {"time": "t", "current1": name})
+        np.testing.assert_allclose(rec.signals["current1"], 0.1 + t, rtol=1e-12, err_msg=name)
