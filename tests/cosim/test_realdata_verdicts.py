@@ -66,3 +66,20 @@ def test_repeats_of_one_machine_are_not_drifting_on_intervals_conditional_on_a_r
     lo, hi = second["parameters"]["Cd"]["ci95"]
     assert hi - lo > 0.01  # +-0.0066 N.m: the interval several files are compared with
     assert lo < first["parameters"]["Cd"]["value"] < hi
+
+
+def test_files_that_share_no_given_parameter_are_not_called_consistent(capsys: pytest.CaptureFixture) -> None:
+    """HSM150 repeats 1 and 2 at a 100 Hz cut-off: repeat 2 has every parameter refused, so no parameter is given
+    by both files. The agreement said "consistent (p = 1, Bonferroni over 0 parameters; joint chi2 0 on 0 dof)":
+    a verdict with no test behind it."""
+    argv = ["estimate", *(str(HSM / f"idf_pos_0.06_{k}.mat") for k in (1, 2)), "--map", *HSM_MAP,
+            "--segment", "none", "--filter-cutoff", "100"]
+    assert cosim([*argv, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["files"][1]["estimate"] == {}  # the case this test is about
+    consistency = doc["consistency"]
+    assert consistency["verdict"].startswith("not tested") and consistency["p_value"] is None
+    assert consistency["per_parameter"] == {} and consistency["differ"] == []
+    assert cosim(argv) == 0
+    out = capsys.readouterr().out
+    assert "agreement: not tested: no parameter is given by two files or more" in out and "consistent" not in out
