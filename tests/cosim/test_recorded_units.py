@@ -76,3 +76,15 @@ def test_a_name_that_fits_two_columns_is_refused_naming_both(tmp_path: Path) -> 
     for name in ("I [A]", "I [mA]", "I [mA]*0.001 [A]"):
         rec = load_recording(path, {"time": "t", "current1": name})
         np.testing.assert_allclose(rec.signals["current1"], 0.1 + t, rtol=1e-12, err_msg=name)
+
+
+def test_a_pattern_or_a_folder_where_one_recording_is_expected_says_so(tmp_path: Path) -> None:
+    """``cosim monitor 'run*.csv'`` said "run*.csv: no such file" while three files matched: the pattern is
+    cosim estimate's; the monitor takes its recordings one at a time."""
+    for k in range(3):
+        (tmp_path / f"run{k}.csv").write_text("t [s],w [rad/s],T [N.m]\n0,0,0\n", encoding="utf-8")
+    with pytest.raises(DataError, match=r"run\*\.csv: a file pattern \(3 files: .*run0\.csv, .*\); expected one "
+                                         r"recording here: give each in turn, oldest first"):
+        load_recording(tmp_path / "run*.csv", {"time": "t", "speed": "w"})
+    with pytest.raises(DataError, match=r": is a folder; expected a recording file"):
+        load_recording(tmp_path, {"time": "t", "speed": "w"})
