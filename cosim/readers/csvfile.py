@@ -57,14 +57,19 @@ def dialect(text: str, delimiter: str | None, decimal: str | None, path: Path) -
         header = head[0] if head else ""
         counts = {d: len(fields(header, d)) for d in (",", ";", "\t")}
         delimiter = max(counts, key=lambda d: (counts[d], d == ","))
+    # pandas' to_csv(decimal=",") with the default separator quotes every such cell: "0,5","1,25"
+    quoted = any('"' in line for line in head[1:])
     if decimal is None:
         sample = [c.strip() for line in head[1:] for c in fields(line, delimiter)]
         comma = any(re.fullmatch(r"[-+]?\d*,\d+([eE][-+]?\d+)?", c) for c in sample)
-        decimal = "," if comma and delimiter != "," else "."
+        # quoted with a comma separator, "1,234" beside "0.5" is a thousands separator: taken as no decimal comma
+        dots = quoted and any(re.fullmatch(r"[-+]?\d*\.\d+([eE][-+]?\d+)?", c) for c in sample)
+        decimal = "," if comma and (delimiter != "," or (quoted and not dots)) else "."
     if decimal not in (".", ","):
         raise DataError(f"{path}: --decimal {decimal!r}; expected '.' or ','")
-    if decimal == delimiter:
-        raise DataError(f"{path}: the decimal mark and the separator are both {decimal!r}; expected different ones")
+    if decimal == delimiter and not (decimal == "," and quoted):
+        raise DataError(f"{path}: the decimal mark and the separator are both {decimal!r}; expected different ones "
+                        "(or the cells in quotes)")
     return delimiter, decimal
 
 
