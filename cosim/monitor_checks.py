@@ -121,6 +121,15 @@ def motion_verdict(result: Mapping, mismatch: bool) -> str:
     return "healthy"
 
 
+def parameter_entry(p, joint, unit: str) -> dict:  # noqa: ANN001 - estimator ParameterEstimate (joint: or None)
+    """A given parameter's report.json entry: its value, with the wider of its interval and its interval not
+    conditional on a refused parameter fixed at its own estimate (``MotionEstimate.joint``)."""
+    if joint is not None and joint.std > p.std:
+        half = joint.ci95[1] - joint.value
+        return {"value": p.value, "std": joint.std, "ci95": [p.value - half, p.value + half], "unit": unit}
+    return {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": unit}
+
+
 def known_parameters(known: Mapping[str, float], units: Mapping[str, str]) -> dict[str, dict]:
     """Known parameters as report.json parameter entries (``known: true``, no interval)."""
     return {k: {"value": float(v), "std": 0.0, "ci95": [float(v), float(v)], "unit": units.get(k, ""), "known": True}

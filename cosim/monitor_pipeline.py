@@ -226,13 +226,20 @@ class MonitorPipeline:
             return adequacy is not None and adequacy.mismatch
         params = est.parameters
         units = parameter_units("motor")  # the monitor's signals are the motor's: u, i, w [rad/s]
-        result["parameters"] = {k: {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": units.get(k, "")}
-                                for k, p in params.items()}
+        # judged against other motions (drift, baseline, trends): the intervals not conditional on a refused parameter
+        # fixed at its own estimate, as several files are compared (cosim estimate A B C); the conditional ones were
+        # 5 times narrower on an HSM150 repeat and made the same machine "drifting"
+        joint = est.joint.parameters if est.joint is not None else {}
+        result["parameters"] = {k: checks.parameter_entry(p, joint.get(k), units.get(k, "")) for k, p in params.items()}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error),
                    "estimation_rate_hz": est.rate_hz}  # the record's rate, or its decimated one
         result["refused"] = dict(est.refused)
         if est.result.message:  # a fallback (IV -> LS) is stated with its reason
             result["notes"].append(est.result.message)
+        if not params:  # every parameter refused: nothing to validate, to diagnose or to add to the baseline
+            result["error"] = (f"every parameter refused ({', '.join(est.refused) or 'none given'}), each with its "
+                               "reason: nothing to validate")
+            return adequacy is not None and adequacy.mismatch
         flags = dict(est.flags)
         if flags:  # outside the physical range or the user's bounds: reported, never validated
             result["flags"] = flags

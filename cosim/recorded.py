@@ -10,12 +10,9 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
-import math
-import re
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +29,15 @@ from feeddrive.cosim.recorded_options import (  # noqa: F401 - the shared option
     mapped_roles,
     pairs,
     sampling_modes,
+)
+from feeddrive.cosim.recorded_units import (  # noqa: F401 - the units, re-exported
+    MAX_ABS,
+    MECHANICAL,
+    SI_SIDE,
+    SI_UNITS,
+    column_factor,
+    si_factor,
+    split_map,
 )
 
 __all__ = ["TIME_JITTER", "Recording", "load_recording", "si_factor", "split_map"]
@@ -118,146 +124,6 @@ class Recording:
         return self.t0 + k * self.h
 
 
-#: SI unit each role is converted to, in order of preference; a unit that converts to a later entry of
-#: position / speed / torque puts the data on the table side of a linear axis.
-SI_UNITS = {"time": ("s",), "voltage": ("V",), "voltage_ref": ("V",), "current": ("A",), "current1": ("A",),
-            "current2": ("A",), "speed": ("rad/s", "m/s"), "position": ("rad", "m"), "torque": ("N*m", "N"),
-            "state": (), "i_d": ("A",), "i_q": ("A",), "u_d": ("V",), "u_q": ("V",),  # PMSM dq (cosim estimate --drive)
-            # a PMSM drive's trace (cosim monitor --drive pmsm, cosim/recorded_servo.py): phase currents, a second
-            # sensor on one phase, voltage references, electrical angle, linear-scale position
-            "I_U": ("A",), "I_V": ("A",), "I_W": ("A",), "I_U2": ("A",), "I_V2": ("A",), "I_W2": ("A",),
-            "u_d_ref": ("V",), "u_q_ref": ("V",), "phi_el": ("rad",), "x_lin": ("m",)}
-#: roles whose unit says which side of the drive chain the data are on (``Recording.side``, ``to_motor_side``)
-MECHANICAL = ("position", "speed", "torque")
-#: roles whose values may be rms values (``[A rms]``): a PMSM's dq currents, whose amplitude-invariant value is
-#: the phase peak, sqrt(2) x the rms value of the sinusoidal phase current (a phase current's sample is never rms)
-RMS_ROLES = ("i_d", "i_q")
-SI_SIDE = {"rad/s": "motor", "rad": "motor", "N*m": "motor", "m/s": "table", "m": "table", "N": "table"}
-#: Largest magnitude accepted: the estimator squares and sums the samples, 1e300 would overflow
-MAX_ABS = 1e100
-
-
-@lru_cache(maxsize=1)
-def _registry():  # noqa: ANN202 - pint.UnitRegistry, built once (slow)
-    import pint
-
-    return pint.UnitRegistry()
-
-
-def si_factor(unit: str, role: str, where: str) -> tuple[float, str]:
-    """``(factor, si_unit)``: a value in ``unit`` times ``factor`` is in ``si_unit`` (pint does the work).
-
-    ``N.m``, ``kg.m2`` and ``Ohm`` are read as ``N*m``, ``kg*m**2`` and ``ohm``. ``where`` names the file
-    and column in the error.
-    """
-    import pint
-
-    targets = SI_UNITS.get(role, ())
-    if not targets or unit in ("", "1", "-"):
-        return 1.0, ""
-    base, rms = re.subn(r"(?i)[\s_]*rms$", "", unit.strip())
-    if rms:  # an rms value is no unit pint converts: stated in the header, converted here, and said so
-        if role not in RMS_ROLES or not base:
-            raise DataError(f"{where}: unit {unit!r}: an rms value is not a sample of role {role}; expected "
-                            f"{' or '.join(targets)} (rms only for the dq currents {', '.join(RMS_ROLES)})")
-        factor, si = si_factor(base, role, where)
-        return factor * math.sqrt(2.0), f"{si} (rms x sqrt 2)"
-    text = re.sub(r"(?<=[A-Za-z])\.(?=[A-Za-z])", "*", unit)  # N.m -> N*m
-    text = re.sub(r"(?<=[A-Za-z])(\d+)", r"**\1", text).replace("Ohm", "ohm")  # m2 -> m**2
-    ureg = _registry()
-    try:
-        q = ureg.Quantity(1.0, text)
-    except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError):
-        raise DataError(f"{where}: unknown unit {unit!r}; expected a unit such as {', '.join(targets)}") from None
-    for target in targets:
-        try:
-            factor = float(q.to(target).magnitude)
-        except pint.errors.DimensionalityError:
-            continue
-        from feeddrive.cosim.unit_map import angle_mismatch
-
-        angle = angle_mismatch(unit, target)  # pint holds the radian dimensionless: [1/min] was rad/s x 1/60
-        if angle is not None:
-            raise DataError(f"{where}: {angle}; expected the unit that says it, e.g. [rpm] for revolutions per minute")
-        return factor, target
-    raise DataError(f"{where}: unit {unit!r} is not a unit of role {role} (expected one convertible to "
-                    f"{' or '.join(targets)})")
-
-
-#: a scale within this relative distance of the header unit's own factor to SI agrees with it (rounded constants)
-SCALE_AGREES = 1e-3
-_STATED = re.compile(r"^(?P<column>.*\S)\s+\[(?P<unit>[^\[\]]*)\]\s*$")
-_SCALED = re.compile(r"^(?P<column>.*\S)\s*\*\s*(?P<scale>[^\s*\[\]]+)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
-
-
-def split_map(column: str) -> tuple[str, float | None, str | None]:
-    """A role map's entry: ``COLUMN``, ``COLUMN [UNIT]``, ``COLUMN*SCALE`` or ``COLUMN*SCALE [UNIT]``.
-
-    Returns ``(column, scale or None, stated unit or None)``: the column's values times the scale are in
-    the stated unit (``"Wheel velocity*325.9 [rad/s]"``: a wheel speed in m/s times gear/radius is the
-    motor's speed in rad/s; a gear or a pitch changes the unit, so the header's unit no longer says it).
-    """
-    m = _SCALED.match(column)
-    if m is None:
-        m = _STATED.match(column)  # a unit stated without a scale: after a space (data[:,3] is an index)
-        if m is None:
-            return column, None, None
-        unit = m["unit"].strip()
-        if not unit:
-            raise InputError(f"--map {column!r}: empty unit in [ ]; expected e.g. [rad/s]")
-        return m["column"].strip(), None, unit
-    try:
-        value = float(m["scale"])
-    except ValueError:
-        return column, None, None
-    if not np.isfinite(value) or value == 0:
-        raise InputError(f"--map {column!r}: the scale must be a finite non-zero number")
-    unit = m["unit"].strip() if m["unit"] is not None else None
-    if unit == "":
-        raise InputError(f"--map {column!r}: empty unit in [ ]; expected e.g. [rad/s]")
-    return m["column"].strip(), value, unit
-
-
-def _stated_factor(stated: str, header: str, role: str, where: str) -> tuple[float, str]:
-    """``(factor to SI, SI unit)`` of ``COLUMN [UNIT]``: the unit a column's header lacks, or its own again; one that
-    contradicts the header's is refused (a scale converts: ``COLUMN*SCALE [UNIT]``)."""
-    factor, si = si_factor(stated, role, f"{where}: stated unit [{stated}]")
-    if header:
-        head_factor, head_si = si_factor(header, role, where)
-        if head_si != si or abs(factor / head_factor - 1.0) > 1e-12:
-            raise DataError(f"{where}: the header says [{header}], the map states [{stated}]; expected one unit (a "
-                            f"scale converts between them: --map '{role}=COLUMN*SCALE [{stated}]')")
-    return factor, si
-
-
-def _scaled_factor(spec: str, scale: float, stated: str | None, header: str, role: str, where: str
-                   ) -> tuple[float, str]:
-    """``(factor to SI, SI unit or "")`` of ``COLUMN*SCALE [UNIT]`` (``stated``) on a column whose header states
-    ``header``.
-
-    A stated unit decides (the values times the scale are in it). Without one, a scale that agrees with the
-    header's own factor to SI (within :data:`SCALE_AGREES`) keeps the header's unit; one that contradicts it is
-    refused (it changes the unit: a gear, a pitch, a wheel radius), naming the fix. With no unit anywhere the
-    unit stays unknown (``""``): :func:`read_recording` says what it is taken as.
-    """
-    if stated is not None:
-        factor, si = si_factor(stated, role, f"{where}: stated unit [{stated}]")
-        return scale * factor, si
-    head_factor, head_si = 1.0, ""
-    if header:
-        try:
-            head_factor, head_si = si_factor(header, role, where)
-        except DataError:
-            head_si = ""
-    if not head_si:
-        return scale, ""
-    if abs(scale / head_factor - 1.0) <= SCALE_AGREES:
-        return scale, head_si
-    why = " (a gear, a pitch or a radius changes it)" if role in MECHANICAL else ""
-    raise DataError(f"{where}: the header says [{header}] ({head_factor:.6g} x to {head_si}) but the map's scale is "
-                    f"{scale:.6g}, so the scaled values are in another unit{why}; state it: --map "
-                    f"'{role}={spec} [UNIT]', e.g. [{SI_UNITS[role][0]}]")
-
 
 def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: float | None = None,
                    delimiter: str | None = None, decimal: str | None = None, *, resample: float | None = None,
@@ -307,15 +173,10 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     path, what = source.path, "column" if not hasattr(source, "tree") else "variable"
     columns, signals, units, lengths, time_sig = {}, {}, {}, {}, None
     for role, spec in role_map.items():
-        column, scale, stated = split_map(spec)
-        sig = source.resolve(column, role)
+        whole = spec.strip()  # a CSV header given whole, with its unit ("I [A]" beside "I [mA]")
+        sig = source.resolve(whole if whole in getattr(source, "header", ()) else split_map(spec)[0], role)
         where = f"{path}: {what} {sig.label!r} (role {role})"
-        if scale is None and stated is not None:
-            factor, si = _stated_factor(stated, sig.unit, role, where)
-        elif scale is None:
-            factor, si = si_factor(sig.unit, role, where)
-        else:
-            factor, si = _scaled_factor(spec.strip(), scale, stated, sig.unit, role, where)
+        factor, si = column_factor(spec, sig.unit, role, where)
         with np.errstate(over="ignore", invalid="ignore"):
             values = sig.values * factor
         bad = np.flatnonzero(~(np.abs(values) <= MAX_ABS))  # NaN fails the comparison too
@@ -441,8 +302,8 @@ def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: 
 
 
 def assumed_units(rec: Recording) -> tuple[str, ...]:
-    """One line per position, speed or torque signal whose unit nothing states (header, map or ``--pitch``):
-    what it is taken as, on the side the other columns state (the motor's when none does), and how to state it."""
+    """One line per signal whose unit nothing states (header, map or ``--pitch``): what it is taken as (a position,
+    speed or torque on the side the other columns state, the motor's when none does), and how to state it."""
     side = rec.side or "motor"
     out = []
     if rec.timing.get("unit_stated") is False:  # a time in ms taken for s made Jt 1e6 times too large, unsaid
@@ -450,11 +311,17 @@ def assumed_units(rec: Recording) -> tuple[str, ...]:
         out.append(f"time: {source} states no unit (not in the header, not in the map): taken as s (a step of "
                    f"{rec.h:.6g} s, {1 / rec.h:.6g} Hz); state it: --map 'time={source.strip(chr(39))} [UNIT]' "
                    f"(e.g. ms)")
-    for role in MECHANICAL:
-        if role in rec.signals and not rec.units.get(role):
+    for role in rec.signals:
+        if rec.units.get(role) or len(SI_UNITS.get(role, ())) == 0:
+            continue
+        if role in MECHANICAL:
             unit = dict(zip(("motor", "table"), SI_UNITS[role]))[side].replace("*", ".")  # N.m, as printed elsewhere
-            out.append(f"{role}: {rec.columns[role]!r} states no unit (not in the header, not in the map): taken as "
-                       f"{unit} ({side} side); state it: --map '{role}={rec.columns[role]}*SCALE [UNIT]'")
+            taken, example = f"{unit} ({side} side)", ""
+        else:  # a current in mA taken for A made R and K 1000 times too small, unsaid and physically possible
+            taken = SI_UNITS[role][0]
+            example = {"A": " (e.g. mA)", "V": " (e.g. mV)"}.get(taken, "")
+        out.append(f"{role}: {rec.columns[role]!r} states no unit (not in the header, not in the map): taken as "
+                   f"{taken}; state it: --map '{role}={rec.columns[role]}*SCALE [UNIT]'{example}")
     return tuple(out)
 
 
@@ -474,8 +341,9 @@ def motions(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None,
 def start_clock(rec: Recording, start_time: str | None = None) -> tuple[float, str]:
     """Calendar time of the recording's first sample [s since 1970 UTC] and where it came from.
 
-    In order: ``--start-time`` (ISO 8601; without a zone, UTC), the time column's calendar time stamps,
-    else the file's modification time taken as the end of the recording (said so).
+    In order: ``--start-time`` (ISO 8601; without a zone, UTC), the time column's calendar time stamps, a run's
+    own signals.csv's ``start_utc`` (signals.meta.json: the machine time of its first row), else the file's
+    modification time taken as the end of the recording (said so).
     """
     if start_time is not None:
         try:
@@ -487,6 +355,14 @@ def start_clock(rec: Recording, start_time: str | None = None) -> tuple[float, s
         return t.timestamp(), f"--start-time {start_time}"
     if rec.clock is not None:
         return rec.clock, f"time stamps of {rec.timing.get('source', 'the time column')} in {rec.path}"
+    from feeddrive.cosim.recorder import sidecar_start
+
+    try:  # a run's own signals.csv: its first row's machine time (a copy's modification time would date it anew)
+        run = sidecar_start(rec.path)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    if run is not None:
+        return run[0], f"start_utc of {run[1]} (the machine time of the run's first row)"
     end = rec.time(rec.n - 1) - rec.t0
     return (rec.path.stat().st_mtime - end,
             f"file modification time of {rec.path} (taken as the end of the recording; set --start-time ISO)")

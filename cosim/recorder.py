@@ -3,8 +3,11 @@
 Beside it, ``signals.meta.json`` says how each column was sampled (:class:`Sampling`), so that
 ``cosim estimate`` and ``cosim monitor`` read a run's own signals.csv right by default::
 
-    {"format": "feeddrive-sampling/1", "step_s": 1e-4,
+    {"format": "feeddrive-sampling/1", "step_s": 1e-4, "start_utc": "2026-11-26T23:04:22.118234+00:00",
      "columns": {"sensors.u": {"mode": "mean", "rate_hz": 10000.0, "window_s": 1e-4}, ...}}
+
+``start_utc`` is the machine time of the run's first row: a replay of the file is dated by it, not by the
+file's modification time (``cosim.recorded.start_clock``).
 """
 from __future__ import annotations
 
@@ -174,10 +177,17 @@ def sidecar_path(csv: str | Path) -> Path:
     return csv.with_name(csv.stem + ".meta.json")
 
 
-def write_sampling_sidecar(csv: str | Path, step: float, columns: Mapping[str, Sampling]) -> Path:
-    """Write the sampling of each column of ``csv`` into its sidecar (see the module docstring)."""
+def write_sampling_sidecar(csv: str | Path, step: float, columns: Mapping[str, Sampling],
+                           start: float | None = None) -> Path:
+    """Write the sampling of each column of ``csv`` into its sidecar (see the module docstring); ``start`` is the
+    machine time of its first row [s since 1970 UTC] (default: now, as the run's set-up opens its signals)."""
+    import datetime as _dt
+    import time as _time
+
     path = sidecar_path(csv)
+    start = _time.time() if start is None else float(start)
     data = {"format": SIDECAR_FORMAT, "step_s": step,
+            "start_utc": _dt.datetime.fromtimestamp(start, _dt.timezone.utc).isoformat(timespec="microseconds"),
             "columns": {k: {f: v for f, v in asdict(c).items() if v is not None} for k, c in columns.items()}}
     path.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     return path
@@ -208,6 +218,36 @@ def read_sampling_sidecar(csv: str | Path) -> dict[str, Sampling] | None:
     except (ValueError, TypeError, KeyError, AttributeError) as exc:
         raise ValueError(f"{path}: not a sampling sidecar ({exc}); expected {{\"format\": \"{SIDECAR_FORMAT}\", "
                          "\"columns\": {name: {mode, rate_hz, ...}}}, or delete it") from None
+
+
+def sidecar_start(csv: str | Path) -> tuple[float, Path] | None:
+    """The machine time of the first row of a run's ``csv`` [s since 1970 UTC] from its sidecar's ``start_utc``,
+    and the sidecar; None without a sidecar or that key (a sidecar of an earlier version).
+
+    Raises
+    ------
+    ValueError
+        A ``start_utc`` that is not an ISO 8601 time with its zone; the message names the file and the key.
+    """
+    import datetime as _dt
+
+    path = sidecar_path(csv)
+    if not path.is_file():
+        return None
+    try:
+        text = json.loads(path.read_text(encoding="utf-8")).get("start_utc")
+    except (ValueError, AttributeError):
+        return None  # not this format: read_sampling_sidecar says so where the sampling is read
+    if text is None:
+        return None
+    try:
+        t = _dt.datetime.fromisoformat(str(text))
+        if t.tzinfo is None:
+            raise ValueError("no time zone")
+    except ValueError:
+        raise ValueError(f"{path}: start_utc {text!r}: expected an ISO 8601 time with its zone, e.g. "
+                         "2026-11-26T23:04:22.118234+00:00, or delete the key") from None
+    return t.timestamp(), path
 
 
 def sidecar_modes(csv: str | Path, columns: Mapping[str, str]) -> dict[str, str]:

@@ -166,7 +166,10 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         report |= {"step_s": master.h, "stop_time_s": master.stop_time, "steps": master.n_steps}
         if signals:
             master.recorder.stream(paths["signals"])  # kept up to the last block if the process dies
-            write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names))
+            # the first row's machine time as the run's monitor dates its motions: a replay lands on the same times
+            clock0 = getattr(master.components.get("monitor"), "clock0", None)
+            write_sampling_sidecar(paths["signals"], master.h, column_sampling(scenario, master.recorder.names),
+                                   start=None if clock0 is None else clock0 + master.t0)
         # imported while the compiled loop runs: the monitor's on its first motion, report.html's at the end
         importer = _import_meanwhile((MONITOR_LATE_IMPORTS if scenario.monitor is not None else ())
                                      + (("feeddrive.cosim.report.page",) if page else ()))

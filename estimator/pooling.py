@@ -33,12 +33,13 @@ class Pooled:
         How many estimates gave each parameter.
     chi2, dof, joint_p : float, int, float
         Joint test over the parameters every estimate gives (dof 0 and p 1 when there is nothing to test).
-    p_value : float
-        The smallest per-parameter p-value times the number of parameters tested (at most 1): the verdict's.
+    p_value : float or None
+        The smallest per-parameter p-value times the number of parameters tested (at most 1): the verdict's;
+        None when no parameter is given by two estimates or more (verdict ``not tested: ...``).
     per_parameter : dict of str to (chi2, dof, p_value)
     differ : list of str
     verdict : str
-        ``consistent`` or ``differ: Jt, ...``.
+        ``consistent``, ``differ: Jt, ...`` or ``not tested: ...``.
     """
 
     parameters: dict[str, ParameterEstimate]
@@ -46,7 +47,7 @@ class Pooled:
     chi2: float
     dof: int
     joint_p: float
-    p_value: float
+    p_value: float | None
     per_parameter: dict[str, tuple[float, int, float]] = field(default_factory=dict)
     differ: list[str] = field(default_factory=list)
     verdict: str = "consistent"
@@ -116,4 +117,6 @@ def pool(results: list[MethodResult], alpha: float = 0.01) -> Pooled:
     p_value = min(1.0, min((p for *_, p in per.values()), default=1.0) * max(len(per), 1))
     differ = [n for n, (_, _, p) in per.items() if p * len(per) <= alpha]
     verdict = f"differ: {', '.join(differ)}" if differ else "consistent"
+    if len(results) > 1 and not per:  # nothing to compare: "consistent" would be a verdict without a test
+        verdict, p_value = "not tested: no parameter is given by more than one estimate", None
     return Pooled(params, count, chi2, dof, joint_p, p_value, per, differ, verdict, dofs)

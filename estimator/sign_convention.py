@@ -90,5 +90,11 @@ def sign_hint(data: MotionData, options: EstimationOptions, flags: Mapping[str, 
         return (f"the {q}'s sign is the opposite of the model's convention: with it negated every parameter is "
                 f"physically possible ({shown}); map it times -1 (COLUMN*-1) or check the sensor's direction")
     a, b = found
+    # a term of neither quantity (a torque offset T0) changes sign with the one negated: both values are said
+    same = {n: v for n, v in found[a].items() if n in found[b] and np.isclose(v, found[b][n], rtol=1e-6, atol=0.0)}
+    shown = ", ".join(f"{n} {v:.4g}" for n, v in same.items())
+    both = [f"{n} {v:.4g} with the {a} negated, {found[b][n]:.4g} with the {b}" for n, v in found[a].items()
+            if n not in same and n in found[b]]
+    shown += "".join(f"; {x}" for x in both)
     return (f"the {a} and the {b} have opposite sign conventions (only their relative sign is seen): with either "
             f"negated every parameter is physically possible ({shown}); map one of them times -1 (COLUMN*-1)")

@@ -266,11 +266,14 @@ def several_table(rows, verdict, units: dict[str, str]) -> str:  # noqa: ANN001 
                 lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {n} FLAGGED, not to be validated: {why}")
             if r.hint:
                 lines.append(f"  {r.start:.4g}-{r.end:.4g} s: {r.hint}")
-    lines.append(f"agreement: {verdict.verdict} (p = {verdict.p_value:.3g}, Bonferroni over "
-                 f"{len(verdict.per_parameter)} parameters; joint chi2 {verdict.chi2:.3g} on {verdict.dof} dof, "
-                 f"p = {verdict.joint_p:.3g})")
-    lines.append("  per parameter: " + ", ".join(f"{n} chi2 {c:.3g} on {d}, p {p:.3g}"
-                                                 for n, (c, d, p) in verdict.per_parameter.items()))
+    if not verdict.per_parameter:  # no parameter given by two files: no agreement to test
+        lines.append("agreement: not tested: no parameter is given by two files or more (see the refusals above)")
+    else:
+        lines.append(f"agreement: {verdict.verdict} (p = {verdict.p_value:.3g}, Bonferroni over "
+                     f"{len(verdict.per_parameter)} parameters; joint chi2 {verdict.chi2:.3g} on {verdict.dof} dof, "
+                     f"p = {verdict.joint_p:.3g})")
+        lines.append("  per parameter: " + ", ".join(f"{n} chi2 {c:.3g} on {d}, p {p:.3g}"
+                                                     for n, (c, d, p) in verdict.per_parameter.items()))
     lines.append("pooled:")
     for n, p in verdict.parameters.items():
         note = ", the files differ" if n in verdict.differ else ""

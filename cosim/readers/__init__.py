@@ -7,6 +7,7 @@ declared unit); :mod:`feeddrive.cosim.recorded` converts units and checks the ti
 """
 from __future__ import annotations
 
+import glob
 from pathlib import Path
 
 from feeddrive.cosim.errors import DataError
@@ -56,6 +57,13 @@ def open_source(path: str | Path, delimiter: str | None = None, decimal: str | N
     """
     path = Path(path)
     if not path.is_file():
+        if path.is_dir():
+            raise DataError(f"{path}: is a folder; expected a recording file")
+        hits = sorted(glob.glob(str(path))) if any(c in str(path) for c in "*?[") else []
+        if hits:  # cosim monitor 'run*.csv': a pattern is cosim estimate's; the monitor takes its recordings in turn
+            shown = ", ".join(hits[:3]) + (", ..." if len(hits) > 3 else "")
+            raise DataError(f"{path}: a file pattern ({len(hits)} files: {shown}); expected one recording here: give "
+                            "each in turn, oldest first (cosim estimate takes a pattern)")
         raise DataError(f"{path}: no such file")
     kind = _format(path)
     if kind == "mat":

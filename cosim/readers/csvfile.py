@@ -57,14 +57,19 @@ def dialect(text: str, delimiter: str | None, decimal: str | None, path: Path) -
         header = head[0] if head else ""
         counts = {d: len(fields(header, d)) for d in (",", ";", "\t")}
         delimiter = max(counts, key=lambda d: (counts[d], d == ","))
+    # pandas' to_csv(decimal=",") with the default separator quotes every such cell: "0,5","1,25"
+    quoted = any('"' in line for line in head[1:])
     if decimal is None:
         sample = [c.strip() for line in head[1:] for c in fields(line, delimiter)]
         comma = any(re.fullmatch(r"[-+]?\d*,\d+([eE][-+]?\d+)?", c) for c in sample)
-        decimal = "," if comma and delimiter != "," else "."
+        # quoted with a comma separator, "1,234" beside "0.5" is a thousands separator: taken as no decimal comma
+        dots = quoted and any(re.fullmatch(r"[-+]?\d*\.\d+([eE][-+]?\d+)?", c) for c in sample)
+        decimal = "," if comma and (delimiter != "," or (quoted and not dots)) else "."
     if decimal not in (".", ","):
         raise DataError(f"{path}: --decimal {decimal!r}; expected '.' or ','")
-    if decimal == delimiter:
-        raise DataError(f"{path}: the decimal mark and the separator are both {decimal!r}; expected different ones")
+    if decimal == delimiter and not (decimal == "," and quoted):
+        raise DataError(f"{path}: the decimal mark and the separator are both {decimal!r}; expected different ones "
+                        "(or the cells in quotes)")
     return delimiter, decimal
 
 
@@ -147,9 +152,12 @@ class CsvSource(Source):
             self.n_rows = arrow[0]
         self.header = [h.strip() for h in header]
         self.index: dict[str, int] = {}
+        #: name without its unit -> the headers it names (``I`` -> ``I [A]``, ``I [mA]``: a converted copy beside it)
+        self.named: dict[str, list[str]] = {}
         for k, h in enumerate(self.header):
             self.index.setdefault(h, k)
             self.index.setdefault(bare(h), k)
+            self.named.setdefault(bare(h), []).append(h)
         sep = {"\t": "tab"}.get(self.sep, self.sep)
         self.kind = f"CSV ('{sep}' separated, decimal '{self.dec}')"
 
@@ -216,6 +224,10 @@ class CsvSource(Source):
                       origin.timestamp() if absolute else 0.0)
 
     def resolve(self, expr: str, role: str) -> Signal:
+        same = self.named.get(bare(expr), []) if expr.strip() not in self.header else []
+        if len(same) > 1:  # the first one taken silently could be the mA copy read as A
+            raise DataError(f"{self.path}: column {expr!r} (role {role}) names {len(same)} columns, "
+                            f"{', '.join(map(repr, same))}; expected one: name it whole, e.g. --map '{role}={same[0]}'")
         k = self.index.get(expr.strip(), self.index.get(bare(expr)))
         if k is None:
             raise DataError(f"{self.path}: column {expr!r} (role {role}) not found; columns are {self.header} "

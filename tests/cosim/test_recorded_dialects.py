@@ -187,3 +187,19 @@ def test_a_unit_stated_without_a_scale_converts_a_bare_column_and_must_agree_wit
                                U * np.pi / 30, rtol=1e-14)
     with pytest.raises(DataError, match=r"the header says \[rpm\], the map states \[rad/s\]; expected one unit"):
         load_recording(headed, {"time": "t", "speed": "w [rad/s]"})
+
+
+def test_pandas_decimal_comma_with_the_default_separator_is_read_from_its_quotes(tmp_path):
+    """``df.to_csv(decimal=",")`` keeps the ',' separator and quotes every number ("0,5"). It was refused with
+    "(decimal comma? use --decimal ,)", and --decimal , then with "the decimal mark and the separator are both
+    ','": a dead end. The quotes make it unambiguous; a quoted "1,234" beside "0.5" stays a thousands mark."""
+    path = tmp_path / "pandas.csv"
+    path.write_text('t [s],v [m/s]\n' + "".join(f'"{t:.3f}","{float(u)!r}"\n'.replace(".", ",") for t, u in zip(T, U)),
+                    encoding="utf-8")
+    rec = load_recording(path, {"time": "t", "speed": "v"})
+    np.testing.assert_allclose(rec.signals["speed"], U, rtol=1e-14)
+    assert rec.h == pytest.approx(T[1] - T[0])
+    mixed = tmp_path / "mixed.csv"
+    mixed.write_text('t [s],v [m/s],n\n' + "".join(f'{float(t)!r},{float(u)!r},"1,234"\n' for t, u in zip(T, U)), encoding="utf-8")
+    rec = load_recording(mixed, {"time": "t", "speed": "v"})
+    np.testing.assert_allclose(rec.signals["speed"], U, rtol=1e-14)

@@ -11,13 +11,14 @@ gives 5.4e-6 H and [0.0039781, 0.0040000]; the estimate itself is unbiased (+0.0
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import pytest
 import yaml
 
 from feeddrive.cosim.cli import main
-from feeddrive.cosim.recorder import Sampling, read_sampling_sidecar
+from feeddrive.cosim.recorder import Sampling, read_sampling_sidecar, sidecar_start
 from feeddrive.cosim.run import run_scenario
 from feeddrive.cosim.scenario import scenario_from_dict
 
@@ -62,7 +63,11 @@ def test_the_estimate_on_a_runs_own_signals_covers_r_l_and_k(tmp_path, capsys, s
 
 
 def test_interval_means_are_read_from_the_sidecar_and_sampling_wins(tmp_path, capsys):
+    before = time.time()
     csv = run(tmp_path / "run", 1, oversample=10)
+    # the first row's machine time (the run's monitor's clock), which dates a replay (tests/cosim/test_recorded_replay.py)
+    start, _ = sidecar_start(csv)
+    assert before <= start <= time.time()
     side = read_sampling_sidecar(csv)
     assert side["sensors.u"] == Sampling("mean", 1e4, window_s=pytest.approx(1e-4))
     assert side["plant.voltage"].mode == "instant" and side["nc.state"].mode == "instant"

@@ -86,3 +86,22 @@ def test_the_same_code_names_a_pmsm_current_measured_the_other_way():
     truth = drive_model("pmsm").nominal(("physical",))
     for name, v in quoted(est.hint).items():
         assert v == pytest.approx(truth[name], rel=0.05), name
+
+
+def test_a_torque_offset_is_quoted_with_the_sign_each_negation_gives():
+    """With a torque offset T0, negating the speed or the torque gives the same Jt, ft, Cd but T0 of opposite
+    signs; the hint quoted whichever negation came first (the speed's: -0.3 N.m for a true +0.3), so its T0
+    depended on the order of the signals. It now says both, each with its negation."""
+    t0 = 0.3
+    torque = TRUTH["K"] * D["i"] + t0
+    est = estimate_parameters(MotionData(H, w=D["w"], torque=-torque), EstimationOptions(method="iv", offset=True))
+    assert {"Jt", "ft", "Cd"} <= set(est.flags)
+    assert est.hint.startswith("the speed and the torque have opposite sign conventions")
+    inside = est.hint.split("physically possible (")[1].split("); map")[0]
+    common, offset = inside.split("; ")
+    values = {k: float(v) for k, v in (item.split() for item in common.split(", "))}
+    assert set(values) == {"Jt", "ft", "Cd"}
+    assert values["Jt"] == pytest.approx(TRUTH["Jt"], rel=0.05)
+    words = offset.split()  # T0 <with the speed negated> , <with the torque negated>
+    assert words[0] == "T0" and words[2:6] == ["with", "the", "speed", "negated,"] and words[-3:] == ["with", "the", "torque"]
+    assert float(words[1]) == pytest.approx(-t0, rel=0.1) and float(words[6]) == pytest.approx(t0, rel=0.1)
