@@ -16,11 +16,13 @@ class NotEnoughExcitation(ValueError):
         What is missing (constant speed, no speed reversal, motion too short, ...).
     """
 
-    def __init__(self, unidentifiable: list[str], reason: str, condition_number: float = float("inf")) -> None:
+    def __init__(self, unidentifiable: list[str], reason: str, condition_number: float = float("inf"),
+                 lead: str = "not enough excitation to identify") -> None:
         self.unidentifiable = list(unidentifiable)
         self.reason = reason
         self.condition_number = condition_number
-        super().__init__(f"not enough excitation to identify {', '.join(self.unidentifiable)}: {reason}")
+        # ``lead``: "cannot identify" where the cause is a signal that is not there, not the motion's excitation
+        super().__init__(f"{lead} {', '.join(self.unidentifiable)}: {reason}")
 
 
 class NumericalFailure(EstimatorInputError):

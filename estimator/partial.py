@@ -85,9 +85,7 @@ def _apriori(p, options: EstimationOptions, fixed: dict, refused: dict, lumped: 
     mech = next((r for r in p.regressions if r.equation == "mechanical"), None)
     if mech is None:
         return False
-    rows = p.rows["mechanical"]
-    w = p.signals["w"][rows]
-    changed = False
+    w, changed = p.signals["w"][p.rows["mechanical"]], False
     if "Cd" in mech.names and "T0" in mech.names and "Cd" not in refused:
         pos, neg = int((w > 0).sum()), int((w < 0).sum())
         if min(pos, neg) < MIN_REVERSED:
@@ -442,8 +440,10 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
             reasons = {}
             for n, why in refused.items():
                 reasons.setdefault(why, []).append(n)
+            missing = all(" equation is scaled by " in why for why in reasons)  # (K, no voltage): not excitation
             raise NotEnoughExcitation(list(refused), next(iter(reasons)) if len(reasons) == 1 else
-                                      "; ".join(f"{', '.join(ns)}: {why}" for why, ns in reasons.items()))
+                                      "; ".join(f"{', '.join(ns)}: {why}" for why, ns in reasons.items()),
+                                      lead="cannot identify" if missing else "not enough excitation to identify")
         final = ls
         iv = oe = None
         if options.method in ("iv", "oe"):

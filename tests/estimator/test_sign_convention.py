@@ -63,7 +63,9 @@ def test_a_current_without_voltage_says_what_to_state():
     """Not a sign, the same kind of help: without a voltage K is not estimated, and the refusal says what to give."""
     from feeddrive.estimator.errors import NotEnoughExcitation
 
-    with pytest.raises(NotEnoughExcitation, match=r"scaled by K, which is refused \(no voltage signal: map the "
+    # a missing signal, not the motion's excitation: the message does not say "not enough excitation"
+    with pytest.raises(NotEnoughExcitation, match=r"^cannot identify Jt, ft, Cd: mechanical equation is scaled by K, "
+                                                  r"which is refused \(no voltage signal: map the "
                                                   r"voltage or state K \(--known K=VALUE, monitor.known\)\)"):
         estimate_parameters(MotionData(H, i=D["i"], w=D["w"]), EstimationOptions(method="iv"))
     est = estimate_parameters(MotionData(H, i=D["i"], w=D["w"]), EstimationOptions(method="iv", known={"K": TRUTH["K"]}))
