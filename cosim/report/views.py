@@ -195,9 +195,9 @@ SERVO_CHECKS = {"phase_current_sum": "phase currents", "phase_sensor_pair": "sec
 def gain_ratio(m: Mapping) -> tuple[str, str]:
     """(a1/a2, relative gain error) of the current sensors, or why they were not computed."""
     if not finite(m.get("gain_ratio")):
-        why = m.get("gain_ratio_reason") or ("not checked: one current sensor" if "current" not in
-                                             (m.get("residues") or {}) else "not computed: the current pair's residue "
-                                             "test did not run to its gain (see the residues)")
+        why = m.get("gain_ratio_reason") or (m.get("not_checked") or {}).get("current") or (
+            "not checked: one current sensor" if "current" not in (m.get("residues") or {}) else
+            "not computed: the current pair's residue test did not run to its gain (see the residues)")
         return why, why
     rel = m.get("relative_gain_error")
     return f"{m['gain_ratio']:.5g}", f"{100 * rel:+.3g} %" if finite(rel) else "not computed"
