@@ -1,6 +1,6 @@
 """``cosim history``: print an axis's stored motions and plot each parameter's trend with its CI band.
 
-    cosim history [--db PATH] [--axis ID] [--plot [PNG]] [--html OUT.html] [--overwrite] [--json]
+    cosim history [DB | --db PATH] [--axis ID] [--plot [PNG]] [--html OUT.html] [--overwrite] [--json]
 """
 from __future__ import annotations
 
@@ -20,7 +20,8 @@ NAMES = ("R", "L", "K", "Jt", "ft", "Cd")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--db", default=DEFAULT_DB, help=f"SQLite history file (default: {DEFAULT_DB})")
+    parser.add_argument("database", nargs="?", metavar="DB", help="SQLite history file, as --db")
+    parser.add_argument("--db", default=None, help=f"SQLite history file (default: {DEFAULT_DB})")
     parser.add_argument("--axis", help="machine/axis id (default: every axis in the file)")
     parser.add_argument("--plot", nargs="?", const="", metavar="PNG",
                         help="draw the parameter trends (default file: history_<axis>.png)")
@@ -33,7 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     from feeddrive.estimator.history import History
 
-    db = Path(args.db)
+    if args.database is not None and args.db is not None and Path(args.database) != Path(args.db):
+        raise InputError(f"two history files: {args.database} and --db {args.db}; give one")
+    db = Path(args.database or args.db or DEFAULT_DB)
     if not db.is_file():  # reading must not create an empty database
         raise InputError(f"history database {db} does not exist")
     with History(db) as history:

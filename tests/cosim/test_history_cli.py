@@ -84,3 +84,13 @@ def test_motions_are_numbered_per_axis_across_runs(tmp_path, capsys):
     assert main(["history", "--db", str(path), "--axis", "X"]) == 0
     rows = capsys.readouterr().out.splitlines()[2:]
     assert [r.split()[:2] for r in rows] == [["1", "tool-change:1"], ["2", "worn-axis:1"]]
+
+
+def test_the_database_as_an_argument(db, tmp_path, capsys):
+    """``cosim history FILE`` reads FILE, as ``--db FILE`` does (it was an argparse error); two different files
+    are refused in one line."""
+    assert main(["history", str(db), "--axis", "Y"]) == 0
+    assert capsys.readouterr().out.startswith("axis Y: 1 motion(s)")
+    assert main(["history", str(db), "--db", str(tmp_path / "other.sqlite")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "two history files" in err
