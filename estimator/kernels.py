@@ -476,10 +476,17 @@ def label_slices(labels: np.ndarray) -> list[tuple[slice] | None]:
     """
     labels = np.asarray(labels).ravel()
     top = int(labels.max(initial=0))
-    idx = np.flatnonzero(labels > 0)
-    lab = labels[idx]
+    if top <= 0:
+        return []
+    # the runs of equal labels (a few, where the samples are thousands): a label's first sample is the start of
+    # its first run, its last sample the end of its last run
+    change = np.flatnonzero(labels[1:] != labels[:-1])
+    start, stop = np.concatenate(([0], change + 1)), np.concatenate((change, [labels.size - 1]))
+    lab = labels.take(start)
+    used = lab > 0
+    lab, start, stop = lab[used], start[used], stop[used]
     first, last = np.full(top + 1, -1), np.full(top + 1, -1)
-    last[lab] = idx                # the last assignment to a label wins: its last sample
-    first[lab[::-1]] = idx[::-1]   # reversed: its first sample
+    last[lab] = stop                   # the last assignment to a label wins: its last run's end
+    first[lab[::-1]] = start[::-1]     # reversed: its first run's start
     return [(slice(int(first[m]), int(last[m]) + 1),) if last[m] >= 0 else None for m in range(1, top + 1)]
 
