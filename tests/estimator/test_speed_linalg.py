@@ -193,3 +193,18 @@ def test_block_sums_in_c_are_numpys_middle_axis_sums(monkeypatch) -> None:
     finally:
         monkeypatch.delenv("FEEDDRIVE_NO_COMPILED_BLOCKS")
         blocks_c._library.cache_clear()
+
+
+def test_rows_transformed_together_are_the_rows_transformed_alone() -> None:
+    """kernels.toeplitz_score_covariance transforms the residue and the instruments in one ``rfft`` call: each row
+    of a batch has the bits of its own transform (pocketfft pairs rows in the lanes of a vector, the same
+    operations), for the tool change's lengths (LS and the IV halves) and 1 to 5 rows."""
+    from scipy.fft import rfft
+
+    rng = np.random.default_rng(29)
+    for n, nfft in ((11426, 11664), (5712, 5832), (901, 960)):
+        for rows in range(1, 6):
+            X = rng.standard_normal((rows, n)) * np.logspace(0, 6, rows)[:, None]
+            together = rfft(X, nfft, axis=-1)
+            for r in range(rows):
+                np.testing.assert_array_equal(together[r], rfft(X[r], nfft))
