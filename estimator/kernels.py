@@ -246,7 +246,10 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
     n = len(e)
     m = min(lags, n - 1)
     nfft = next_fast_len(n + m + 1, real=True)
-    fe = rfft(e, nfft)
+    # e and the columns of W in one call: pocketfft takes the rows two at a time in the lanes of a vector (the same
+    # bits per row as transformed alone), so the four rows of p = 3 are two passes instead of three
+    F = rfft(np.vstack([e, W.T]), nfft, axis=-1)
+    fe, FW = F[0], F[1:]
     num = irfft(fe * np.conj(fe), nfft)[:m + 1]
     used = e != 0
     pairs = used_pairs(used, m)
@@ -263,7 +266,6 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
     weight[0] /= 2.0
     if nfft % 2 == 0:  # ... but the zero and Nyquist bins
         weight[-1] /= 2.0
-    FW = rfft(np.ascontiguousarray(W.T), nfft, axis=-1)
     return ((FW.conj() * weight) @ FW.T).real / nfft
 
 
@@ -476,10 +478,17 @@ def label_slices(labels: np.ndarray) -> list[tuple[slice] | None]:
     """
     labels = np.asarray(labels).ravel()
     top = int(labels.max(initial=0))
-    idx = np.flatnonzero(labels > 0)
-    lab = labels[idx]
+    if top <= 0:
+        return []
+    # the runs of equal labels (a few, where the samples are thousands): a label's first sample is the start of
+    # its first run, its last sample the end of its last run
+    change = np.flatnonzero(labels[1:] != labels[:-1])
+    start, stop = np.concatenate(([0], change + 1)), np.concatenate((change, [labels.size - 1]))
+    lab = labels.take(start)
+    used = lab > 0
+    lab, start, stop = lab[used], start[used], stop[used]
     first, last = np.full(top + 1, -1), np.full(top + 1, -1)
-    last[lab] = idx                # the last assignment to a label wins: its last sample
-    first[lab[::-1]] = idx[::-1]   # reversed: its first sample
+    last[lab] = stop                   # the last assignment to a label wins: its last run's end
+    first[lab[::-1]] = start[::-1]     # reversed: its first run's start
     return [(slice(int(first[m]), int(last[m]) + 1),) if last[m] >= 0 else None for m in range(1, top + 1)]
 

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from feeddrive.estimator.blocks_c import row_block_sums
 from feeddrive.estimator.distributions import t_ppf
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.filtering import FilterSpec, check_decimation
@@ -481,7 +482,7 @@ def parameter_covariance(G: np.ndarray, Ai: np.ndarray, block: int,
     p = G.shape[1]
     cov = Ai @ S @ Ai.T
     block = min(block, len(G))
-    v = ((G[:nb * block] @ Ai.T) ** 2).reshape(nb, block, -1).sum(axis=1)
+    v = row_block_sums((G[:nb * block] @ Ai.T) ** 2, block)  # numpy's reshape(nb, block, p).sum(axis=1)
     total = v.sum(axis=0)
     k = np.where(total > 0, total ** 2 / np.maximum((v ** 2).sum(axis=0), np.finfo(float).tiny), nb)
     # one block (a short record) leaves k = 1: its k / (k - 1) is capped rather than divided by zero
@@ -501,7 +502,7 @@ def long_run_covariance(G: np.ndarray, block: int) -> tuple[np.ndarray, int]:
     """Batch-means long-run covariance of the sum of the rows of G (n, p), and its blocks count."""
     block = min(block, len(G))
     nb = len(G) // block
-    B = G[:nb * block].reshape(nb, block, -1).sum(axis=1)
+    B = row_block_sums(G, block)  # G[:nb * block].reshape(nb, block, p).sum(axis=1), bit for bit
     # scaled up for the samples of the incomplete last block and for the p estimated parameters
     return B.T @ B * (len(G) / (nb * block)) * nb / max(nb - G.shape[1], 1), nb
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg
 
+from feeddrive.estimator.blocks_c import row_block_sums
 from feeddrive.estimator.distributions import chi2_sf, f_sf, norm_isf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.glsar import glsar_fit
@@ -74,6 +75,8 @@ def block_samples(rate_hz: float, h: float) -> int:
 
 def _blocks(x: np.ndarray, block: int) -> np.ndarray:
     nb = x.shape[0] // block
+    if x.ndim == 2:  # numpy's mean over the middle axis: its sum (row after row, blocks_c), then / block
+        return row_block_sums(x, block) / block
     return x[:nb * block].reshape(nb, block, *x.shape[1:]).mean(axis=1)
 
 

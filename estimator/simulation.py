@@ -125,7 +125,12 @@ def simulate(equations: tuple[str, ...], inputs: Mapping[str, np.ndarray], param
         values.append(float(params.get(v.name, v.nominal)))
     if len(idx) < 2:
         raise EstimatorInputError(f"simulation needs at least 2 samples, got {n}")
-    S = np.vstack([np.asarray(inputs[m], dtype=float)[idx] for m in names])
+    # the samples idx by strides (and the last one when the stride steps over it), not a gather by index
+    S, every = np.empty((len(names), idx.size)), (n - 1) // k + 1
+    for row, m in zip(S, names):
+        x = np.asarray(inputs[m], dtype=float)
+        row[:every] = x[:n:k]
+        row[every:] = x[n - 1:n]
     hk = np.diff(idx) * h
     # mapaccum needs one step size: integrate the uniform part, the last (shorter) step separately
     uniform = hk == k * h

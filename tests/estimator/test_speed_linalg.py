@@ -163,3 +163,48 @@ def test_the_spline_without_its_c_loops_is_the_same(monkeypatch) -> None:
     finally:
         monkeypatch.delenv("FEEDDRIVE_NO_COMPILED_SPLINE")
         spline_c._library.cache_clear()
+
+
+def test_block_sums_in_c_are_numpys_middle_axis_sums(monkeypatch) -> None:
+    """estimator.blocks_c.row_block_sums against ``x[:nb * block].reshape(nb, block, p).sum(axis=1)``: the same bits
+    (the batch-means covariance and the residue tests' block means), for the scores' shapes, a remainder left out,
+    a block of -0.0 (numpy starts from +0), one column (numpy's pairwise sum: left to numpy), a column slice, and
+    the numpy path without the C loop."""
+    from feeddrive.estimator import blocks_c
+
+    rng = np.random.default_rng(23)
+    cases = [(11426, 3, 167), (5712, 3, 83), (7003, 5, 13), (9, 2, 10), (400, 1, 7), (50, 4, 1)]
+    arrays = [(rng.standard_normal((n, p)) * np.exp(3 * rng.standard_normal((n, p))), b) for n, p, b in cases]
+    arrays.append((np.where(np.arange(12)[:, None] < 6, -0.0, np.ones((12, 2))), 3))
+    arrays.append((rng.standard_normal((300, 6))[:, ::2], 10))  # not contiguous
+    assert blocks_c.available()
+    for x, b in arrays:
+        nb = x.shape[0] // b
+        want = x[:nb * b].reshape(nb, b, x.shape[1]).sum(axis=1)
+        got = blocks_c.row_block_sums(x, b)
+        assert got.shape == want.shape
+        np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))  # -0.0 told from +0.0
+    monkeypatch.setenv("FEEDDRIVE_NO_COMPILED_BLOCKS", "1")
+    blocks_c._library.cache_clear()
+    try:
+        assert not blocks_c.available()
+        x, b = arrays[0]
+        np.testing.assert_array_equal(blocks_c.row_block_sums(x, b), x[:11356].reshape(68, b, 3).sum(axis=1))
+    finally:
+        monkeypatch.delenv("FEEDDRIVE_NO_COMPILED_BLOCKS")
+        blocks_c._library.cache_clear()
+
+
+def test_rows_transformed_together_are_the_rows_transformed_alone() -> None:
+    """kernels.toeplitz_score_covariance transforms the residue and the instruments in one ``rfft`` call: each row
+    of a batch has the bits of its own transform (pocketfft pairs rows in the lanes of a vector, the same
+    operations), for the tool change's lengths (LS and the IV halves) and 1 to 5 rows."""
+    from scipy.fft import rfft
+
+    rng = np.random.default_rng(29)
+    for n, nfft in ((11426, 11664), (5712, 5832), (901, 960)):
+        for rows in range(1, 6):
+            X = rng.standard_normal((rows, n)) * np.logspace(0, 6, rows)[:, None]
+            together = rfft(X, nfft, axis=-1)
+            for r in range(rows):
+                np.testing.assert_array_equal(together[r], rfft(X[r], nfft))
