@@ -261,9 +261,11 @@ def _prepare() -> None:
     for name in RUN_IMPORTS:
         importlib.import_module(name)
     _registry()
-    from feeddrive.estimator import spline_c
+    from feeddrive.estimator import blocks_c, lti, spline_c
 
-    spline_c.available()  # its C library built (or found) and loaded here, not in every forked run
+    for compiled in (spline_c, blocks_c):  # their C libraries built (or found) and loaded here, not in every run
+        compiled.available()
+    lti._library()  # the C filters' library likewise
 
 
 #: modules every co-simulation run with a monitor imports (some lazily, in the run): imported by ``prepare``
