@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -140,6 +140,34 @@ def vendor_pmsm_fmu(fmu_cache_dir: Path) -> Path:
             except OSError:  # another worker put its copy there first
                 pass
     return target / f"{MODEL}.fmu"
+
+
+@pytest.fixture(scope="session")
+def built_once(fmu_cache_dir: Path) -> Callable[[str, Callable[[Path], Path]], Path]:
+    """``built_once(name, build) -> path``: the test FMU ``build(folder)`` makes, made once for the whole test run.
+
+    Several modules compile the same test plant (RefAxis, RampIntegrator, Faulty, the example's vendor FMU:
+    0.5-2 s of CPU each): the first caller builds it into the session's FMU cache (which the xdist workers
+    share), holding a lock file that the others wait on, and every caller gets that file. ``name`` says what
+    is built (with its options: the cache lives for this session only, so the sources cannot change); the FMU
+    is read only for its users (a test that changes one builds its own)."""
+    import fcntl
+
+    def get(name: str, build: Callable[[Path], Path]) -> Path:
+        folder = fmu_cache_dir / "built_once"
+        folder.mkdir(exist_ok=True)
+        done = folder / f"{name}.path"
+        with open(folder / f"{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                if not done.is_file():
+                    (folder / name).mkdir(exist_ok=True)
+                    done.write_text(str(build(folder / name)), encoding="utf-8")
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+        return Path(done.read_text(encoding="utf-8"))
+
+    return get
 
 
 #: the examples that several modules run through ``cosim run`` as a user does (tests/conftest.py example_runs)

@@ -23,8 +23,8 @@ def sleepy(spec):
 
 
 @pytest.fixture(scope="module")
-def faulty_campaign(tmp_path_factory) -> Campaign:
-    fmu = build(tmp_path_factory.mktemp("faulty") / "Faulty.fmu")
+def faulty_campaign(built_once) -> Campaign:
+    fmu = built_once("Faulty", lambda folder: build(folder / "Faulty.fmu"))
     base = {"name": "faulty", "axis": "X", "step": 1e-3, "stop_time": 0.6,
             "plant": {"fmu": str(fmu), "parameters": {"mode": 0, "fail_time": 0.5}, "map": MAP, "call_timeout": 1.0},
             "nc": {"program": [{"rapid": {"to": 0.01, "v_max": 0.05, "accel": 0.5}}]}, "monitor": {}}

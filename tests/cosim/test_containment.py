@@ -25,8 +25,8 @@ FAIL_TIME = 0.5
 
 
 @pytest.fixture(scope="module")
-def faulty_fmu(tmp_path_factory) -> Path:
-    return build(tmp_path_factory.mktemp("faulty") / "Faulty.fmu")
+def faulty_fmu(built_once) -> Path:
+    return built_once("Faulty", lambda folder: build(folder / "Faulty.fmu"))
 
 
 def scenario(tmp_path: Path, fmu: Path, mode: str, **plant) -> Path:

@@ -111,10 +111,10 @@ def test_pmsm_axis_with_servo_sensors_bit_identical(monkeypatch, feeddrive_fmu):
     assert x.max() > 0.15 and fast["reports"]["monitor"]["unfinished_motion"] == 1  # mid tool change (m)
 
 
-def test_vendor_fmu_at_oversample_10_bit_identical(monkeypatch, tmp_path):
+def test_vendor_fmu_at_oversample_10_bit_identical(monkeypatch, built_once):
     """The example's vendor FMU (rpm, mm: a role map with scales) at 10 plant steps per recording step."""
-    fmu = runpy.run_path(str(EXAMPLES / "vendor_fmu" / "build_vendor_fmu.py"))["main"](
-        ["--out", str(tmp_path / "VendorDrive.fmu")])
+    fmu = built_once("VendorDrive", lambda folder: runpy.run_path(str(EXAMPLES / "vendor_fmu" / "build_vendor_fmu.py"))[
+        "main"](["--out", str(folder / "VendorDrive.fmu")]))
     data = example("vendor_fmu.yaml", stop_time=0.45)
     data["plant"] = data["plant"] | {"fmu": str(fmu), "oversample": 10}
     py, fast = run_both(monkeypatch, data)

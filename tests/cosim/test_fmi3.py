@@ -24,9 +24,9 @@ H = 1e-4
 
 
 @pytest.fixture(scope="module")
-def axes(tmp_path_factory) -> dict[int, Path]:
-    tmp = tmp_path_factory.mktemp("ref_axis")
-    return {v: build(tmp / f"RefAxis{v}.fmu", v) for v in (2, 3)}
+def axes(built_once) -> dict[int, Path]:
+    """RefAxis as FMI 2.0 and 3.0, built once for the test run (tests/conftest.py built_once)."""
+    return {v: built_once(f"RefAxis{v}", lambda folder, v=v: build(folder / f"RefAxis{v}.fmu", v)) for v in (2, 3)}
 
 
 def plant_scenario(fmu: Path, interface: str, **extra) -> dict:
@@ -113,11 +113,11 @@ def test_a_connection_between_units_of_another_dimension_is_refused(axes):
         Master.from_scenario(scenario_from_dict(components(axes, 1, source="a.pos_mm"))).setup()
 
 
-def test_a_hanging_fmu_component_is_named_with_its_own_watchdog(axes, tmp_path, capfd):
+def test_a_hanging_fmu_component_is_named_with_its_own_watchdog(axes, tmp_path, capfd, built_once):
     from faulty import MODES
     from faulty import build as build_faulty
 
-    faulty = build_faulty(tmp_path / "Faulty.fmu")
+    faulty = built_once("Faulty", lambda folder: build_faulty(folder / "Faulty.fmu"))
     data = components(axes, 1) | {"stop_time": 0.6}  # Faulty fails at t = 0.5 s
     data["components"].append({"name": "drive2", "fmu": str(faulty),
                                "config": {"parameters": {"mode": MODES["loop"]}, "call_timeout": 1.0},

@@ -24,9 +24,11 @@ H, N, A, B, W = 1e-3, 40, 0.2, 3.0, 0.5  # step [s], steps, ramp r(t) = A + B t 
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory) -> dict[bool, Path]:
-    tmp = tmp_path_factory.mktemp("ramp_integrator")
-    return {flag: build(tmp / f"RampIntegrator{int(flag)}.fmu", intermediate=flag) for flag in (True, False)}
+def fmus(built_once) -> dict[bool, Path]:
+    """RampIntegrator with and without intermediate update, built once for the test run (tests/conftest.py)."""
+    return {flag: built_once(f"RampIntegrator{int(flag)}",
+                             lambda folder, flag=flag: build(folder / f"RampIntegrator{int(flag)}.fmu", intermediate=flag))
+            for flag in (True, False)}
 
 
 def run(fmu: Path, **config) -> tuple[dict[str, np.ndarray], dict]:
@@ -124,10 +126,10 @@ def test_cosim_info_states_the_input_handling(fmus, capsys):
     assert "Model Exchange inputs: first-order hold by the master inside CVode" in out
 
 
-def test_an_fmi2_component_in_model_exchange_gets_the_ramp_on_its_own_inputs(tmp_path):
+def test_an_fmi2_component_in_model_exchange_gets_the_ramp_on_its_own_inputs(built_once):
     """The first-order hold of an FMU component's own inputs (not roles), here RefAxis FMI 2.0 in Model
     Exchange: pos_mm' = n_set / 60 * pitch_mm integrates the ramped n_set, B H^2 / 2 more per step than held."""
-    fmu = build_axis(tmp_path / "RefAxis2.fmu", 2)
+    fmu = built_once("RefAxis2", lambda folder: build_axis(folder / "RefAxis2.fmu", 2))
 
     def position(hold: str) -> np.ndarray:
         data = {"name": "ramp2", "step": H, "stop_time": N * H, "components": [

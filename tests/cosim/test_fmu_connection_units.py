@@ -25,10 +25,12 @@ H = 1e-3
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory) -> dict[str, Path]:
-    tmp = tmp_path_factory.mktemp("units")
-    return {"axis2": build(tmp / "RefAxis2.fmu", 2), "axis3": build(tmp / "RefAxis3.fmu", 3),
-            "integrator": build_integrator(tmp / "RampIntegrator.fmu")}
+def fmus(built_once) -> dict[str, Path]:
+    """RefAxis (FMI 2.0, 3.0) and RampIntegrator, built once for the test run (tests/conftest.py built_once)."""
+    return {"axis2": built_once("RefAxis2", lambda folder: build(folder / "RefAxis2.fmu", 2)),
+            "axis3": built_once("RefAxis3", lambda folder: build(folder / "RefAxis3.fmu", 3)),
+            "integrator": built_once("RampIntegrator1",
+                                     lambda folder: build_integrator(folder / "RampIntegrator1.fmu"))}
 
 
 def chain(fmus: dict, w_source: str = "a.n_act") -> dict:

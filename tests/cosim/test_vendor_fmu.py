@@ -22,10 +22,10 @@ def run(scenario) -> dict:
 
 
 @pytest.mark.slow
-def test_example_vendor_fmu_matches_the_builtin_plant(tmp_path, feeddrive_fmu):
+def test_example_vendor_fmu_matches_the_builtin_plant(built_once, feeddrive_fmu):
     """The example's vendor FMU (same physics, rpm / mm interface) gives the built-in plant's signals."""
     build = runpy.run_path(str(EXAMPLES / "vendor_fmu" / "build_vendor_fmu.py"))
-    fmu = build["main"](["--out", str(tmp_path / "VendorDrive.fmu")])
+    fmu = built_once("VendorDrive", lambda folder: build["main"](["--out", str(folder / "VendorDrive.fmu")]))
     data = yaml.safe_load((EXAMPLES / "vendor_fmu.yaml").read_text())
     data.pop("monitor", None)
     data["stop_time"] = 1.0

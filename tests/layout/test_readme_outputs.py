@@ -1,7 +1,8 @@
 """The README's shown outputs are what the commands print (issue 23: its figures had drifted).
 
 Every fenced block of README.md whose first line starts with ``$ `` is a session: each ``$ COMMAND`` line
-is run (a shell, in a fresh directory holding a copy of examples/ and the test data generator), and for
+is run (in a fresh directory holding a copy of examples/ and the test data generator: ``cosim ...`` by the
+console script's ``main`` in this process, other commands in a shell), and for
 a ``$ cosim ...`` command the lines after it, up to the next ``$`` line or the block's end, must equal
 what it prints (other commands prepare its input: their exit status is checked), line by line,
 with numbers within a tolerance, wall times (``simulated in X s``) free, and the time stamp of a run
@@ -12,12 +13,15 @@ from __future__ import annotations
 import math
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from feeddrive.cosim.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
@@ -106,12 +110,15 @@ ORDERED = sorted(STEPS, key=lambda session: _example_run(session[1]) is not None
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("line", "steps"), ORDERED, ids=[f"README line {n}" for n, _ in ORDERED])
-def test_readme_session_prints_what_it_shows(line, steps, tmp_path, feeddrive_fmu, request):
+def test_readme_session_prints_what_it_shows(line, steps, tmp_path, feeddrive_fmu, request, monkeypatch, capsys):
     """Each session run as the README shows it; a session that is a single ``cosim run`` of an example the
     test session already ran in a fresh directory as a user does (tests/conftest.py example_runs: the same
     command in-process, its axis alone on its history) is compared with what that run printed, not run again
-    (two runs with their figures less; the other sessions run the ``cosim`` command, with the user's drawing
-    processes)."""
+    (two runs with their figures less). In the other sessions a ``cosim ...`` line is the console script's
+    ``main`` called in this process (the same code; a new interpreter and its imports cost ~1.5 s of CPU
+    each), with the user's drawing processes, in the session's folder with ``CI`` set; the other lines
+    (``python ...``, ``head``) run in a shell. The console script itself is run by tests/layout/test_layout.py
+    and tests/cosim/test_cli_fast.py."""
     name = _example_run(steps)
     if name is not None:
         ((command, expected),) = steps
@@ -122,13 +129,20 @@ def test_readme_session_prints_what_it_shows(line, steps, tmp_path, feeddrive_fm
     shutil.copy(ROOT / "tests" / "cosim" / "linear_axis.py", tmp_path / "tests" / "cosim")
     env = os.environ | {"PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
                         "OPENBLAS_NUM_THREADS": "1", "CI": "1"}
-    env.pop("FEEDDRIVE_PLOT_PROCESSES", None)  # drawn as a user's run draws (tests/conftest.py sets 1)
+    monkeypatch.setenv("CI", "1")
+    monkeypatch.delenv("FEEDDRIVE_PLOT_PROCESSES", raising=False)  # drawn as a user's run draws (conftest sets 1)
+    env.pop("FEEDDRIVE_PLOT_PROCESSES", None)
+    monkeypatch.chdir(tmp_path)
     for command, expected in steps:
+        if command.startswith("cosim "):
+            capsys.readouterr()
+            status = main(shlex.split(command)[1:])
+            out, err = capsys.readouterr()
+            assert status == 0, f"README line {line}: {command}: exit {status}\n{err[-2000:]}"
+            assert_printed(line, command, expected, out.splitlines())
+            continue
         proc = subprocess.run(command, shell=True, cwd=tmp_path, capture_output=True, text=True, env=env, timeout=900)
         assert proc.returncode == 0, f"README line {line}: {command}: exit {proc.returncode}\n{proc.stderr[-2000:]}"
-        if not command.startswith("cosim "):
-            continue
-        assert_printed(line, command, expected, proc.stdout.splitlines())
 
 
 def assert_printed(line: int, command: str, expected: list[str], actual: list[str]) -> None:
