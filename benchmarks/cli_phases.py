@@ -2,9 +2,9 @@
 
     python benchmarks/cli_phases.py SCENARIO.yaml
 
-Runs ``run_scenario`` as the child of ``cosim run`` does, in this fresh interpreter, and prints the time at
-which each phase ends (steps of the run wrapped here to mark them; nothing else is changed): imports, the
-scenario, the drawing processes forked, the master made (the monitor's imports), each motion's run figures sent
+Runs ``run_scenario`` as ``cosim run`` does, in this fresh interpreter (the drawing processes forked first, before
+the run's imports, as cosim/cli/run.py does), and prints the time at which each phase ends (steps of the run wrapped
+here to mark them; nothing else is changed): the drawing processes forked, imports, the scenario, the master made (the monitor's imports), each motion's run figures sent
 to a drawing process when it ends, the simulation with the monitor in the loop, the figure jobs, report.html's preparation (while the figures are drawn), the figures,
 report.json and report.html; and, per drawing process, when it warmed up and drew each figure (with the
 figure's CPU time). Times depend on the machine's load.
@@ -64,20 +64,26 @@ def warm_up(preload: tuple[str, ...]) -> None:
 
 def main(scenario_path: str) -> None:
     pw.FigureJob.__call__, pw._warm_up = job_call, warm_up
+    from feeddrive.cosim.figure_jobs import FIGURE_MODULES
+
+    workers = pw.PlotWorkers(preload=FIGURE_MODULES)  # first, as cosim run does (cosim/cli/run.py)
+    mark("drawing processes forked")
     import feeddrive.cosim.run as run
     from feeddrive.cosim.scenario import load_scenario
 
     mark("imports (cosim.run, cosim.scenario)")
     scenario = load_scenario(scenario_path)
     mark("scenario loaded")
-    wrap(run.Master, "from_scenario", "drawing processes forked", "master made (the monitor's imports)")
+    wrap(run.Master, "from_scenario", None, "master made (the monitor's imports)")
     wrap(pw.PlotWorkers, "submit", None, "a motion's run figures sent to a drawing process (the motion ended)")
     wrap(run, "plot_jobs", "simulation with the monitor (report.json wall_time_s)", "figure jobs made")
     wrap(run, "_prepare_page", None, "report.html prepared (while the figures are drawn)")
     wrap(pw.PlotWorkers, "draw", None, "figures drawn")
     wrap(run, "_write_page", "report.json written", "report.html written")
     with tempfile.TemporaryDirectory() as tmp:
-        result = run.run_scenario(scenario, os.path.join(tmp, "run"), default_history=os.path.join(tmp, "h.sqlite"))
+        result = run.run_scenario(scenario, os.path.join(tmp, "run"), default_history=os.path.join(tmp, "h.sqlite"),
+                                  workers=workers)
+    workers.close()
     mark("run_scenario returned")
     rows = [(t, "", name) for t, name in MARKS]
     if os.path.exists(LOG):
