@@ -175,6 +175,33 @@ def draw_concurrently(jobs: Sequence[Callable[[], list[Path]]], processes: int |
         return workers.draw(jobs)
 
 
+def tight_layout(fig: plt.Figure, **kwargs) -> None:
+    """``fig.tight_layout(**kwargs)`` with each Axes' extent measured once.
+
+    With ``rect`` (the trends' room for the figure's legend), matplotlib computes the margins twice from the Axes'
+    extents, which do not change in between (the Axes are placed after): each tick label, axis label and title was
+    measured twice, 12 % of the trends figure's time. The extents of the first pass are reused: the same layout.
+    """
+    for ax in fig.axes:
+        ax.get_tightbbox = functools.partial(_tightbbox_once, ax.get_tightbbox, {})
+    try:
+        fig.tight_layout(**kwargs)
+    finally:
+        for ax in fig.axes:
+            del ax.get_tightbbox  # the method again
+
+
+def _tightbbox_once(get: Callable, seen: dict, *args, **kwargs):  # noqa: ANN202 - a Bbox or None
+    try:
+        key = (tuple(map(id, args)), tuple(sorted(kwargs.items())))
+        hash(key)
+    except TypeError:  # e.g. a list of extra artists: measured each time
+        return get(*args, **kwargs)
+    if key not in seen:
+        seen[key] = get(*args, **kwargs)
+    return seen[key]
+
+
 def wrapped(text: matplotlib.text.Text) -> matplotlib.text.Text:
     """``text`` (made with ``wrap=True``) wrapped as matplotlib wraps it, with fewer measurements; returns ``text``.
 

@@ -113,3 +113,27 @@ def test_wrapped_breaks_the_lines_where_matplotlib_does(width):
         assert ours.replace("\n", " ") == text.get_text().replace("\n", " ")  # line breaks only
     assert max(t._get_wrapped_text().count("\n") for t in made) >= (3 if width < 5 else 1)  # some were wrapped
     plt.close(fig)
+
+
+def test_tight_layout_measuring_each_axes_once_places_them_as_matplotlib_does():
+    """``cosim.plots.tight_layout`` (the trends: ``rect`` makes matplotlib lay out twice from the same extents) puts
+    every Axes where ``Figure.tight_layout`` does, and leaves the Axes' own ``get_tightbbox`` in place."""
+    from feeddrive.cosim.plots import tight_layout
+
+    def figure() -> plt.Figure:
+        fig, axes = plt.subplots(2, 2, sharex=True, figsize=(5, 4), dpi=100)
+        for k, ax in enumerate(axes.ravel()):
+            ax.plot([1, 2, 3], [10.0 ** k, 3.0 * 10.0 ** k, 2.0 * 10.0 ** k], "o-", label="estimate")
+            ax.set_ylabel(f"parameter {k} [unit{'s' * k}]")
+        axes[1, 0].set_xlabel("motion number (history order)")
+        fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", frameon=False)
+        fig.suptitle("parameter trends axis X")
+        return fig
+
+    theirs, ours = figure(), figure()
+    theirs.tight_layout(rect=(0, 0.06, 1, 1))
+    tight_layout(ours, rect=(0, 0.06, 1, 1))
+    assert [ax.get_position().bounds for ax in ours.axes] == [ax.get_position().bounds for ax in theirs.axes]
+    assert all("get_tightbbox" not in vars(ax) for ax in ours.axes)
+    plt.close(theirs)
+    plt.close(ours)
