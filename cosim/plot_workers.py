@@ -252,6 +252,20 @@ class PlotWorkers:
             else:
                 results[key] = list(_job(jobs[key])())
 
+    def abandon(self) -> None:
+        """End the workers now, without waiting for a figure or a warm-up: their figures are not wanted (``cosim run``
+        failed before its run drew, e.g. on a bad scenario: its error is not held back by a warm-up's second). The first
+        worker is killed (it writes no file), the others see their pipe close and exit."""
+        self._join_senders()
+        for conn in self._conns:
+            conn.close()
+        self._conns, self._pending = [], {}
+        if self._pid is not None:
+            _kill(self._pid)
+            if os.getpid() == self._owner:
+                os.waitpid(self._pid, 0)
+            self._pid = None
+
     def close(self, wait: bool = True) -> None:
         """End the workers: each finishes its figure and exits; this waits for them (10 s at most, then the
         first worker, whose exit ends the others, is killed).

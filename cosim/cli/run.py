@@ -63,10 +63,14 @@ def main(args: argparse.Namespace) -> int:
 
         workers = PlotWorkers(preload=FIGURE_MODULES)
     try:
-        return _run(args, workers)
-    finally:
-        if workers is not None:
-            workers.close()  # the supervised child drew with them and ended them; a run that failed before did not
+        code = _run(args, workers)
+    except BaseException:
+        if workers is not None:  # a bad scenario, or a run that failed: no figure is wanted, no warm-up waited for
+            workers.abandon()
+        raise
+    if workers is not None:
+        workers.close()  # the supervised child drew with them and told them to exit: they have, or are about to
+    return code
 
 
 def _run(args: argparse.Namespace, workers) -> int:  # noqa: ANN001 - PlotWorkers or None

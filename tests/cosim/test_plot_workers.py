@@ -219,3 +219,17 @@ def test_jobs_submitted_while_the_run_goes_on_take_one_idle_worker_and_are_retur
         assert dead.sent
         assert workers.draw([dead]) == [tmp_path / "e.txt"]
     assert int((tmp_path / "e.txt").read_text()) == os.getpid()  # drawn again here
+
+
+@needs_fork
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="no /proc: the children cannot be listed")
+def test_abandoned_workers_are_ended_at_once_and_reaped():
+    """``cosim run`` failing before its run drew (a bad scenario): the workers, still warming up, are ended and
+    reaped at once, not waited for."""
+    before = _all_children(os.getpid())
+    workers = PlotWorkers(processes=2, preload=("feeddrive.cosim.plots",))
+    pid = workers._pid
+    workers.abandon()
+    workers.abandon()  # nothing left to end
+    workers.close()
+    assert pid is not None and _all_children(os.getpid()) - before == set()
