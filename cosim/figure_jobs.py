@@ -16,6 +16,8 @@ import numpy as np
 
 from feeddrive.cosim.figure_data import envelope, motion_figure
 
+#: the modules of the run's figures (:class:`FigureJob`), loaded by the drawing processes at their start
+FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
 #: the figures of a run, per high-speed motion: (file name, drawing function of cosim.plots, cost)
 RUN_FIGURES = (("motion_{k}_profiles.png", "profiles_figure", 3.0), ("motion_{k}_currents.png", "currents_figure", 2.0))
 #: rows of the profiles figure: (label, unit, candidate signals in order of preference: measured first)

@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 
 from feeddrive.cosim.figure_data import motion_figure  # noqa: E402
 from feeddrive.cosim.figure_jobs import monitor_figure_jobs  # noqa: E402
-from feeddrive.cosim.plots import DPI, draw_concurrently, subplots, write_png  # noqa: E402
+from feeddrive.cosim.plots import DPI, draw_concurrently, subplots, wrapped, write_png  # noqa: E402
 from feeddrive.cosim.plots import prepare_figures as _prepare  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS, TRENDS_LAYOUT  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
@@ -87,7 +87,7 @@ def plot_motion(trace, path: Path) -> Path:
                 ax.axhline(check.noise_std, color=color, ls=":", lw=0.8)
                 ax.axhline(-check.noise_std, color=color, ls=":", lw=0.8)
             ax.set_ylabel(f"{check.signal} residue [{unit}]", color=color)
-        axes[3].set_title(decision_text(mm), fontsize=8, wrap=True)
+        wrapped(axes[3].set_title(decision_text(mm), fontsize=8, wrap=True))
         for ax in axes[1:3]:
             _legend_outside(ax)
         handles = [h for a in (axes[3], *fig.axes[len(axes):]) for h in a.get_legend_handles_labels()[0]]
@@ -96,7 +96,7 @@ def plot_motion(trace, path: Path) -> Path:
     axes[-1].set_xlabel("time [s]")
     from feeddrive.cosim.report.verdict import verdict_line
 
-    fig.suptitle(f"motion {shown.motion}: {verdict_line(shown.result)}", fontsize=10, wrap=True)
+    wrapped(fig.suptitle(f"motion {shown.motion}: {verdict_line(shown.result)}", fontsize=10, wrap=True))
     return write_png(fig, path)
 
 
@@ -120,8 +120,8 @@ def _plot_equations(axes, lines: dict, mm, result: dict) -> None:  # noqa: ANN00
         ax.legend(handles, [h.get_label() for h in handles], loc="upper left", bbox_to_anchor=(1.08, 1), fontsize=7,
                   frameon=False)
     deciding = (result.get("output_error_check") or {}).get("deciding", True)
-    axes[-1].set_title(decision_text(mm) + ("" if deciding else "\n(advisory: the residue check decides)"),
-                       fontsize=8, wrap=True)
+    wrapped(axes[-1].set_title(decision_text(mm) + ("" if deciding else "\n(advisory: the residue check decides)"),
+                               fontsize=8, wrap=True))
 
 
 def _legend_outside(ax: plt.Axes) -> None:

@@ -88,6 +88,9 @@ class PlotWorkers:
         self._pending: dict[Any, deque] = {}
         self._senders: list[threading.Thread] = []  # submit()'s writers
         self._pid: int | None = None  # the first worker (the others are its children)
+        #: the process that forked the first worker, the one that reaps it: a process forked from it after (``cosim
+        #: run``'s supervised child, which draws with workers forked before the run's imports) only ends them
+        self._owner = os.getpid()
         self._index = {id(job): j for j, job in enumerate(jobs)}
         self._here = here
         k = drawing_processes(processes) - here
@@ -249,6 +252,20 @@ class PlotWorkers:
             else:
                 results[key] = list(_job(jobs[key])())
 
+    def abandon(self) -> None:
+        """End the workers now, without waiting for a figure or a warm-up: their figures are not wanted (``cosim run``
+        failed before its run drew, e.g. on a bad scenario: its error is not held back by a warm-up's second). The first
+        worker is killed (it writes no file), the others see their pipe close and exit."""
+        self._join_senders()
+        for conn in self._conns:
+            conn.close()
+        self._conns, self._pending = [], {}
+        if self._pid is not None:
+            _kill(self._pid)
+            if os.getpid() == self._owner:
+                os.waitpid(self._pid, 0)
+            self._pid = None
+
     def close(self, wait: bool = True) -> None:
         """End the workers: each finishes its figure and exits; this waits for them (10 s at most, then the
         first worker, whose exit ends the others, is killed).
@@ -265,8 +282,9 @@ class PlotWorkers:
                     pass
                 conn.close()
             self._conns, self._pending = [], {}
-            # the thread only waits in the kernel: a fork meanwhile (the next run's workers) inherits no lock of it
-            threading.Thread(target=_reap, args=(self._pid,), name="feeddrive-plot-reaper", daemon=True).start()
+            if os.getpid() == self._owner:
+                # the thread only waits in the kernel: a fork meanwhile (the next run's workers) inherits no lock of it
+                threading.Thread(target=_reap, args=(self._pid,), name="feeddrive-plot-reaper", daemon=True).start()
             self._pid = None
             return
         for conn in self._conns:
@@ -286,7 +304,8 @@ class PlotWorkers:
         if self._pid is not None:
             if time.monotonic() > deadline:
                 _kill(self._pid)
-            os.waitpid(self._pid, 0)
+            if os.getpid() == self._owner:
+                os.waitpid(self._pid, 0)
             self._pid = None
 
 

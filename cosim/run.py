@@ -37,14 +37,12 @@ import yaml
 
 from feeddrive.cosim.axis import parameter_units
 from feeddrive.cosim.errors import InputError
-from feeddrive.cosim.figure_jobs import FigureBatch, run_figure_jobs
+from feeddrive.cosim.figure_jobs import FIGURE_MODULES, FigureBatch, run_figure_jobs
 from feeddrive.cosim.master import Master
 from feeddrive.cosim.plot_workers import PlotWorkers
 from feeddrive.cosim.recorder import Sampling, write_sampling_sidecar
 from feeddrive.cosim.scenario import Scenario, load_scenario
 
-#: the modules of the run's figures (cosim.figure_jobs.FigureJob), loaded by the drawing processes at the start
-FIGURE_MODULES = ("feeddrive.cosim.plots", "feeddrive.cosim.monitor_plots")
 #: modules the monitor imports when it treats its first motion (estimator.distributions' scipy.special,
 #: estimator.kernels' scipy.fft), imported while the simulation's compiled loop runs (cosim.run._import_meanwhile)
 MONITOR_LATE_IMPORTS = ("scipy.special", "scipy.fft")
@@ -87,7 +85,7 @@ class RunResult:
 
 def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progress: bool = False,
                  overwrite: bool = False, plots: bool = True, default_history: str | Path | None = None,
-                 page: bool = True, signals: bool = True) -> RunResult:
+                 page: bool = True, signals: bool = True, workers: PlotWorkers | None = None) -> RunResult:
     """Run a scenario and write its output directory.
 
     Parameters
@@ -110,6 +108,10 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     signals : bool
         Write signals.csv and signals.meta.json (False: a campaign run whose files are discarded; formatting
         the rows was a third of such a run). The signals are in the result either way.
+    workers : PlotWorkers or None
+        Drawing processes forked by the caller before this run's imports (``cosim run`` forks them first thing:
+        their warm-up overlaps the imports and the scenario's loading): the run draws with them and ends them
+        once it has (the caller closes them too, for a run that fails before). None: forked here.
 
     Returns
     -------
@@ -143,7 +145,9 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
         scenario = updated
     # the figures' processes start first (cosim.plot_workers): their import of matplotlib overlaps the import of
     # the monitor (scipy, when its component is made) and the simulation, on another CPU
-    workers = PlotWorkers(preload=FIGURE_MODULES) if plots else None
+    if not plots and workers is not None:
+        workers.close()
+    workers = (workers or PlotWorkers(preload=FIGURE_MODULES)) if plots else None
     collecting = gc.isenabled()
     gc.disable()  # the monitor's imports make long-lived objects: no collector's passes over them (6 to 20 % of them)
     try:

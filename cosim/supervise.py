@@ -274,11 +274,12 @@ _REPORTED = _reported()
 
 
 # -- cosim run -------------------------------------------------------------------------------------------
-def _run_child(scenario: Any, out_dir: Path, progress: bool, default_history: Path | None, plots: bool) -> Any:
+def _run_child(scenario: Any, out_dir: Path, progress: bool, default_history: Path | None, plots: bool,
+               workers: Any = None) -> Any:
     from feeddrive.cosim.run import RunResult, run_scenario
 
     res = run_scenario(scenario, out_dir, progress=progress, overwrite=True, default_history=default_history,
-                       plots=plots)
+                       plots=plots, workers=workers)
     # only the last sample crosses the pipe (the summary's needs): signals.csv holds them all
     last = {k: v[-1:].copy() for k, v in res.signals.items()}
     return RunResult(res.out_dir, res.time[-1:].copy(), last, res.units, res.report, res.paths)
@@ -286,10 +287,12 @@ def _run_child(scenario: Any, out_dir: Path, progress: bool, default_history: Pa
 
 def run_supervised(scenario: Any, out_dir: str | Path, *, progress: bool = False, overwrite: bool = False,
                    default_history: str | Path | None = None, timeout: float | None = None,
-                   plots: bool = True) -> Any:
+                   plots: bool = True, workers: Any = None) -> Any:
     """:func:`cosim.run.run_scenario` in a supervised child process (``cosim run``).
 
-    Parameters are those of ``run_scenario``, plus ``timeout`` (wall time of the whole run [s]).
+    Parameters are those of ``run_scenario``, plus ``timeout`` (wall time of the whole run [s]). ``workers``
+    (cosim.plot_workers.PlotWorkers, forked by the caller) are the child's to draw with; the caller closes its
+    copy once this returns.
     The run's log file ``run.log`` in ``out_dir`` receives the child's tracebacks.
 
     Returns
@@ -310,7 +313,8 @@ def run_supervised(scenario: Any, out_dir: str | Path, *, progress: bool = False
     log = out_dir / LOG_FILE
     log.write_text("", encoding="utf-8")
     history = Path(default_history) if default_history is not None else None
-    outcome = supervise(_run_child, scenario, out_dir, progress, history, plots, timeout=timeout, log_path=log)
+    outcome = supervise(_run_child, scenario, out_dir, progress, history, plots, workers, timeout=timeout,
+                        log_path=log)
     if outcome.status == "ok":
         return outcome.value
     if outcome.status == "error":

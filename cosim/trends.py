@@ -174,7 +174,7 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
     stored = {n: p["unit"] for m in motions for n, p in (m.get("parameters") or {}).items()
               if isinstance(p, dict) and p.get("unit")}
     units = {**UNITS, **stored, **(units or {})}
-    from feeddrive.cosim.plots import subplots
+    from feeddrive.cosim.plots import subplots, tight_layout
 
     fig, axes = subplots(*TRENDS_LAYOUT[0], **TRENDS_LAYOUT[1])
     for ax, (name, _) in zip(axes.T.ravel(), PARAMETERS):
@@ -210,7 +210,7 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
     fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(len(handles), 4), fontsize=8,
                frameon=False)
     fig.suptitle(f"parameter trends {title}".strip(), fontsize=11)
-    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    tight_layout(fig, rect=(0, 0.06, 1, 1))  # fig.tight_layout, each panel measured once, not once per pass
     return fig
 
 

@@ -53,6 +53,27 @@ def main(args: argparse.Namespace) -> int:
     handler.addFilter(_ReportedElsewhere())
     handler.setFormatter(logging.Formatter("cosim run: %(name)s: %(levelname)s: %(message)s"))
     logging.basicConfig(level=logging.WARNING, handlers=[handler])
+    workers = None
+    if not args.no_plots:
+        # the drawing processes first, before this run's imports: their own import of matplotlib and their first
+        # figures (cosim.plot_workers) take the other CPU while this one imports and loads the scenario, instead of
+        # while it simulates (the run's figures are then drawn as each motion ends, not queued behind a warm-up)
+        from feeddrive.cosim.figure_jobs import FIGURE_MODULES
+        from feeddrive.cosim.plot_workers import PlotWorkers
+
+        workers = PlotWorkers(preload=FIGURE_MODULES)
+    try:
+        code = _run(args, workers)
+    except BaseException:
+        if workers is not None:  # a bad scenario, or a run that failed: no figure is wanted, no warm-up waited for
+            workers.abandon()
+        raise
+    if workers is not None:
+        workers.close()  # the supervised child drew with them and told them to exit: they have, or are about to
+    return code
+
+
+def _run(args: argparse.Namespace, workers) -> int:  # noqa: ANN001 - PlotWorkers or None
     # the collector is off while the run's modules are imported and the scenario is loaded: what they make lives
     # as long as the run, and the collector's passes over it were 15 % of that time (0.70 -> 0.60 s CPU, best of 7)
     collecting = gc.isenabled()
@@ -78,7 +99,7 @@ def main(args: argparse.Namespace) -> int:
     out = args.out or _fresh_run_dir(Path("runs") / f"{scenario.name}-{_dt.datetime.now():%Y%m%d-%H%M%S}")
     # in a supervised child process: an FMU that crashes or hangs is reported in one line (exit 1)
     result = run_supervised(scenario, out, progress=enabled(not args.no_progress), overwrite=args.overwrite,
-                            default_history=Path(DEFAULT_DB), plots=not args.no_plots)
+                            default_history=Path(DEFAULT_DB), plots=not args.no_plots, workers=workers)
     print(summary(result))
     return 0
 

@@ -106,6 +106,29 @@ def test_idle_workers_closed_without_waiting_exit_and_are_reaped(tmp_path):
 
 
 @needs_fork
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="no /proc: the children cannot be listed")
+def test_workers_forked_before_a_child_draw_for_it_and_their_forker_reaps_them(tmp_path):
+    """``cosim run``: the drawing processes are forked first, the run is a child forked after; the child draws with
+    them and ends them (it is not their parent: it reaps nothing), the first process reaps them: none is left."""
+    before = _all_children(os.getpid())
+    workers = PlotWorkers(processes=2, warm=False)
+    pid = os.fork()
+    if pid == 0:  # the run's supervised child
+        code = 1
+        try:
+            paths = workers.draw([FigureJob(__name__, "write_pid", (tmp_path / f"f{k}.txt",)) for k in range(3)])
+            workers.close()  # waits for them to exit (as the run's finally does on a failure), reaps nothing
+            code = 0 if paths == [tmp_path / f"f{k}.txt" for k in range(3)] else 2
+        finally:
+            os._exit(code)
+    assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 0
+    workers.close()
+    drawn_by = {int((tmp_path / f"f{k}.txt").read_text()) for k in range(3)}
+    assert not drawn_by & {os.getpid(), pid}  # by the workers, not by the child itself
+    assert _all_children(os.getpid()) - before == set()  # reaped at close(): no zombie either
+
+
+@needs_fork
 def test_a_workers_error_is_raised_here_and_a_dead_workers_figure_is_drawn_here(tmp_path):
     workers = PlotWorkers(processes=2)
     try:
@@ -196,3 +219,17 @@ def test_jobs_submitted_while_the_run_goes_on_take_one_idle_worker_and_are_retur
         assert dead.sent
         assert workers.draw([dead]) == [tmp_path / "e.txt"]
     assert int((tmp_path / "e.txt").read_text()) == os.getpid()  # drawn again here
+
+
+@needs_fork
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="no /proc: the children cannot be listed")
+def test_abandoned_workers_are_ended_at_once_and_reaped():
+    """``cosim run`` failing before its run drew (a bad scenario): the workers, still warming up, are ended and
+    reaped at once, not waited for."""
+    before = _all_children(os.getpid())
+    workers = PlotWorkers(processes=2, preload=("feeddrive.cosim.plots",))
+    pid = workers._pid
+    workers.abandon()
+    workers.abandon()  # nothing left to end
+    workers.close()
+    assert pid is not None and _all_children(os.getpid()) - before == set()

@@ -90,3 +90,50 @@ def test_cosim_run_gives_the_collector_back_as_it_found_it(tmp_path, capsys, col
     finally:
         gc.enable()
     assert "step: Input should be greater than 0" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("width", [2.5, 9.0])
+def test_wrapped_breaks_the_lines_where_matplotlib_does(width):
+    """``cosim.plots.wrapped`` (a bisection per line) gives matplotlib's own lines (one more word at a time), for
+    a title over an axes and a figure title, texts with line breaks of their own, a word wider than the figure."""
+    from feeddrive.cosim.plots import wrapped
+
+    texts = ["passed: current independence F = 1.08, Bonferroni-adjusted p = 1 >= alpha = 0.01 (5 tests)\n"
+             "current RMS 0.0312 vs noise 0.05; speed RMS 0.00121 vs noise 0.002, noise not checked: no confirmed "
+             "redundant speed pair", "short", "", "averyveryverylongwordwithoutanyspaceinsideitatallreallywideindeed x",
+             "two  spaces  between words and a trailing space "]
+    fig, ax = plt.subplots(figsize=(width, 3), dpi=DPI)
+    made = [wrapped(ax.set_title(text, fontsize=8, wrap=True)) for text in texts[:1]]
+    made += [wrapped(fig.text(0.3, 0.5, text, fontsize=9, wrap=True)) for text in texts]
+    made.append(wrapped(fig.suptitle(texts[0], fontsize=10, wrap=True)))
+    fig.canvas.draw()  # each text's renderer and position: what the wrapping measures against
+    for text in made:
+        ours, theirs = text._get_wrapped_text(), matplotlib.text.Text._get_wrapped_text(text)
+        assert ours == theirs
+        assert ours.replace("\n", " ") == text.get_text().replace("\n", " ")  # line breaks only
+    assert max(t._get_wrapped_text().count("\n") for t in made) >= (3 if width < 5 else 1)  # some were wrapped
+    plt.close(fig)
+
+
+def test_tight_layout_measuring_each_axes_once_places_them_as_matplotlib_does():
+    """``cosim.plots.tight_layout`` (the trends: ``rect`` makes matplotlib lay out twice from the same extents) puts
+    every Axes where ``Figure.tight_layout`` does, and leaves the Axes' own ``get_tightbbox`` in place."""
+    from feeddrive.cosim.plots import tight_layout
+
+    def figure() -> plt.Figure:
+        fig, axes = plt.subplots(2, 2, sharex=True, figsize=(5, 4), dpi=100)
+        for k, ax in enumerate(axes.ravel()):
+            ax.plot([1, 2, 3], [10.0 ** k, 3.0 * 10.0 ** k, 2.0 * 10.0 ** k], "o-", label="estimate")
+            ax.set_ylabel(f"parameter {k} [unit{'s' * k}]")
+        axes[1, 0].set_xlabel("motion number (history order)")
+        fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", frameon=False)
+        fig.suptitle("parameter trends axis X")
+        return fig
+
+    theirs, ours = figure(), figure()
+    theirs.tight_layout(rect=(0, 0.06, 1, 1))
+    tight_layout(ours, rect=(0, 0.06, 1, 1))
+    assert [ax.get_position().bounds for ax in ours.axes] == [ax.get_position().bounds for ax in theirs.axes]
+    assert all("get_tightbbox" not in vars(ax) for ax in ours.axes)
+    plt.close(theirs)
+    plt.close(ours)
