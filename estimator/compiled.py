@@ -58,14 +58,21 @@ def _build(source: str) -> Path:
     if target.is_file():
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-        c = Path(tmp, "rollout.c")
-        c.write_text(source, encoding="utf-8")
-        so = Path(tmp, "rollout.so")
-        # -ffp-contract=off: no fused multiply-add, so that the results are CasADi's to the last bit
-        subprocess.run([*compiler, "-O2", "-shared", "-fPIC", "-ffp-contract=off", "-o", str(so), str(c), "-lm"],
-                       check=True, capture_output=True, timeout=120)
-        os.replace(so, target)
+    import fcntl
+
+    # one compile per library at a time (the PMSM closed loop's is 9 s of gcc): a process that waited finds it built
+    with open(target.with_suffix(".lock"), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes, or when a killed process ends
+        if target.is_file():
+            return target
+        with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
+            c = Path(tmp, "rollout.c")
+            c.write_text(source, encoding="utf-8")
+            so = Path(tmp, "rollout.so")
+            # -ffp-contract=off: no fused multiply-add, so that the results are CasADi's to the last bit
+            subprocess.run([*compiler, "-O2", "-shared", "-fPIC", "-ffp-contract=off", "-o", str(so), str(c), "-lm"],
+                           check=True, capture_output=True, timeout=120)
+            os.replace(so, target)
     return target
 
 

@@ -196,7 +196,7 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, 
     target = root / cache_key(sources) / f"{model.name}.fmu"
     try:
         if not target.is_file():
-            with _build_lock(root, target.parent.name):
+            with build_lock(root, target.parent.name):
                 if not target.is_file():  # another process may have built it while this one waited
                     _build(sources, target)
         _write_atomically(index, f"{target.parent.name}/{target.name}\n")
@@ -206,7 +206,7 @@ def builtin_fmu(cache_dir: Path | str | None = None, *, backlash: bool = False, 
 
 
 @contextlib.contextmanager
-def _build_lock(root: Path, key: str) -> Iterator[None]:
+def build_lock(root: Path, key: str) -> Iterator[None]:
     """Hold ``<root>/locks/<key>`` exclusively (``flock``): one build per cache key at a time. The kernel drops the
     lock when its process ends, so a killed build never blocks the next one; the file itself is left (empty)."""
     import fcntl

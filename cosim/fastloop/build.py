@@ -27,6 +27,17 @@ def _cache_root() -> Path:
     return Path(os.environ.get("FEEDDRIVE_CACHE") or Path.home() / ".cache" / "feeddrive") / "fastloop"
 
 
+def _compile(cc: list[str], target: Path) -> None:
+    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:  # private: parallel builds do not collide
+        out = Path(tmp) / "fineloop.so"
+        done = subprocess.run([*cc, *CFLAGS, "-o", str(out), str(SOURCE), "-lm"], capture_output=True,
+                              text=True, check=False)
+        if done.returncode != 0:
+            first = (done.stderr or done.stdout).strip().splitlines()[:1]
+            raise BuildFailed(f"{' '.join(cc)} failed on {SOURCE.name}: {first[0] if first else '?'}")
+        os.replace(out, target)  # atomic: another process sees the whole library or none
+
+
 @lru_cache(maxsize=1)
 def library() -> ctypes.CDLL:
     """The compiled fine loop (built on first use, then cached on disk and in this process).
@@ -36,7 +47,7 @@ def library() -> ctypes.CDLL:
     BuildFailed
         No C compiler, a compiler error or an unwritable cache: the message says which.
     """
-    from feeddrive.fmu_build.build import compiler
+    from feeddrive.fmu_build.build import build_lock, compiler
 
     cc = compiler()
     text = SOURCE.read_bytes()
@@ -45,14 +56,9 @@ def library() -> ctypes.CDLL:
     if not target.is_file():
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=target.parent) as tmp:  # private: parallel builds do not collide
-                out = Path(tmp) / "fineloop.so"
-                done = subprocess.run([*cc, *CFLAGS, "-o", str(out), str(SOURCE), "-lm"], capture_output=True,
-                                      text=True, check=False)
-                if done.returncode != 0:
-                    first = (done.stderr or done.stdout).strip().splitlines()[:1]
-                    raise BuildFailed(f"{' '.join(cc)} failed on {SOURCE.name}: {first[0] if first else '?'}")
-                os.replace(out, target)  # atomic: another process sees the whole library or none
+            with build_lock(_cache_root(), key):  # one compile at a time: a process that waited finds it built
+                if not target.is_file():
+                    _compile(cc, target)
         except FileNotFoundError:
             raise BuildFailed(f"no C compiler {cc[0]!r} (set $CC)") from None
         except OSError as exc:
