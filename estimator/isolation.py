@@ -15,6 +15,7 @@ import numpy as np
 
 from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.hac import ols_hac
 from feeddrive.estimator.kernels import bilinear_first_order
 
 #: a sensor fault's kind: index offset + 2 gain
@@ -103,12 +104,9 @@ def isolate(x1f: np.ndarray, x2f: np.ndarray, reference: np.ndarray, names: tupl
         raise EstimatorInputError(f"isolate: {ref.size} samples left after trimming {options.edge_s} s edges")
     X = np.column_stack([ref, np.ones(ref.size)])
     span = float(np.max(np.abs(ref)))
-    # not statsmodels.api (seconds of imports), and only here: isolating a faulty sensor is rare
-    from statsmodels.regression.linear_model import OLS
-
     fits = []
     for name, x in zip(names, (x1f, x2f)):
-        res = OLS(x[sl], X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
+        res = ols_hac(x[sl], X, maxlags=16)  # statsmodels' OLS with HAC errors, without its 2 s of imports
         (a, b), ((alo, ahi), (blo, bhi)) = res.params, res.conf_int(0.05)  # reported: 95 % intervals
         # decided at the level of every other test (alpha), not at the reported intervals' 5 %
         (tlo_a, thi_a), (tlo_b, thi_b) = res.conf_int(options.alpha)

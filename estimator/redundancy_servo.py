@@ -34,6 +34,7 @@ import numpy as np
 
 from feeddrive.estimator.distributions import chi2_sf, t_ppf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.hac import ols_hac
 from feeddrive.estimator.validation import ResidueTest, ValidationOptions, gain_ratio, noise_std, residue_test
 
 PHASES = ("U", "V", "W")
@@ -121,15 +122,13 @@ def phase_current_sum(i_u: np.ndarray, i_v: np.ndarray, i_w: np.ndarray, alpha: 
     -------
     PhaseSumCheck
     """
-    from statsmodels.regression.linear_model import OLS
-
     i_u, i_v, i_w = _arrays(i_u, i_v, i_w, names=("i_u", "i_v", "i_w"))
     if i_u.size < 50:
         raise EstimatorInputError(f"phase_current_sum: {i_u.size} samples; need at least 50")
     r = i_u + i_v + i_w
     X = np.column_stack([i_u, i_v, np.ones_like(i_u)])
-    res = OLS(r, X).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
-    beta, cov = res.params, res.cov_params()
+    res = ols_hac(r, X, maxlags=16)
+    beta, cov = res.params, res.cov
     p = float(chi2_sf(float(beta @ np.linalg.solve(cov, beta)), 3))
     span = float(np.max(np.abs([i_u, i_v, i_w])))
     # single fault: the best of r = e I_k + b
@@ -214,11 +213,9 @@ def dq_current_consistency(i_q: np.ndarray, i_u: np.ndarray, i_v: np.ndarray, i_
     phi_el : ndarray, shape (n,)
         Electrical angle [rad].
     """
-    from statsmodels.regression.linear_model import OLS
-
     i_q, i_u, i_v, i_w, phi = _arrays(i_q, i_u, i_v, i_w, phi_el, names=("i_q", "i_u", "i_v", "i_w", "phi_el"))
     _, q = park(np.vstack([i_u, i_v, i_w]), phi)
-    res = OLS(i_q, np.column_stack([q, np.ones_like(q)])).fit(cov_type="HAC", cov_kwds={"maxlags": 16})
+    res = ols_hac(i_q, np.column_stack([q, np.ones_like(q)]), maxlags=16)
     lo, hi = res.conf_int(alpha)[0]
     g = float(res.params[0])
     lo95, hi95 = res.conf_int(0.05)[0]

@@ -249,8 +249,8 @@ def _prepare() -> None:
     (``run_cosim.validate``, which imports the report page when the run keeps its files).
 
     The modules a run imports lazily are imported here too (``RUN_IMPORTS``): statsmodels' GLSAR, which the
-    monitor loads when it starts (pandas, pyarrow, formulaic: 537 modules), was imported again by every
-    run's child, 0.85 s of its 1.35 s CPU (``PYTHONDONTWRITEBYTECODE`` also recompiles the feeddrive modules
+    monitor loaded when it started (pandas, pyarrow, formulaic: 537 modules; now in numpy, estimator.glsar and
+    estimator.hac), was imported again by every run's child, 0.85 s of its 1.35 s CPU (``PYTHONDONTWRITEBYTECODE`` also recompiles the feeddrive modules
     each time); with them here a run's child takes 0.5 s (issue 26). bench_campaign warns when a run
     imports a module that is not here.
     """
@@ -270,7 +270,7 @@ def _prepare() -> None:
 
 #: modules every co-simulation run with a monitor imports (some lazily, in the run): imported by ``prepare``
 RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.estimator.estimate",
-               "statsmodels.regression.linear_model", "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
+               "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
                "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
                "feeddrive.estimator.spline_c",
                "multiprocessing.synchronize", "feeddrive.cosim.sensors_servo", "feeddrive.estimator.redundancy_servo",
