@@ -48,6 +48,7 @@ from feeddrive.estimator.distributions import f_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
 from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms, right_singular, thin_q
+from feeddrive.estimator.pvalue_text import p_text
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
 MIN_DIRECTION = 1e-3
@@ -136,7 +137,7 @@ class AdequacyResult:
 
     def line(self) -> str:
         """One console line: the verdict, its p-value against alpha, and the reason."""
-        p = "" if self.p_value is None else f" (p = {self.p_value:.3g} {'<' if self.p_value < self.alpha else '>='} " \
+        p = "" if self.p_value is None else f" ({p_text(self.p_value)} {'<' if self.p_value < self.alpha else '>='} " \
                                             f"alpha = {self.alpha:g})"
         verdict = "MODEL MISMATCH" if self.mismatch else self.verdict
         return f"model check (own residue): {verdict}{p}: {self.reason}"

@@ -49,6 +49,7 @@ from feeddrive.cosim.recorded import (
 )
 from feeddrive.cosim.recorded_servo import PMSM_ROLES, missing_roles, second_phase, servo_signals, unit_notes
 from feeddrive.cosim.run import _versions
+from feeddrive.estimator.pvalue_text import p_text
 
 #: units of the monitor's parameters (motor side)
 UNITS = parameter_units("motor")
@@ -270,7 +271,7 @@ def table(results: list[dict], units: dict[str, str] | None = None) -> str:
         if r["mismatch"]:
             m = r["mismatch"]
             lines.append(f"  model check: {'passed' if m['passed'] else 'MISMATCH'} (decided by the {m['test']} "
-                         f"test: statistic {m['statistic']:.3g}, p = {m['p_value']:.3g} at alpha = {m['alpha']:g})")
+                         f"test: statistic {m['statistic']:.3g}, {p_text(m['p_value'])} at alpha = {m['alpha']:g})")
         if r.get("adequacy"):
             lines.append(f"  {adequacy_line(r['adequacy'])}")
         if r.get("servo_checks"):  # a PMSM's redundancies, as the co-simulation's console shows them

@@ -22,6 +22,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from feeddrive.estimator.pvalue_text import p_text
+
 #: verdict kinds in order of precedence, with the CSS class of their colour
 KINDS = {"sensor fault": "bad", "not estimated": "not-judged", "model mismatch": "bad", "diagnosis": "diagnosed",
          "drifting": "drifting", "healthy": "healthy", "not validated": "not-judged"}
@@ -105,7 +107,7 @@ def _derive(m: Mapping, statuses: Mapping[str, str]) -> tuple[str, str]:
         return "not estimated", f"not estimated: {m.get('error') or 'no parameters in this result'}"
     mm = m.get("mismatch")
     if isinstance(mm, Mapping) and mm.get("passed") is False:
-        p = f", adjusted p = {mm['p_value']:.3g} < alpha = {mm['alpha']:g}" if finite(mm.get("p_value")) and \
+        p = f", adjusted {p_text(mm['p_value'])} < alpha = {mm['alpha']:g}" if finite(mm.get("p_value")) and \
             finite(mm.get("alpha")) else ""
         return "model mismatch", f"model mismatch: the {mm.get('test', 'model check')} test rejects{p}; " \
                                  "parameters not validated"

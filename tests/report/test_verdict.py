@@ -118,3 +118,18 @@ def test_budget_is_judged_on_cpu_time():
     del old["processing_cpu_s"]
     wall = views.processing(old, 2.0)
     assert wall["within"] is None and "wall time" in wall["text"] and "OVER" not in wall["text"].upper()
+
+
+def test_an_underflowed_p_value_is_not_written_as_zero():
+    """A rejection so strong that its tail probability underflows to 0.0 reads 'p < 1e-300', not 'p = 0'."""
+    from feeddrive.cosim.report.verdict import verdict_line
+    from feeddrive.estimator.adequacy import AdequacyResult
+
+    m = {"parameters": {"R": {"value": 0.46}},
+         "mismatch": {"passed": False, "test": "current size", "p_value": 0.0, "alpha": 0.01}}
+    assert verdict_line(m) == ("model mismatch: the current size test rejects, adjusted p < 1e-300 < alpha = 0.01; "
+                               "parameters not validated")
+    m["mismatch"]["p_value"] = 1.4e-20
+    assert "adjusted p = 1.4e-20 < alpha" in verdict_line(m)
+    line = AdequacyResult("model mismatch", 0.0, 0.01, "the electrical equation lacks a term").line()
+    assert "(p < 1e-300 < alpha = 0.01)" in line
