@@ -63,6 +63,7 @@ from feeddrive.estimator.motion import FIELDS, SAMPLING_DELAY
 from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.estimator.physical import impossible_values, parse_bounds
 from feeddrive.estimator.pooling import pool
+from feeddrive.estimator.pvalue_text import p_text
 
 ROLES = {"time": None, "voltage": "u", "current": "i", "speed": "w", "position": "position", "torque": "torque",
          "state": None, "i_q": "i_q", "i_d": "i_d", "u_q": "u_q", "u_d": "u_d"}
@@ -269,10 +270,10 @@ def several_table(rows, verdict, units: dict[str, str]) -> str:  # noqa: ANN001 
     if not verdict.per_parameter:  # no parameter given by two files: no agreement to test
         lines.append("agreement: not tested: no parameter is given by two files or more (see the refusals above)")
     else:
-        lines.append(f"agreement: {verdict.verdict} (p = {verdict.p_value:.3g}, Bonferroni over "
+        lines.append(f"agreement: {verdict.verdict} ({p_text(verdict.p_value)}, Bonferroni over "
                      f"{len(verdict.per_parameter)} parameters; joint chi2 {verdict.chi2:.3g} on {verdict.dof} dof, "
-                     f"p = {verdict.joint_p:.3g})")
-        lines.append("  per parameter: " + ", ".join(f"{n} chi2 {c:.3g} on {d}, p {p:.3g}"
+                     f"{p_text(verdict.joint_p)})")
+        lines.append("  per parameter: " + ", ".join(f"{n} chi2 {c:.3g} on {d}, {p_text(p)}"
                                                      for n, (c, d, p) in verdict.per_parameter.items()))
     lines.append("pooled:")
     for n, p in verdict.parameters.items():
