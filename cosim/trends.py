@@ -38,8 +38,21 @@ PARAMETERS = (("R", "Ohm"), ("L", "H"), ("K", "N.m/A"), ("Jt", "kg.m2"), ("ft", 
 UNITS = dict(PARAMETERS)
 #: a history spanning more than this [s] is plotted against calendar time
 DATE_SPAN_S = 86400.0
-#: ``plt.subplots``' arguments of :func:`trend_figure` (at the figure's own 100 dpi)
+#: ``plt.subplots``' arguments of :func:`trend_figure` for the DC drive's six (at the figure's own 100 dpi)
 TRENDS_LAYOUT = ((3, 2), {"figsize": (11, 8.2), "sharex": True})
+#: the order of the trend panels: the DC drive's six with the PMSM's dq inductances and flux in their place; a
+#: parameter not named here (a torque offset T0) after them
+ORDER = ("R", "L", "L_d", "L_q", "K", "psi_f", "Jt", "ft", "Cd")
+
+
+def trends_layout(n: int) -> tuple[tuple[int, int], dict]:
+    """``plt.subplots``' arguments for ``n`` panels, filled column by column: the DC drive's 3 x 2 for six, two
+    columns from four (a PMSM's seven: 4 x 2), one column below (a torque-only axis's ft and Cd)."""
+    if n == 6:
+        return TRENDS_LAYOUT
+    cols = 2 if n >= 4 else 1
+    rows = -(-n // cols)
+    return (rows, cols), {"figsize": (11, max(3.4, 8.2 * rows / 3)), "sharex": True}
 
 
 def alarm_half_width(std: float | None, ref: Mapping, z_crit: float, min_relative: float) -> float:
@@ -157,7 +170,8 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
     Returns
     -------
     matplotlib.figure.Figure
-        3 x 2 panels (R, L, K | Jt, ft, Cd); the caller closes it.
+        A panel per parameter with a trend, column by column (``trends_layout``): the DC drive's 3 x 2 (R, L, K |
+        Jt, ft, Cd); the caller closes it.
     """
     # matplotlib here, not at the top: report.html reads the trends' data (trend_series) without drawing
     import matplotlib
@@ -176,12 +190,17 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
     units = {**UNITS, **stored, **(units or {})}
     from feeddrive.cosim.plots import subplots, tight_layout
 
-    fig, axes = subplots(*TRENDS_LAYOUT[0], **TRENDS_LAYOUT[1])
-    for ax, (name, _) in zip(axes.T.ravel(), PARAMETERS):
-        s = series.get(name)
-        if s is None:
-            ax.set_visible(False)
-            continue
+    # a panel per parameter with a trend: a PMSM's L_d, L_q and psi_f (demagnetisation) among them, no empty one
+    # for a parameter the axis never gives (a torque-only axis: ft and Cd)
+    names = [n for n in ORDER if n in series] + sorted(set(series) - set(ORDER))
+    (rows, cols), layout = trends_layout(len(names))
+    fig, axes = subplots(rows, cols, **layout)
+    axes = np.asarray(axes, dtype=object).reshape(rows, cols)
+    slots = list(axes.T.ravel())  # column by column: R, L, K over Jt, ft, Cd
+    for ax in slots[len(names):]:
+        ax.set_visible(False)
+    for ax, name in zip(slots, names):
+        s = series[name]
         if dates:
             xs = mdates.date2num([_dt.datetime.fromtimestamp(t, _dt.timezone.utc) for t in s["time"]])
             # half a motion spacing, but at least 2 % of the span: points at the ends stay visible
@@ -194,7 +213,9 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
         fmt.set_scientific(False)
         ax.yaxis.set_major_formatter(fmt)
         ax.grid(alpha=0.3)
-    for ax in axes[-1]:
+    # each column's lowest panel carries the time axis (a column one short of the other has its own)
+    for ax in (slots[min(len(names), (c + 1) * rows) - 1] for c in range(cols) if c * rows < len(names)):
+        ax.tick_params(labelbottom=True)
         if dates:
             loc = mdates.AutoDateLocator()
             ax.xaxis.set_major_locator(loc)
