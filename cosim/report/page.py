@@ -25,7 +25,7 @@ import jinja2
 
 from feeddrive.cosim.report import views
 from feeddrive.cosim.report.verdict import motion_verdict
-from feeddrive.cosim.trends import UNITS, trend_series, use_dates
+from feeddrive.cosim.trends import ORDER, UNITS, trend_series, use_dates
 
 PAGE = "report.html"
 
@@ -267,10 +267,12 @@ def write_history_page(path: str | Path, axis: str, motions: Sequence[Mapping], 
                "mismatches": sum(isinstance(m.get("mismatch"), Mapping) and m["mismatch"].get("passed") is False
                                  for m in motions)}
     index = {name: {k: j for j, k in enumerate(s["number"])} for name, s in series.items()}
+    # a column per parameter this axis has given, in the trends' order: a DC axis has no L_d, L_q, psi_f columns
+    columns = [n for n in ORDER if n in series] + sorted(set(series) - set(ORDER))
     rows = []
     for k, m in enumerate(motions, 1):
         cells = {}
-        for name in units:
+        for name in columns:
             s, j = series.get(name), index.get(name, {}).get(k)
             if j is None:
                 continue
@@ -281,7 +283,7 @@ def write_history_page(path: str | Path, axis: str, motions: Sequence[Mapping], 
                      "verdict": motion_verdict(m, {n: c["status"] for n, c in cells.items()})})
     html = _ENV.get_template("report.html.j2").render(
         kind="history", title=f"axis {axis}", report={}, motions=[], figures=figures, thresholds=thresholds,
-        units=units, history=history, rows=rows, data_json=json.dumps({"axis": axis, "thresholds": thresholds, "trends": series}).replace("</", "<\\/"))
+        units=units, columns=columns, history=history, rows=rows, data_json=json.dumps({"axis": axis, "thresholds": thresholds, "trends": series}).replace("</", "<\\/"))
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(html, encoding="utf-8")
     return path

@@ -48,3 +48,16 @@ def test_one_panel_per_parameter_and_a_time_axis_under_each_column(params, expec
         lowest = min(col, key=lambda ax: ax.get_position().y0)
         assert lowest.get_xlabel() == "motion number (history order)"
         assert any(t.get_text() for t in lowest.get_xticklabels())
+
+
+@pytest.mark.parametrize(("params", "expected"), [(DC, list(DC)), (PMSM, list(PMSM)), ({"ft": DC["ft"]}, ["ft"])],
+                         ids=["dc", "pmsm", "ft-only"])
+def test_the_history_table_has_a_column_per_given_parameter(params, expected, tmp_path):
+    """A DC axis's motion table had L_d, L_q, psi_f and T0 columns of dashes; a PMSM's L and K (found by audit2)."""
+    import re
+
+    from feeddrive.cosim.report.page import write_history_page
+
+    page = write_history_page(tmp_path / "h.html", "X", motions(params), None, "h.sqlite").read_text()
+    header = re.search(r"<tr><th>#</th>.*?</tr>", page).group(0)
+    assert re.findall(r"<th>(\w+) \[", header) == expected
