@@ -301,7 +301,9 @@ class MonitorPipeline:
         reference = self.baseline()
         if reference is not None:
             # the reference and thresholds this motion was judged against: the trend plots' alarm band
-            result["drift_reference"] = _drift_reference(reference, self.diagnosis_options, self.names)
+            # with the baseline's size, so that the history page states the baseline this axis's monitor used
+            result["drift_reference"] = _drift_reference(reference, self.diagnosis_options, self.names) | {
+                "baseline_mode": self.config.baseline, "baseline_motions": self.config.baseline_motions}
             result["diagnosis"] = [d.to_dict() for d in diagnose(current, reference, self.last_validated, self.recent,
                                                                  self.diagnosis_options, self.table)]
         if self.building:

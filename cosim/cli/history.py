@@ -76,15 +76,18 @@ def main(args: argparse.Namespace) -> int:
 
 
 def thresholds(db: Path, axis: str, motions: list[dict]) -> dict:
-    """The alarm band's thresholds for a history page: those of the newest diagnosed motion (what the
-    monitor used), else the monitor's defaults; the healthy baseline as the monitor reads it from ``db``."""
+    """The alarm band's thresholds for a history page: those of the newest judged motion (what the monitor used:
+    its z, relative changes and baseline size), else the monitor's defaults; the healthy baseline as the monitor
+    reads it from ``db``."""
     from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
     from feeddrive.estimator.history import History
 
-    config = MonitorConfig(axis=axis)
+    used = next((m["drift_reference"] for m in reversed(motions) if m.get("drift_reference")), None)
+    # the baseline's size the monitor used (stored with each judged motion since 2026-11-27; else the default)
+    size = (used or {}).get("baseline_motions") if (used or {}).get("baseline_mode") == "motions" else None
+    config = MonitorConfig(axis=axis) if size is None else MonitorConfig(axis=axis, baseline_motions=size)
     with History(db) as history:
         out = MonitorPipeline(config, history, axis).thresholds()
-    used = next((m["drift_reference"] for m in reversed(motions) if m.get("drift_reference")), None)
     if used is not None:
         from feeddrive.estimator.distributions import norm_sf
 

@@ -61,3 +61,24 @@ def test_the_history_table_has_a_column_per_given_parameter(params, expected, tm
     page = write_history_page(tmp_path / "h.html", "X", motions(params), None, "h.sqlite").read_text()
     header = re.search(r"<tr><th>#</th>.*?</tr>", page).group(0)
     assert re.findall(r"<th>(\w+) \[", header) == expected
+
+
+def test_the_history_page_states_the_baseline_size_the_monitor_used(tmp_path):
+    """examples/pmsm_monitor.yaml learns its baseline from one motion; its history page said 'the first 3' (the
+    default), as if the baseline were still being learnt. The size is stored with each judged motion."""
+    from feeddrive.cosim.cli.history import thresholds
+    from feeddrive.cosim.report.page import write_history_page
+    from feeddrive.estimator.history import History
+
+    db = tmp_path / "h.sqlite"
+    first, second = motions(DC, 2)
+    second["drift_reference"] = {"z_crit": 2.576, "min_relative": {n: 0.02 for n in DC}, "baseline": {n: {"value": v, "std": 1e-3 * v} for n, (_, v) in DC.items()},
+                                 "baseline_mode": "motions", "baseline_motions": 1}
+    with History(db) as h:
+        h.record("X", first, time=first["time"])
+        h.record("X", second, time=second["time"])
+        stored = h.motions("X")
+    t = thresholds(db, "X", stored)
+    assert t["baseline_motions"] == 1 and t["baseline_learnt"] == 1
+    page = write_history_page(tmp_path / "h.html", "X", stored, t, str(db)).read_text()
+    assert "The healthy baseline is the first validated motion without a diagnosis." in page
