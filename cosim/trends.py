@@ -45,6 +45,12 @@ TRENDS_LAYOUT = ((3, 2), {"figsize": (11, 8.2), "sharex": True})
 ORDER = ("R", "L", "L_d", "L_q", "K", "psi_f", "Jt", "ft", "Cd")
 
 
+def trend_names(series: Mapping) -> list[str]:
+    """The parameters of ``trend_series``' result in the panels' and the history table's order (``ORDER``, then the
+    others by name)."""
+    return [n for n in ORDER if n in series] + sorted(set(series) - set(ORDER))
+
+
 def trends_layout(n: int) -> tuple[tuple[int, int], dict]:
     """``plt.subplots``' arguments for ``n`` panels, filled column by column: the DC drive's 3 x 2 for six, two
     columns from four (a PMSM's seven: 4 x 2), one column below (a torque-only axis's ft and Cd)."""
@@ -192,7 +198,7 @@ def trend_figure(motions: Sequence[Mapping], title: str = "", thresholds: Mappin
 
     # a panel per parameter with a trend: a PMSM's L_d, L_q and psi_f (demagnetisation) among them, no empty one
     # for a parameter the axis never gives (a torque-only axis: ft and Cd)
-    names = [n for n in ORDER if n in series] + sorted(set(series) - set(ORDER))
+    names = trend_names(series)
     (rows, cols), layout = trends_layout(len(names))
     fig, axes = subplots(rows, cols, **layout)
     axes = np.asarray(axes, dtype=object).reshape(rows, cols)

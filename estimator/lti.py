@@ -327,6 +327,11 @@ def _library() -> ctypes.CDLL | None:
                         {"fd_sosfilt": [n, n, n, dp, dp, dp, n], "fd_lfilter": [n, n, dp, dp, dp, dp, dp]})
 
 
+def available() -> bool:
+    """True when the C loops could be built here."""
+    return _library() is not None
+
+
 #: rows per call of the C sosfilt: its states live on the C stack (a vector per row pair and section state)
 ROWS_PER_CALL = 64
 

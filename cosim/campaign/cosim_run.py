@@ -263,9 +263,8 @@ def _prepare() -> None:
     _registry()
     from feeddrive.estimator import blocks_c, lti, spline_c
 
-    for compiled in (spline_c, blocks_c):  # their C libraries built (or found) and loaded here, not in every run
+    for compiled in (spline_c, blocks_c, lti):  # their C libraries built (or found) and loaded here, not per run
         compiled.available()
-    lti._library()  # the C filters' library likewise
 
 
 #: modules every co-simulation run with a monitor imports (some lazily, in the run): imported by ``prepare``

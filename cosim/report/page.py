@@ -25,7 +25,7 @@ import jinja2
 
 from feeddrive.cosim.report import views
 from feeddrive.cosim.report.verdict import motion_verdict
-from feeddrive.cosim.trends import ORDER, UNITS, trend_series, use_dates
+from feeddrive.cosim.trends import UNITS, trend_names, trend_series, use_dates
 
 PAGE = "report.html"
 
@@ -268,7 +268,7 @@ def write_history_page(path: str | Path, axis: str, motions: Sequence[Mapping], 
                                  for m in motions)}
     index = {name: {k: j for j, k in enumerate(s["number"])} for name, s in series.items()}
     # a column per parameter this axis has given, in the trends' order: a DC axis has no L_d, L_q, psi_f columns
-    columns = [n for n in ORDER if n in series] + sorted(set(series) - set(ORDER))
+    columns = trend_names(series)
     rows = []
     for k, m in enumerate(motions, 1):
         cells = {}
