@@ -24,6 +24,7 @@ from feeddrive.cosim.plots import DPI, draw_concurrently, subplots, wrapped, wri
 from feeddrive.cosim.plots import prepare_figures as _prepare  # noqa: E402
 from feeddrive.cosim.trends import PARAMETERS, TRENDS_LAYOUT  # noqa: E402, F401 - re-exported
 from feeddrive.cosim.trends import plot_trends as _plot_trends  # noqa: E402
+from feeddrive.estimator.pvalue_text import p_text  # noqa: E402
 
 
 def motion_layout(panels: int) -> tuple[tuple, dict]:
@@ -166,7 +167,7 @@ def plot_correlation(trace, path: Path) -> Path:
         top = max(float(np.nanmax(np.abs(check.correlation), initial=0.0)), float(check.band))
         ax.set_ylim(-1.35 * top, 1.35 * top)
         p = check.tests["independence"].p_value
-        ax.set_title(f"{name} residue vs past inputs: F-test p = {p:.3g}", fontsize=8)
+        ax.set_title(f"{name} residue vs past inputs: F-test {p_text(p)}", fontsize=8)
         ax.set_xlabel("lag [blocks of 20 ms]")
         _legend_outside(ax)
     axes[0, 0].set_ylabel("correlation")

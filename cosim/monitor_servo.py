@@ -34,6 +34,7 @@ from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.estimate import MotionData
 from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.pvalue_text import p_text
 from feeddrive.estimator.validation import gain_ratio
 
 #: the monitor component's extra inputs on a PMSM axis, after ``state, motion`` (wired from the ``servo``
@@ -343,7 +344,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     else:
         result["output_error_check"] = paper.to_dict() | {"deciding": False}
         trace.mismatch = paper  # its residues in the motion's figure (paper Fig. 13, 14), said to be advisory
-        outcome = "passed" if paper.passed else f"rejected by its {paper.test} test (p = {paper.p_value:.3g})"
+        outcome = "passed" if paper.passed else f"rejected by its {paper.test} test ({p_text(paper.p_value)})"
         result["not_checked"]["model (paper, output error)"] = (
             f"advisory only, {outcome}: on a PMSM its speed independence test over-rejects healthy motions (the "
             f"check rejected 6 % of 200 at alpha 0.01, benchmarks/bench_pmsm_model_check.py); the residue check "

@@ -436,7 +436,7 @@ def _verdict(results: dict[str, EquationCheck], alpha: float) -> AdequacyResult:
         return AdequacyResult("not enough excitation", p, alpha, "no mismatch found, but the check has little "
                               "power (" + "; ".join(weak + ([note] if note else [])) + ")", results)
     return AdequacyResult("adequate", p, alpha, "no mismatch found (" + ", ".join(
-        f"{e.equation} p = {e.p_value:.3g}" for e in tested.values()) + "; Bonferroni over the equations"
+        f"{e.equation} {p_text(e.p_value)}" for e in tested.values()) + "; Bonferroni over the equations"
         + (f"; {note}" if note else "") + ")", results)
 
 

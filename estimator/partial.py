@@ -61,6 +61,7 @@ from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_la
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.nc_rate import rate_rule, systematic
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
+from feeddrive.estimator.pvalue_text import p_text
 from feeddrive.estimator.sign_convention import sign_hint
 from feeddrive.models.drives import differentiated
 
@@ -217,7 +218,7 @@ def _lag_check(result: MethodResult, lagfree: dict, refused: dict, lumped: set) 
         value = float(values[j])
         free = value + delta * scale  # the given value without the lag's effect measured on LS
         if abs(free - value) > half:
-            test = "with the d2i/dt2 term" if p_value != p_value else f"with the lag's terms (Wald p = {p_value:.2g})"
+            test = "with the d2i/dt2 term" if p_value != p_value else f"with the lag's terms (Wald {p_text(p_value)})"
             refused[n] = (f"biased by the lag of the {state} measurement (the second lag test): fitted {test} it is "
                           f"{free:.4g}, outside its 95 % interval [{value - half:.4g}, {value + half:.4g}] "
                           f"({result.method_used.upper()}: {value:.4g})")

@@ -230,7 +230,7 @@ def _jsonable(x):  # noqa: ANN001, ANN202 - numpy scalars in the results
 
 def adequacy_line(a: dict) -> str:
     """The residue model check's line from its report.json dict (``AdequacyResult.to_dict``)."""
-    p = "" if a["p_value"] is None else f" (p = {a['p_value']:.3g} at alpha = {a['alpha']:g})"
+    p = "" if a["p_value"] is None else f" ({p_text(a['p_value'])} at alpha = {a['alpha']:g})"
     verdict = "MODEL MISMATCH" if a["verdict"] == "model mismatch" else a["verdict"]
     return f"model check (own residue): {verdict}{p}: {a['reason']}"
 

@@ -133,3 +133,13 @@ def test_an_underflowed_p_value_is_not_written_as_zero():
     assert "adjusted p = 1.4e-20 < alpha" in verdict_line(m)
     line = AdequacyResult("model mismatch", 0.0, 0.01, "the electrical equation lacks a term").line()
     assert "(p < 1e-300 < alpha = 0.01)" in line
+
+
+def test_the_monitor_consoles_residue_check_line_does_not_write_p_zero():
+    """`cosim monitor`'s line for the residue model check: an underflowed p reads 'p < 1e-300' (it read 'p = 0')."""
+    from feeddrive.cosim.cli.monitor import adequacy_line
+
+    a = {"verdict": "model mismatch", "p_value": 0.0, "alpha": 0.01, "reason": "the electrical equation lacks a term"}
+    assert adequacy_line(a) == ("model check (own residue): MODEL MISMATCH (p < 1e-300 at alpha = 0.01): "
+                                "the electrical equation lacks a term")
+    assert "(p = 0.0234 at alpha" in adequacy_line(a | {"p_value": 0.0234})
