@@ -7,6 +7,9 @@
   loop (report.json ``wall_time_s``: ``Master.run``, which includes the monitor's processing of each
   motion; ``processing_s`` of the motions is printed too); target ratio <= 2. The rest is start-up
   (imports, scenario and FMU check), the supervised child, report.json/report.html and the plots.
+* The floor under that ratio: a bare interpreter importing the third-party modules the run imports
+  (numpy, scipy's linalg, special and fft, fmpy, pydantic, casadi, jinja2, ...: read from the run's
+  ``-X importtime``), against the same simulation: no change in the project's own code goes below it.
 
     python benchmarks/bench_cli.py [--repeat 3] [--scenario examples/tool_change.yaml] [--phases]
 
@@ -80,7 +83,36 @@ def main(argv: list[str] | None = None) -> int:
     print(f"cosim run {args.scenario.name}: {elapsed:.2f} s wall; simulation with the monitor in the loop "
           f"{simulation:.2f} s (of which monitor {monitor:.2f} s); rest {elapsed - simulation:.2f} s")
     print(f"ratio wall / (simulation + monitoring) = {ratio:.2f}   (target <= 2) {'ok' if ratio <= 2 else 'OVER'}")
+    floor, names = import_floor(args.scenario, args.repeat)
+    print(f"floor: a bare interpreter importing the {len(names)} third-party packages the run's process imports "
+          f"({', '.join(names)}) takes {floor:.2f} s; with the simulation, {(floor + simulation) / simulation:.2f} times "
+          "the simulation, whatever the project's own code does")
     return 0
+
+
+def import_floor(scenario: Path, repeat: int) -> tuple[float, list[str]]:
+    """Seconds for a fresh interpreter to import the third-party modules ``cosim run scenario --no-plots``
+    imports (best of ``repeat``), and their packages' names: the part of the run's start-up that no change
+    in this project can remove while it uses them. The modules are read from ``-X importtime`` (its
+    supervised child's imports too); third-party: their package is found in a site-packages folder."""
+    import importlib.util
+
+    with tempfile.TemporaryDirectory(prefix="bench_cli_") as tmp:
+        _, proc = wall([sys.executable, "-X", "importtime", "-m", "feeddrive.cosim", "run", str(scenario.resolve()),
+                        "--no-progress", "--no-plots", "--out", "run"], cwd=Path(tmp))
+    modules = [line.rsplit("|", 1)[1].strip() for line in proc.stderr.splitlines()
+               if line.startswith("import time:") and line.count("|") == 2]
+    packages = []
+    for name in sorted({m.split(".")[0] for m in modules} - {"feeddrive"}):
+        spec = importlib.util.find_spec(name) if name.isidentifier() and not name.startswith("_") else None
+        if spec is not None and "site-packages" in (spec.origin or ""):
+            packages.append(name)
+    wanted = [m for m in modules if m.split(".")[0] in packages]
+    # a module importtime lists may not be importable by name (a missing optional one, tried and skipped)
+    code = f"import importlib\nfor m in {wanted!r}:\n    try:\n        importlib.import_module(m)\n" \
+           "    except ImportError:\n        pass"
+    best = min(wall([sys.executable, "-c", code])[0] for _ in range(repeat))
+    return best, packages
 
 
 if __name__ == "__main__":
