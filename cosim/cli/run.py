@@ -184,6 +184,8 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
                 lines.append(f"    {m['error']}")
     if r.get("held_inputs"):  # a rejection the set-up's sampling explains (cosim/held_inputs.py)
         lines.append(f"  set-up: {r['held_inputs']}")
+    if r.get("sampling_bias"):  # L's discretisation error the set-up's sampling leaves (cosim/held_inputs.py)
+        lines.append(f"  set-up: {r['sampling_bias']}")
     line = history_line((r.get("components") or {}).get("monitor"))
     if line:
         lines.append(line)
