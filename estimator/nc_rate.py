@@ -74,7 +74,7 @@ def systematic(data: MotionData, ls: MethodResult, result: MethodResult, options
         the fall-back LS gave Jt -18 % +-17 % (the halves' LS -35 %: the bias of noisy Dw doubles).
     """
     if _phase(data, options) <= MAX_HALF_PHASE or result.method != "iv" or result.method_used == LAGGED:
-        return result  # the lagged IV reads the whole record (no halves to alias) with noise-free instruments
+        return result  # the lagged IV reads the whole record (no halves to alias), its instruments not the noise
     names = [n for n in result.names if n in ls.names]
     if result.method_used == "iv":
         d = {n: result.values[result.names.index(n)] - ls.values[ls.names.index(n)] for n in names}
