@@ -19,6 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from feeddrive.estimator.estimate import split_halves
+from feeddrive.estimator.lagged_iv import LAGGED
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData
 
 #: Largest phase 2 pi f_c (2 h) of the filter's cut-off at the IV halves' sample period 2 h [rad] above which the
@@ -56,7 +57,8 @@ def systematic(data: MotionData, ls: MethodResult, result: MethodResult, options
     ls : MethodResult
         LS of the whole record.
     result : MethodResult
-        IV, or LS labelled ``iv`` when IV fell back (``result.ran == "ls"``).
+        IV, or LS labelled ``iv`` when IV fell back (``result.ran == "ls"``); the lagged IV
+        (``lagged_iv.LAGGED``) is returned unchanged.
     options : EstimationOptions
     fixed : dict
         Parameters fixed in the re-fit (they stay fixed in the halves' LS).
@@ -71,8 +73,8 @@ def systematic(data: MotionData, ls: MethodResult, result: MethodResult, options
         ``d = mean(LS_halves) - LS`` (LS's noise bias, IV fell back), and a note in ``message``. At 2 ms noise-free IV's L_d was -6.3 % +-6.1 % (LS -3.5 %); at 2 ms, 30 dB,
         the fall-back LS gave Jt -18 % +-17 % (the halves' LS -35 %: the bias of noisy Dw doubles).
     """
-    if _phase(data, options) <= MAX_HALF_PHASE or result.method != "iv":
-        return result
+    if _phase(data, options) <= MAX_HALF_PHASE or result.method != "iv" or result.method_used == LAGGED:
+        return result  # the lagged IV reads the whole record (no halves to alias), its instruments not the noise
     names = [n for n in result.names if n in ls.names]
     if result.method_used == "iv":
         d = {n: result.values[result.names.index(n)] - ls.values[ls.names.index(n)] for n in names}

@@ -58,6 +58,7 @@ from feeddrive.estimator.estimate import (
     update_constants,
 )
 from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_lag
+from feeddrive.estimator.lagged_iv import fallback
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.nc_rate import rate_rule, systematic
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
@@ -505,10 +506,9 @@ def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: M
             res = replace(res, message=f"IV without simulated instruments for the {', '.join(dynamic)} equation "
                                        f"({', '.join(n + ' fixed at 0' for n in dynamic.values())})")
     except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:  # NotEnoughExcitation, NumericalFailure
-        return fell_back(ls, "iv", f"IV fell back to LS: {exc}")
-    if not (np.all(np.isfinite(res.values)) and np.all(np.isfinite(res.covariance))):
-        return fell_back(ls, "iv", "IV fell back to LS: non-finite IV estimate")
-    return res
+        return fallback(data, ls, options, equations, str(exc))  # the lagged-regressor IV, or LS when it fails too
+    finite = np.all(np.isfinite(res.values)) and np.all(np.isfinite(res.covariance))
+    return res if finite else fallback(data, ls, options, equations, "non-finite IV estimate")
 
 
 def _oe(p, iv: MethodResult, options: EstimationOptions, fixed: Mapping[str, float]) -> MethodResult:

@@ -12,7 +12,10 @@ from pmsm_data import H, add_noise
 
 from feeddrive.estimator import EstimationOptions, FilterSpec, MotionData
 from feeddrive.estimator.design import simulate_closed_loop
-from feeddrive.estimator.partial import estimate_parameters, time_constants
+from feeddrive.estimator.estimate import fell_back
+from feeddrive.estimator.lagged_iv import LABEL, LAGGED
+from feeddrive.estimator.nc_rate import systematic
+from feeddrive.estimator.partial import _fit_ls, estimate_parameters, time_constants
 from feeddrive.models.drives import drive_model
 
 TRUTH = drive_model("pmsm").nominal(("physical",))
@@ -108,10 +111,27 @@ def test_dry_friction_tied_to_a_refused_viscous_friction_is_refused_not_given_on
     assert float(why.split("variance is ")[1].split(" times")[0]) > 10
 
 
-def test_ls_standing_in_for_iv_at_an_nc_rate_holds_its_noise_bias_in_its_interval():
-    """2 ms, 30 dB: IV cannot run (its iterates diverge), LS stands in; the noise of the speed's derivative biases
-    LS's Jt by -16 % (the halves' LS, twice the filtered noise: -35 %), the interval used to miss the truth."""
+def test_lagged_iv_standing_in_for_iv_at_an_nc_rate_is_not_biased_by_the_noise_of_its_regressors():
+    """2 ms, 30 dB: the split-sample IV cannot run (its simulation of the q axis is unstable at its halves' 4 ms),
+    the lagged IV stands in (estimator/lagged_iv.py): Jt +16 % +-39 % (over 40 noise draws +0.7 % +- 9.4 %, given
+    in 39, 97 % of them covering the truth); LS's Jt is -16 % (the noise of the speed's derivative; over the 40
+    draws -17 % +- 6 %). (LS stood in here before, its interval widened by its noise bias: the next test.)"""
     est = estimate(add_noise(simulated(), 30.0, 0), 16)
-    assert est.iv.ran == "ls" and "the halves' LS - LS (LS's noise bias" in est.iv.message
-    assert est.parameters["Jt"].value / TRUTH["Jt"] - 1 < -0.1
+    assert est.iv.ran == LAGGED and est.iv.message.startswith(LABEL + ": the split-sample IV failed (the simulation")
+    assert {"L_q", "psi_f", "Jt"} <= set(est.parameters)
+    assert est.ls.values[est.ls.names.index("Jt")] / TRUTH["Jt"] - 1 < -0.1
     check(est, TRUTH, "2 ms, 30 dB", tolerance=False)
+
+
+def test_ls_standing_in_for_iv_at_an_nc_rate_holds_its_noise_bias_in_its_interval():
+    """2 ms, 30 dB, where the lagged IV failed too and LS stood in: the noise of the speed's derivative biases LS's
+    Jt by -16 % (the halves' LS, twice the filtered noise: -35 %), the interval used to miss the truth."""
+    s = {n: v[::16] for n, v in add_noise(simulated(), 30.0, 0).items()}
+    m = MotionData(16 * H, w=s["w"], signals={n: s[n] for n in ("u_d", "u_q", "i_d", "i_q")})
+    options = EstimationOptions(method="iv", model="pmsm", filter=FilterSpec(min(100.0, 0.1 / m.h)))
+    _, ls, fixed, _, _ = _fit_ls(m, options)
+    res = systematic(m, ls, fell_back(ls, "iv", "IV fell back to LS"), options, fixed, _fit_ls)
+    assert res.ran == "ls" and "the halves' LS - LS (LS's noise bias" in res.message
+    jt = res.parameters["Jt"]
+    assert jt.value / TRUTH["Jt"] - 1 < -0.1 and jt.ci95[0] <= TRUTH["Jt"] <= jt.ci95[1]
+    assert jt.std > 1.5 * ls.parameters["Jt"].std  # LS's own interval just reached the truth (+0.4 %)

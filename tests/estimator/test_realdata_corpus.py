@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from feeddrive.estimator import EstimationOptions, EstimatorInputError, FilterSpec, MotionData, NotEnoughExcitation
+from feeddrive.estimator.lagged_iv import LAGGED
 from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.estimator.physical import NON_NEGATIVE, STRICT
 from feeddrive.estimator.segmentation import from_speed
@@ -78,7 +79,7 @@ def test_every_recording_gives_estimates_or_reasons_and_nothing_impossible_unfla
         counts["given"] += 1
         text = json.dumps(est.to_dict())
         assert "NaN" not in text and "Infinity" not in text, name
-        assert est.method_used in ("ls", "iv", "oe") and (est.method_used == method or est.result.message), name
+        assert est.method_used in ("ls", "iv", "oe", LAGGED) and (est.method_used == method or est.result.message), name
         for n, p in est.parameters.items():
             impossible = (n in STRICT and p.value <= 0) or (n in NON_NEGATIVE and p.ci95[1] < 0)
             assert not impossible or n in est.flags, (name, n, p)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from feeddrive.estimator import EstimationOptions, FilterSpec, MotionData
+from feeddrive.estimator.lagged_iv import LABEL, LAGGED
 from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.estimator.pooling import pool
 
@@ -42,13 +43,16 @@ def test_hsm150_repeats_give_ft_and_cd_wherever_jt_is_refused_and_agree(motions,
         assert set(e.parameters) | set(e.refused) == {"Jt", "ft", "Cd"}
         for p in e.parameters.values():
             assert p.value > 0 and p.std <= 0.3 * p.value
-    if method == "iv":  # IV's instruments drift over 20 s: Jt refused where IV settles, else LS with the reason
+    if method == "iv":  # IV's instruments drift over 20 s: Jt refused where IV settles, else the lagged IV
         for e in ests:
             if "IV did not converge in 10 iterations" in e.iv.message:  # never the last of unsettled iterates
-                assert e.iv.ran == "ls" and np.array_equal(e.iv.values, e.ls.values)
+                # (LS stood in here: Jt 8.5e-5 and 8.0e-5, attenuated by the noise of dw/dt, the catalogue 1.2e-4)
+                assert e.iv.ran == LAGGED and e.iv.message.startswith(LABEL + ": the split-sample IV did not")
+                assert 0.9e-4 < e.parameters["Jt"].value < 1.4e-4
+                assert e.to_dict()["method"] == LAGGED and e.to_dict()["fallback"] == e.iv.message
             else:
                 assert "Jt" in e.refused and not e.iv.message, e.iv.message
-        assert any("Jt" in e.refused for e in ests)
+        assert any("Jt" in e.refused for e in ests) and any(e.iv.ran == LAGGED for e in ests)
     verdict = pool([e.joint for e in ests])
     assert verdict.verdict == "consistent" and verdict.p_value > 0.01
     # catalogue B 7.03e-5 (the steady speeds suggest ~1.3e-4), Cd ~0.04 N.m
