@@ -236,6 +236,8 @@ class MonitorPipeline:
         result["refused"] = dict(est.refused)
         if est.result.message:  # a fallback (IV -> LS) is stated with its reason
             result["notes"].append(est.result.message)
+        if est.method_used != result["method"]:  # which method gave the numbers: iv-lag or ls standing in for iv
+            result["method_used"] = est.method_used
         if not params:  # every parameter refused: nothing to validate, to diagnose or to add to the baseline
             result["error"] = (f"every parameter refused ({', '.join(est.refused) or 'none given'}), each with its "
                                "reason: nothing to validate")
