@@ -70,8 +70,14 @@ def _build(source: str) -> Path:
             c.write_text(source, encoding="utf-8")
             so = Path(tmp, "rollout.so")
             # -ffp-contract=off: no fused multiply-add, so that the results are CasADi's to the last bit
-            subprocess.run([*compiler, "-O2", "-shared", "-fPIC", "-ffp-contract=off", "-o", str(so), str(c), "-lm"],
-                           check=True, capture_output=True, timeout=120)
+            # its elapsed time on a terminal (a PMSM's closed loop takes 9 s, once): the FMU build's display, imported
+            # only here, on a cache miss (fmu_build brings fmpy, which recorded data's estimation does not need)
+            from feeddrive.fmu_build.build import run_with_progress
+
+            done = run_with_progress([*compiler, "-O2", "-shared", "-fPIC", "-ffp-contract=off", "-o", str(so), str(c),
+                                      "-lm"], None, f"compiling the estimator's model simulation ({compiler[0]}, once)", timeout=120)
+            if done.returncode != 0:
+                raise subprocess.CalledProcessError(done.returncode, done.args, done.stdout, done.stderr)
             os.replace(so, target)
     return target
 

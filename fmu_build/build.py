@@ -40,7 +40,7 @@ def _compile(sources: Sources, workdir: Path) -> Path:
     c_files = sorted(name for name in sources.files if name.endswith(".c"))
     command = [*cc, *CFLAGS, f"-I{FMI_HEADERS}", f"-I{workdir}", "-o", str(library), *c_files, "-lm"]
     try:
-        done = _run_with_progress(command, workdir, f"compiling {sources.model_name}.fmu ({cc[0]})")
+        done = run_with_progress(command, workdir, f"compiling {sources.model_name}.fmu ({cc[0]})")
     except OSError as exc:
         raise CompilerError(cc[0], command, f"error: cannot run {cc[0]!r}: {exc.strerror}") from None
     if done.returncode != 0:
@@ -49,11 +49,14 @@ def _compile(sources: Sources, workdir: Path) -> Path:
     return library
 
 
-def _run_with_progress(command: list[str], cwd: Path, what: str) -> subprocess.CompletedProcess:
+def run_with_progress(command: list[str], cwd: Path | None, what: str,
+                      timeout: float | None = None) -> subprocess.CompletedProcess:
     """``subprocess.run`` with the elapsed time on stderr while it runs (the first build of the plant takes
-    10 to 60 s); only on a terminal and not under CI (``$CI``), so logs and pipes stay clean."""
+    10 to 60 s, of a PMSM monitor's rollout 9 s: estimator/compiled.py); only on a terminal and not under CI
+    (``$CI``), so logs and pipes stay clean. ``timeout`` [s]: ``subprocess.TimeoutExpired`` after it (the
+    process killed), as ``subprocess.run``'s."""
     if not sys.stderr.isatty() or os.environ.get("CI"):
-        return subprocess.run(command, cwd=cwd, capture_output=True, text=True)
+        return subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout)
     from tqdm import tqdm
 
     with subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc, \
@@ -63,6 +66,10 @@ def _run_with_progress(command: list[str], cwd: Path, what: str) -> subprocess.C
                 out, err = proc.communicate(timeout=0.5)
                 break
             except subprocess.TimeoutExpired:
+                if timeout is not None and bar.format_dict["elapsed"] > timeout:
+                    proc.kill()
+                    proc.communicate()
+                    raise subprocess.TimeoutExpired(command, timeout) from None
                 bar.refresh()
     return subprocess.CompletedProcess(command, proc.returncode, out, err)
 
