@@ -49,27 +49,70 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items.sort(key=lambda item: (-seconds.get(item.nodeid.split("::")[0], 0.0), first[item.nodeid.split("::")[0]]))
 
 
+def _cpu_seconds() -> float:
+    """CPU seconds (user + system) of this process and of the child processes it has waited for (the CLI's,
+    drawing, campaign and compiler processes the tests start)."""
+    import resource
+
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+_CPU_START = pytest.StashKey[float]()
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_setup(item: pytest.Item):
+    item.stash[_CPU_START] = _cpu_seconds()
+    return (yield)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item):
+    item.stash[_CPU_START] = _cpu_seconds()
+    return (yield)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item: pytest.Item):
+    item.stash[_CPU_START] = _cpu_seconds()
+    return (yield)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
+    """Each phase's report carries ``cpu_s``, the CPU seconds the phase took (a plain attribute: xdist sends it
+    to the controller with the report). On a loaded machine a test's wall time measures the load as much as
+    the test; its CPU time does not."""
+    report = yield
+    if _CPU_START in item.stash:
+        report.cpu_s = _cpu_seconds() - item.stash[_CPU_START]
+    return report
+
+
 _BUSY: dict[str, list[float]] = {}
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
-    """Under xdist (in the controller): each worker's test time, first start and last stop (for the summary)."""
+    """Each worker's (``-n 0``: this process's) test time, CPU time, first start and last stop (for the summary)."""
     node = getattr(report, "node", None)
-    if node is not None:
-        busy = _BUSY.setdefault(node.gateway.id, [0.0, report.start, report.stop])
-        busy[0] += report.duration
-        busy[1], busy[2] = min(busy[1], report.start), max(busy[2], report.stop)
+    busy = _BUSY.setdefault(node.gateway.id if node is not None else "main", [0.0, 0.0, report.start, report.stop])
+    busy[0] += report.duration
+    busy[1] += getattr(report, "cpu_s", 0.0)
+    busy[2], busy[3] = min(busy[2], report.start), max(busy[3], report.stop)
 
 
 def pytest_terminal_summary(terminalreporter) -> None:  # noqa: ANN001 - pytest's TerminalReporter
-    """One line per xdist worker: seconds in its tests (setup + call + teardown) and from its first test's start
-    to its last one's end. With ``--dist loadscope`` the run ends when the last worker does: an idle tail on
-    the other is a core unused (refresh tests/module_seconds.txt, split a long module)."""
+    """One line per xdist worker: seconds in its tests (setup + call + teardown), the CPU seconds they took (its
+    own and its waited-for child processes'), and from its first test's start to its last one's end. With
+    ``--dist loadscope`` the run ends when the last worker does: an idle tail on the other is a core unused
+    (refresh tests/module_seconds.txt, split a long module). Compare runs by the CPU: on a loaded machine the
+    wall times scale with the load."""
     if _BUSY:
-        end = max(stop for _, _, stop in _BUSY.values())
+        end = max(stop for *_, stop in _BUSY.values())
         terminalreporter.write_line("worker busy: " + ", ".join(
-            f"{w} {busy:.1f} s in tests, {stop - start:.1f} s first to last, idle for the last {end - stop:.1f} s"
-            for w, (busy, start, stop) in sorted(_BUSY.items())))
+            f"{w} {busy:.1f} s in tests ({cpu:.1f} s CPU), {stop - start:.1f} s first to last, "
+            f"idle for the last {end - stop:.1f} s" for w, (busy, cpu, start, stop) in sorted(_BUSY.items())))
 
 
 # pytest rewrites the asserts of every test module it imports (parse, rewrite, compile: ~8 s of CPU per process

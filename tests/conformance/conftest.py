@@ -35,11 +35,16 @@ def reference_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]:
 
 
 def _build(cmake: str, root: Path) -> dict[int, Path]:
+    """Each FMI version's models, each model's C files compiled as one unit (``CMAKE_UNITY_BUILD``): every
+    model compiles the shared ``fmi*Functions.c`` and ``cosimulation.c`` with its ``model.c`` either way, and
+    one compiler run per model instead of three costs less (compiler CPU, alternated runs: FMI 2.0 4.0 ->
+    3.5-3.8 s, FMI 3.0 7.2 -> 5.7 s). The same C, unoptimised as before; the tests check the FMUs' runs
+    against fmpy and the reference outputs all the same."""
     out = {}
     for version, models in MODELS.items():
         build = root / f"fmi{version}"
-        subprocess.run([cmake, "-S", str(SOURCE), "-B", str(build), f"-DFMI_VERSION={version}"],
-                       check=True, capture_output=True)
+        subprocess.run([cmake, "-S", str(SOURCE), "-B", str(build), f"-DFMI_VERSION={version}",
+                        "-DCMAKE_UNITY_BUILD=ON"], check=True, capture_output=True)
         subprocess.run([cmake, "--build", str(build), "-j2", "--target", *models], check=True, capture_output=True)
         out[version] = build / "fmus"
     return out
