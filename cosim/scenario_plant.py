@@ -187,7 +187,15 @@ def resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
                                   and (not want or x.causality in want))
                 raise s.error(("plant", key, name), f"{path.name} has no Real "
                               f"{'parameter' if want else 'variable'} {name!r}; expected one of: {kinds}")
-            check_range(s, ("plant", key, name), v, getattr(p, key)[name], path.name)
+            value = getattr(p, key)[name]
+            if not math.isfinite(value):  # the FMU's fmi2SetReal refused it: a run failure (exit 1) for bad input
+                raise s.error(("plant", key, name), f"{name} = {value} is not a finite number; expected a finite value")
+            if key == "start" and (v.start in (None, "") or v.causality == "independent" or v.variability == "constant"):
+                # fmi2SetReal refused it at t = 0 (exit 1: "n_mot is calculated by the FMU and cannot be set")
+                raise s.error(("plant", key, name), f"{path.name} calculates {name!r} (causality {v.causality}, no start "
+                                                    "value): it cannot be set; expected a variable with a start value "
+                                                    "(a state, a parameter, an input)")
+            check_range(s, ("plant", key, name), v, value, path.name)
     plant = p.model_copy(update={"fmu": str(path), "sha256": digest, "map": role_map, "input_hold": hold})
     return plant, md
 

@@ -8,6 +8,7 @@ copies of it whose modelDescription.xml a test rewrites as a vendor's would read
 from __future__ import annotations
 
 import math
+import re
 import sys
 import zipfile
 from pathlib import Path
@@ -98,3 +99,95 @@ def test_info_map_names_the_display_unit_mistake_in_one_line_exit_2(fmus, tmp_pa
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{path}:" in err and "'n_act' declares no unit, only the displayUnit 'rpm'" in err
     assert main(["info", str(bare)]) == 0  # the FMU itself is listed: nothing wrong with it but that unit
+
+
+def test_a_start_value_the_fmu_calculates_or_not_finite_is_refused_when_read(fmus):
+    """``plant.start: {n_act: 5}`` (an output the FMU calculates) ran, and failed at t = 0 in fmi2SetReal (exit 1,
+    "failed"); a NaN parameter or start value the same way: bad input, refused when the scenario is read (exit 2)."""
+    with pytest.raises(ScenarioError, match=r"plant\.start\.n_act: RefAxis2\.fmu calculates 'n_act' \(causality "
+                                            r"output, no start value\): it cannot be set; expected a variable with a "
+                                            r"start value"):
+        scenario_from_dict(scenario(fmus[2], start={"n_act": 5.0}))
+    for key, name in (("parameters", "pitch_mm"), ("start", "pos_mm")):
+        with pytest.raises(ScenarioError, match=rf"plant\.{key}\.{name}: {name} = nan is not a finite number"):
+            scenario_from_dict(scenario(fmus[3], **{key: {name: math.nan}}))
+    s = scenario_from_dict(scenario(fmus[2], start={"pos_mm": 1.0}, parameters={"pitch_mm": 20.0}))
+    assert s.plant.start == {"pos_mm": 1.0}
+
+
+def test_an_event_after_the_run_or_not_finite_is_refused(fmus):
+    """A fault injected after the run's end was dropped without a word (the run's verdict: healthy)."""
+    data = scenario(fmus[2], parameters={"pitch_mm": 20.0}) | {"stop_time": 0.3}
+    late = data | {"events": [{"time": 0.3, "target": "plant.pitch_mm", "value": 10.0}]}
+    with pytest.raises(ScenarioError, match=r"events\[0\]\.time: 0\.3 s is not before the run's end \(0\.3 s, "
+                                            r"stop_time\): the event would never be applied"):
+        scenario_from_dict(late)
+    last = data | {"events": [{"time": 0.299, "target": "plant.pitch_mm", "value": 10.0}]}  # the last step's start
+    assert scenario_from_dict(last).events[0].time == 0.299
+    nan = data | {"events": [{"time": 0.1, "target": "plant.pitch_mm", "value": math.nan}]}
+    with pytest.raises(ScenarioError, match=r"events\[0\]\.value: expected a finite number for plant\.pitch_mm"):
+        scenario_from_dict(nan)
+
+
+def test_a_stop_time_that_cuts_the_motions_is_said(fmus, tmp_path, capsys):
+    """The program's tool change runs 0.05 s to ~0.29 s. With a monitor, a stop_time inside it (or before it) left the
+    motion unjudged and the run silent about it. It is said before the run and in its summary (a short run stays a
+    valid simulation: a slice of a motion, as the loops' parity tests run); without a monitor nothing is judged."""
+    import yaml
+
+    from feeddrive.cosim.nc import plan_program
+    from feeddrive.cosim.scenario import stop_note
+
+    monitored = scenario(fmus[2]) | {"monitor": {"db": ":memory:"}}
+    motion_end = plan_program(scenario_from_dict(monitored).nc)[-1][0]
+    judged = math.ceil(motion_end / H - 1e-9) * H
+    assert stop_note(scenario_from_dict(monitored)) is None  # the default stop time: the program + 0.3 s
+    for stop, where in ((0.1, r"inside the NC program's high-speed motion 1 \(0\.05-[\d.]+ s\): it is not judged"),
+                        (0.04, r"before the NC program's first high-speed motion \(0\.05-[\d.]+ s\): the monitor "
+                               r"judges nothing")):
+        note = stop_note(scenario_from_dict(monitored | {"stop_time": stop}))
+        assert re.fullmatch(rf"stop_time: {stop:g} s ends {where}; a stop_time of at least {judged:.10g} s judges it",
+                            note), note
+        assert stop_note(scenario_from_dict(scenario(fmus[2]) | {"stop_time": stop})) is None  # no monitor
+    assert stop_note(scenario_from_dict(monitored | {"stop_time": round(judged, 6)})) is None
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(monitored | {"stop_time": 0.1}))
+    assert main(["run", str(path), "--out", str(tmp_path / "o"), "--no-plots", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("stop_time: 0.1 s ends inside the NC program's high-speed motion 1")
+    assert "  motion 1: not judged: the run stopped inside it at 0.1 s (stop_time)\n" in out
+
+
+def test_a_plant_that_diverges_is_named_not_an_overflow():
+    """A plant that is not a feed drive (the Reference-FMUs' Feedthrough mapped onto the roles) runs away under the
+    NC's position loop until its position overflows the encoder's count: "sensors: OverflowError: cannot convert
+    float infinity to integer". The failure names the position, the time and the likely cause."""
+    from feeddrive.cosim.errors import SimulationError
+    from feeddrive.cosim.sensors import SensorsComponent
+
+    s = SensorsComponent("sensors", {"seed": 1})
+    s.setup(0.0, 1e-3, 10)
+    s.set_inputs((0.0, 0.0, 0.0, 0.0, 0.01))
+    s.step(0)
+    for position in (1e305, math.inf, math.nan):
+        s.set_inputs((0.0, 0.0, 0.0, 0.0, position))
+        with pytest.raises(SimulationError, match=rf"sensors: the plant's position {re.escape(f'{position:.4g}')} m cannot be counted "
+                                                  r"by the encoder at t=0\.002 s: the plant diverged"):
+            s.step(1)
+
+
+def test_an_axis_that_did_not_move_is_said_so():
+    """A vendor plant whose parameters open its loops (VendorDrive's ``bypass: 1``) never moved: an out-and-back tool
+    change still ended at the NC's target, so the run said nothing and the motion's verdict was only "gain_ratio: the
+    second signal is constant". The run now says the axis did not move, with both spans."""
+    import numpy as np
+
+    from feeddrive.cosim.axis import following_note
+
+    t = np.linspace(0.0, 1.0, 1001)
+    ref = 0.1 * np.sin(np.pi * t)  # out to 0.1 m and back
+    still = {"plant.position": np.zeros_like(t), "nc.x_ref": ref, "nc.speed_ref": np.gradient(ref)}
+    assert following_note(still) == ("the axis did not move: its position spanned 0 m where the NC's spanned 0.1 m; its "
+                                     "speed did not follow the NC's speed reference (loops the plant's parameters "
+                                     "open, a limit, a fault or plant.map)")
+    assert following_note(still | {"plant.position": 0.98 * ref}) is None  # a following axis
