@@ -191,3 +191,22 @@ def test_an_axis_that_did_not_move_is_said_so():
                                      "speed did not follow the NC's speed reference (loops the plant's parameters "
                                      "open, a limit, a fault or plant.map)")
     assert following_note(still | {"plant.position": 0.98 * ref}) is None  # a following axis
+
+
+def test_a_key_given_twice_is_refused_naming_both_lines(tmp_path):
+    """A second ``sensors:`` (or ``name:``) replaced the first silently: its seed and faults were gone. A YAML merge
+    (``<<: *base`` then an override) is not a duplicate."""
+    from feeddrive.cosim.scenario import load_scenario
+    from feeddrive.cosim.yaml_source import read_yaml
+
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nstep: 1.0e-3\nsensors: {seed: 1, voltage: {noise: 0.5}}\nplant: {fmu: builtin}\n"
+                    "nc: {program: [{rapid: {to: 0.01}}]}\nsensors: {seed: 2}\n")
+    with pytest.raises(ScenarioError, match=rf"^{re.escape(str(path))}:6: sensors: duplicate key \(first at line 3\); "
+                                            r"expected each key once in a mapping"):
+        load_scenario(path)
+    path.write_text("a: {x: 1, x: 1}\n")
+    with pytest.raises(ScenarioError, match=r":1: x: duplicate key \(first at line 1\)"):
+        read_yaml(path)
+    path.write_text("base: &b {x: 1, y: 2}\nc:\n  <<: *b\n  x: 3\n")
+    assert read_yaml(path)[0] == {"base": {"x": 1, "y": 2}, "c": {"x": 3, "y": 2}}
