@@ -50,6 +50,13 @@ class MapEntry(Strict):
     scale: float | None = None
     offset: float | None = None
 
+    @field_validator("unit")
+    @classmethod
+    def _unit_named(cls, v: str | None) -> str | None:
+        if v is not None and not v.strip():  # read as dimensionless, it was "stated in , role 'speed' needs rad/s"
+            raise ValueError("unit is empty; expected a unit such as 'rpm', or '1' for a dimensionless value")
+        return v
+
     @field_validator("scale")
     @classmethod
     def _scale_nonzero(cls, v: float | None) -> float | None:

@@ -210,3 +210,10 @@ def test_a_key_given_twice_is_refused_naming_both_lines(tmp_path):
         read_yaml(path)
     path.write_text("base: &b {x: 1, y: 2}\nc:\n  <<: *b\n  x: 3\n")
     assert read_yaml(path)[0] == {"base": {"x": 1, "y": 2}, "c": {"x": 3, "y": 2}}
+
+
+def test_an_empty_unit_is_refused_as_such(fmus):
+    """``unit: ""`` was read as dimensionless: "'n_act' is stated in , role 'speed' needs rad/s"."""
+    with pytest.raises(ScenarioError, match=r"plant\.map\.speed\.unit: unit is empty; expected a unit such as 'rpm', or "
+                                            r"'1' for a dimensionless value$"):
+        scenario_from_dict(scenario(fmus[2], map=MAP | {"speed": {"var": "n_act", "unit": " "}}))
