@@ -194,15 +194,7 @@ def resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
                                   and (not want or x.causality in want))
                 raise s.error(("plant", key, name), f"{path.name} has no Real "
                               f"{'parameter' if want else 'variable'} {name!r}; expected one of: {kinds}")
-            value = getattr(p, key)[name]
-            if not math.isfinite(value):  # the FMU's fmi2SetReal refused it: a run failure (exit 1) for bad input
-                raise s.error(("plant", key, name), f"{name} = {value} is not a finite number; expected a finite value")
-            if key == "start" and (v.start in (None, "") or v.causality == "independent" or v.variability == "constant"):
-                # fmi2SetReal refused it at t = 0 (exit 1: "n_mot is calculated by the FMU and cannot be set")
-                raise s.error(("plant", key, name), f"{path.name} calculates {name!r} (causality {v.causality}, no start "
-                                                    "value): it cannot be set; expected a variable with a start value "
-                                                    "(a state, a parameter, an input)")
-            check_range(s, ("plant", key, name), v, value, path.name)
+            check_setting(s, ("plant", key, name), v, getattr(p, key)[name], path.name)
     plant = p.model_copy(update={"fmu": str(path), "sha256": digest, "map": role_map, "input_hold": hold})
     return plant, md
 
@@ -221,6 +213,21 @@ def check_drive_chain(s: Scenario, md: Any) -> None:
             where = f"plant.parameters.{fmu_name}" if fmu_name in s.plant.parameters else f"the FMU's {fmu_name}"
             raise s.error(("axis", key), f"axis.{key} = {ours:g} contradicts {where} = {float(value):g}; expected "
                                          f"axis: {{{key}: {float(value):g}}}")
+
+
+def check_setting(s: Scenario, key: KeyPath, v: Any, value: float, fmu: str) -> None:
+    """Refuse a ``parameters`` or ``start`` value (``key[-2]``) the FMU would refuse when the run sets it at t = 0:
+    these were run failures (exit 1, "fmi2SetReal returned fmi2Error") for bad input."""
+    name = v.name
+    if getattr(v, "dimensions", None):  # "could not convert string to float: '1 2 3'", "Expected nValues >= 3"
+        raise s.error(key, f"{fmu}: {name!r} is an array variable (FMI 3.0 Dimension); expected a scalar variable")
+    if not math.isfinite(value):
+        raise s.error(key, f"{name} = {value} is not a finite number; expected a finite value")
+    if key[-2] == "start" and (v.start in (None, "") or v.causality == "independent" or v.variability == "constant"):
+        # "n_mot is calculated by the FMU and cannot be set"
+        raise s.error(key, f"{fmu} calculates {name!r} (causality {v.causality}, no start value): it cannot be set; "
+                           "expected a variable with a start value (a state, a parameter, an input)")
+    check_range(s, key, v, value, fmu)
 
 
 def check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str) -> None:

@@ -299,6 +299,10 @@ def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "
                              f"{', '.join(candidates) or 'none'}"))
         elif v.type not in REAL_TYPES:
             problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real (FMI 3.0: Float64)"))
+        elif getattr(v, "dimensions", None):  # the run failed setting it: "could not convert string to float: '1 2 3'"
+            problems.append((path, f"{entry.var!r} is an array variable (FMI 3.0 Dimension); role {role!r} needs a "
+                                   f"scalar: expected a scalar Float64 {want} (or the array in an FMU component, "
+                                   "whose ports are its elements)"))
         elif role in INPUT_ROLES and v.causality != "input":
             problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an input"))
         elif role in INPUT_ROLES and interface == "me" and v.variability == "discrete":

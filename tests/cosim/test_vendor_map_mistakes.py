@@ -217,3 +217,22 @@ def test_an_empty_unit_is_refused_as_such(fmus):
     with pytest.raises(ScenarioError, match=r"plant\.map\.speed\.unit: unit is empty; expected a unit such as 'rpm', or "
                                             r"'1' for a dimensionless value$"):
         scenario_from_dict(scenario(fmus[2], map=MAP | {"speed": {"var": "n_act", "unit": " "}}))
+
+
+def test_an_array_variable_is_refused_for_a_role_a_parameter_or_a_start_value(fmus, tmp_path):
+    """An FMI 3.0 array (the Reference-FMUs' StateSpace u, y, x0) mapped onto a role, or given one number, ran and
+    failed at t = 0 (exit 1: "set-up failed: ValueError: could not convert string to float: '1 2 3'", "fmi3SetFloat64
+    returned fmi3Error: Expected nValues >= 3 but was 1"). RefAxis3 with n_set and pitch_mm declared as arrays of 2."""
+    arrays = rewritten(fmus[3], tmp_path / "Arrays.fmu",
+                       'unit="rpm" start="0"/>', 'unit="rpm" start="0 0"><Dimension start="2"/></Float64>')
+    arrays = rewritten(arrays, tmp_path / "Arrays2.fmu",
+                       'unit="mm" start="20"/>', 'unit="mm" start="20 20"><Dimension start="2"/></Float64>')
+    with pytest.raises(ScenarioError, match=r"plant\.map\.speed_ref\.var: 'n_set' is an array variable \(FMI 3\.0 "
+                                            r"Dimension\); role 'speed_ref' needs a scalar"):
+        scenario_from_dict(scenario(arrays))
+    as_component = {"name": "c", "step": H, "stop_time": 0.01,
+                    "components": [{"name": "a", "fmu": str(arrays), "config": {"parameters": {"pitch_mm": 10.0}},
+                                    "inputs": {"T_load": 0.0}}]}
+    with pytest.raises(ScenarioError, match=r"components\[0\]\.config\.parameters\.pitch_mm: Arrays2\.fmu: 'pitch_mm' "
+                                            r"is an array variable \(FMI 3\.0 Dimension\); expected a scalar variable"):
+        scenario_from_dict(as_component)
