@@ -246,6 +246,7 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     _check_lowpass(scenario)
     plant, md = scenario_plant.resolve_plant(scenario)
     scenario_plant.check_drive_chain(scenario, md)
+    scenario_plant.check_input_ranges(scenario.model_copy(update={"plant": plant}), md)
     check_pole_pairs(scenario.axis.drive, {v.name: v for v in md.modelVariables}, scenario.plant.parameters,
                      scenario.error)
     _check_events(scenario, md)

@@ -230,6 +230,44 @@ def check_setting(s: Scenario, key: KeyPath, v: Any, value: float, fmu: str) -> 
     check_range(s, key, v, value, fmu)
 
 
+def check_input_ranges(s: Scenario, md: Any) -> None:
+    """Refuse an NC program whose motor speed (or load torque) leaves the [min, max] the plant FMU declares for the
+    input it is mapped to: FMI forbids setting an input outside its range (a vendor FMU clips it, or fails), and the
+    run gave no sign of it (660 rpm into an input declared up to 500 rpm: a healthy verdict). The program's planned
+    peak is checked (the position loop's correction comes on top), and the identification motion the monitor may
+    insert."""
+    from feeddrive.cosim.nc import plan_program
+
+    plan, nc = plan_program(s.nc), s.nc
+    peaks: dict[str, tuple[float, KeyPath]] = {"speed_ref": (0.0, ()), "load": (0.0, ())}
+    for seg, nxt in zip(plan, plan[1:]):
+        key = ("nc", "program", seg[6]) if seg[6] >= 0 else ("nc",)
+        v = max(abs(seg[2]), abs(seg[2] + seg[3] * (nxt[0] - seg[0])))
+        w = v * 2 * math.pi * nc.belt_ratio / nc.pitch  # the NC's table speed -> motor speed [rad/s]
+        for role, value in (("speed_ref", w), ("load", abs(seg[5]))):
+            if value > peaks[role][0]:
+                peaks[role] = (value, key)
+    if s.monitor is not None and nc.identification is not None:
+        w = nc.identification.v_max * 2 * math.pi * nc.belt_ratio / nc.pitch
+        if w > peaks["speed_ref"][0]:
+            peaks["speed_ref"] = (w, ("nc", "identification", "v_max"))
+    variables = {v.name: v for v in md.modelVariables}
+    for role, (peak, key) in peaks.items():
+        entry, v = s.plant.map.get(role), None
+        v = variables.get(entry.var) if entry is not None else None
+        if v is None or not key or (v.min in (None, "") and v.max in (None, "")):
+            continue
+        scale, offset = entry.linear()
+        lo, hi = sorted((offset - scale * peak, offset + scale * peak))  # the FMU's values for -peak and +peak
+        for bound, outside, value in ((v.min, lambda b: lo < float(b), lo), (v.max, lambda b: hi > float(b), hi)):
+            if bound not in (None, "") and outside(bound):
+                what = f"a motor speed of {peak:.5g} rad/s" if role == "speed_ref" else f"a load of {peak:.5g} N.m"
+                raise s.error(key, f"the NC program asks {what}: {entry.var} = {value:.5g} (x {scale:.5g}), outside the "
+                                   f"range [{v.min or '-inf'}, {v.max or 'inf'}] that {Path(s.plant.fmu).name} declares "
+                                   f"for its input (FMI: never set outside it); expected slower motions (a lower v_max) "
+                                   "or an FMU whose input allows them")
+
+
 def check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str) -> None:
     """Refuse a value outside the [min, max] the FMU declares for the variable (bad input, not a run failure)."""
     for bound, outside in ((variable.min, lambda b: value < b), (variable.max, lambda b: value > b)):

@@ -236,3 +236,21 @@ def test_an_array_variable_is_refused_for_a_role_a_parameter_or_a_start_value(fm
     with pytest.raises(ScenarioError, match=r"components\[0\]\.config\.parameters\.pitch_mm: Arrays2\.fmu: 'pitch_mm' "
                                             r"is an array variable \(FMI 3\.0 Dimension\); expected a scalar variable"):
         scenario_from_dict(as_component)
+
+
+def test_a_program_faster_than_the_fmus_input_range_is_refused(fmus, tmp_path):
+    """n_set declared [-500, 500] rpm: the program's tool change at 0.1 m/s on RefAxis's 20 mm screw is 300 rpm (passes),
+    at 0.2 m/s (3 m/s^2) 600 rpm (refused, naming the program's item): FMI forbids an input outside its declared range, and the
+    run fed it without a word."""
+    text = zipfile.ZipFile(fmus[2]).read("modelDescription.xml").decode()
+    start = text.index('name="n_set"')
+    element = text[start:text.index("/>", start)]
+    limited = rewritten(fmus[2], tmp_path / "Limited2.fmu", element,
+                        element.replace('unit="rpm"', 'unit="rpm" min="-500" max="500"'))
+    scenario_from_dict(scenario(limited))  # 300 rpm
+    fast = scenario(limited)
+    fast["nc"]["program"] = [PROGRAM[0], {"tool_change": PROGRAM[1]["tool_change"] | {"v_max": 0.2, "accel": 3.0}}]
+    with pytest.raises(ScenarioError, match=r"nc\.program\[1\]: the NC program asks a motor speed of 62\.832 rad/s: "
+                                            r"n_set = -600 \(x 9\.5493\), outside the range \[-500, 500\] that "
+                                            r"Limited2\.fmu declares for its input"):
+        scenario_from_dict(fast)
