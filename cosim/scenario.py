@@ -105,8 +105,24 @@ class Scenario(_Strict):
 
     @property
     def unit_notes(self) -> list[str]:
-        """The plant map's stated unit assumptions (``unit not declared: taken as rad/s``), one per entry."""
-        return [c.note for c in self._conversions.values() if c.note]
+        """The plant map's stated unit assumptions (``unit not declared: taken as rad/s``), one per entry; and a
+        voltage pair without redundancy: ``voltage_ref`` unmapped (the sensors' u_ref then measures the plant's
+        voltage, the master's fallback) or read from the voltage's own variable, whose check passes by construction
+        (the run said "measurements valid" with nothing to say it compared a signal with itself)."""
+        notes = [c.note for c in self._conversions.values() if c.note]
+        roles = self.plant.map
+        parts = {r for c in self.components if c.fmu is not None and isinstance(c.config, dict)
+                 for r in c.config.get("map") or {}} | {r for c in self.components if c.fmu is not None
+                                                        and not isinstance(c.config, dict) for r in c.config.map}
+        if not self._conversions or self.nc is None or self.monitor is None or "voltage_ref" in parts:
+            return notes
+        if "voltage_ref" not in roles:
+            notes.append("voltage_ref not mapped: the sensors' u_ref measures the plant's voltage, so the voltage "
+                         "pair (u against u_ref) has no redundancy and its check passes by construction")
+        elif "voltage" in roles and roles["voltage_ref"].var == roles["voltage"].var:
+            notes.append(f"voltage and voltage_ref both read {roles['voltage'].var}: the voltage pair (u against u_ref) "
+                         "has no redundancy and its check passes by construction")
+        return notes
 
     @property
     def servo_drive(self) -> bool:

@@ -105,6 +105,11 @@ def main(args: argparse.Namespace) -> int:
         first: ScenarioError = error(*problems[0])
         more = f" (and {len(problems) - 1} more problem{'s' * (len(problems) > 2)})" if len(problems) > 1 else ""
         raise ScenarioError(f"{first}{more}")
+    if "voltage_ref" not in role_map:  # as cosim run says it with a monitor (Scenario.unit_notes)
+        print("  voltage_ref not mapped: the sensors' u_ref measures the plant's voltage (no redundancy in the voltage "
+              "pair)")
+    elif "voltage" in role_map and role_map["voltage_ref"].var == role_map["voltage"].var:
+        print(f"  voltage and voltage_ref both read {role_map['voltage'].var} (no redundancy in the voltage pair)")
     print("  map OK")
     return 0
 

@@ -154,7 +154,7 @@ def test_a_stop_time_that_cuts_the_motions_is_said(fmus, tmp_path, capsys):
     path.write_text(yaml.safe_dump(monitored | {"stop_time": 0.1}))
     assert main(["run", str(path), "--out", str(tmp_path / "o"), "--no-plots", "--no-progress"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("stop_time: 0.1 s ends inside the NC program's high-speed motion 1")
+    assert "\nstop_time: 0.1 s ends inside the NC program's high-speed motion 1" in out
     assert "  motion 1: not judged: the run stopped inside it at 0.1 s (stop_time)\n" in out
 
 
@@ -254,3 +254,23 @@ def test_a_program_faster_than_the_fmus_input_range_is_refused(fmus, tmp_path):
                                             r"n_set = -600 \(x 9\.5493\), outside the range \[-500, 500\] that "
                                             r"Limited2\.fmu declares for its input"):
         scenario_from_dict(fast)
+
+
+def test_a_voltage_pair_without_redundancy_is_said(fmus, tmp_path, capsys):
+    """RefAxis has no voltage reference: unmapped, the sensors' u_ref measures the plant's voltage (the master's
+    fallback), and so does voltage_ref mapped onto the voltage's own variable; the pair's check then passes by
+    construction, and the run said "measurements valid" with nothing to tell it compared a signal with itself."""
+    import yaml
+
+    monitored = scenario(fmus[2]) | {"monitor": {"db": ":memory:"}}
+    assert scenario_from_dict(scenario(fmus[2])).unit_notes == []  # without a monitor no pair is checked
+    assert scenario_from_dict(monitored).unit_notes[-1] == (
+        "voltage_ref not mapped: the sensors' u_ref measures the plant's voltage, so the voltage pair (u against "
+        "u_ref) has no redundancy and its check passes by construction")
+    same = monitored | {"plant": monitored["plant"] | {"map": MAP | {"voltage_ref": {"var": "U"}}}}
+    assert scenario_from_dict(same).unit_notes[-1].startswith("voltage and voltage_ref both read U: the voltage pair")
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(same))
+    assert main(["info", str(fmus[2]), "--map", str(path)]) == 0
+    assert capsys.readouterr().out.endswith("  voltage and voltage_ref both read U (no redundancy in the voltage "
+                                            "pair)\n  map OK\n")
