@@ -274,3 +274,13 @@ def test_a_voltage_pair_without_redundancy_is_said(fmus, tmp_path, capsys):
     assert main(["info", str(fmus[2]), "--map", str(path)]) == 0
     assert capsys.readouterr().out.endswith("  voltage and voltage_ref both read U (no redundancy in the voltage "
                                             "pair)\n  map OK\n")
+
+
+def test_a_program_line_without_its_settings_is_refused(fmus):
+    """``- dwell:`` with nothing under it validated as a line with no move: loading the scenario without a stop_time
+    (which plans the program) ended in a bare StopIteration."""
+    data = scenario(fmus[2])
+    data["nc"]["program"] = [{"dwell": None}, PROGRAM[1]]
+    with pytest.raises(ScenarioError, match=r"nc\.program\[0\]: dwell: expected its settings, e\.g\. \{dwell: "
+                                            r"\{time: 0\.2\}\}, got nothing"):
+        scenario_from_dict(data)
