@@ -411,15 +411,18 @@ def _implied_sampling(data: dict) -> dict[str, str]:
                    for c in chans)}
 
 
+def _event_step(time: float, t0: float, h: float) -> int:
+    """``cosim.master.event_step`` (the master imports this module): index n of the first grid point t0 + n h >= time."""
+    return max(0, math.ceil((time - t0) / h - 1e-9))
+
+
 def _check_stop(s: Scenario, stop: float, what: str) -> None:
     """Refuse an event the run ends before: it was dropped without a word (a fault injected at 9.5 s into a 2.1 s
     run left a healthy verdict)."""
-    from feeddrive.cosim.master import event_step
-
     hf = s.step / s.plant.oversample
-    ticks = event_step(stop, 0.0, s.step) * s.plant.oversample
+    ticks = _event_step(stop, 0.0, s.step) * s.plant.oversample
     for k, ev in enumerate(s.events):
-        if event_step(ev.time, 0.0, hf) >= ticks:
+        if _event_step(ev.time, 0.0, hf) >= ticks:
             raise s.error(("events", k, "time"), f"{ev.time:g} s is not before the run's end ({stop:.10g} s, {what}): "
                                                  "the event would never be applied; expected a time before it, or a "
                                                  "later stop_time")
@@ -430,7 +433,6 @@ def stop_note(s: Scenario) -> str | None:
     run stops inside (or before the first one). Such a motion is never judged, and the run said nothing of it; a
     short run is still a valid simulation (a slice of a motion compared between two loops), so it is said, not
     refused (``cosim run`` prints it; the monitor's report holds ``unfinished_motion``)."""
-    from feeddrive.cosim.master import event_step
     from feeddrive.cosim.nc import RAPID
 
     if s.stop_time is None or s.monitor is None or s.nc is None:
@@ -443,7 +445,7 @@ def stop_note(s: Scenario) -> str | None:
             else:
                 motions.append([seg[0], nxt[0], seg[6]])
     for k, (start, end, _) in enumerate(motions, 1):
-        judged = event_step(end, 0.0, s.step) * s.step  # the monitor ends a motion at the first sample after it
+        judged = _event_step(end, 0.0, s.step) * s.step  # the monitor ends a motion at the first sample after it
         if stop < judged - 1e-9 * s.step and (start < stop or k == 1):
             where = (f"inside the NC program's high-speed motion {k} ({start:.6g}-{end:.6g} s): it is not judged"
                      if start < stop else f"before the NC program's first high-speed motion ({start:.6g}-{end:.6g} "
