@@ -208,8 +208,9 @@ def resolve_drive_chain(data: dict, builtin: bool, nominal: tuple[float, float],
 
 
 def following_note(signals: dict, unit: str = "m") -> str | None:
-    """Why the axis did not follow its NC, when its final position is further from the NC's target than a tenth
-    of the programmed travel (at least 1 mm or 1 mrad), else None.
+    """Why the axis did not follow its NC, when its position spanned less than a tenth of the NC's travel (a plant
+    that did not move: its motions' verdicts only said "the second signal is constant") or its final position is
+    further from the NC's target than a tenth of the programmed travel (at least 1 mm or 1 mrad), else None.
 
     ``signals``: the run's ``plant.position`` and ``nc.x_ref`` [m, or rad on a rotary axis] and ``nc.speed_ref``
     [rad/s], arrays of shape (n,). A position that moves against the speed reference is a sign convention (a
@@ -217,6 +218,11 @@ def following_note(signals: dict, unit: str = "m") -> str | None:
     import numpy as np
 
     pos, ref = np.asarray(signals["plant.position"], float), np.asarray(signals["nc.x_ref"], float)
+    travel, moved = float(np.ptp(ref)), float(np.ptp(pos))
+    if travel > 1e-3 and moved < 0.1 * travel:  # an out-and-back motion ends at its target whether it moved or not
+        return (f"the axis did not move: its position spanned {moved:.4g} {unit} where the NC's spanned {travel:.4g} "
+                f"{unit}; its speed did not follow the NC's speed reference (loops the plant's parameters open, a "
+                "limit, a fault or plant.map)")
     error = abs(pos[-1] - ref[-1])
     if not error > max(0.1 * float(np.ptp(ref)), 1e-3):  # NaN: the failed run says why
         return None

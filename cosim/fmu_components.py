@@ -30,6 +30,7 @@ is then required.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,6 +47,7 @@ from feeddrive.cosim.fmu_inspect import (
     sha256,
 )
 from feeddrive.cosim.fmu_ports import unit_of
+from feeddrive.cosim.scenario_plant import check_setting
 from feeddrive.cosim.unit_map import ROLE_UNITS, role_unit
 from feeddrive.cosim.yaml_source import from_validation
 
@@ -133,11 +135,13 @@ def _resolve_fmu(s: Any, k: int, spec: Any, cls: type, check_map: Any) -> Any:
             if v is None or v.type not in REAL_TYPES or (key == "parameters" and v.causality != "parameter"):
                 raise s.error((*where, "config", key, name), f"{path.name} has no Real "
                                                              f"{'parameter' if key == 'parameters' else 'variable'} {name!r}")
+            check_setting(s, (*where, "config", key, name), v, getattr(cfg, key)[name], path.name)
     for j, ev in enumerate(s.events):
         comp, _, param = ev.target.partition(".")
         v = variables.get(param) if comp == spec.name else None
         if comp == spec.name and (v is None or v.causality != "parameter" or v.variability != "tunable"
-                                  or v.type not in REAL_TYPES or not isinstance(ev.value, float)):
+                                  or v.type not in REAL_TYPES or not isinstance(ev.value, float)
+                                  or not math.isfinite(ev.value)):
             raise s.error(("events", j), f"{param!r} is not a tunable Real parameter of {path.name} (or the value "
                                          f"{ev.value!r} is not a number)")
     cfg = cfg.model_copy(update={"fmu": str(path), "sha256": sha256(path), "input_hold": hold, "map": role_map})

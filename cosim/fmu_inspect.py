@@ -80,11 +80,50 @@ def _model_description(path: Path) -> Any:
     try:
         return with_intermediate_update(read_model_description(str(path)), path)
     except FMIValidationError as exc:
-        problems = [" ".join(str(p).split()) for p in exc.problems] or ["(no detail)"]
-        more = f" (and {len(problems) - 1} more problem{'s' * (len(problems) > 2)})" if len(problems) > 1 else ""
-        raise ValueError(f"invalid modelDescription.xml: {problems[0]}{more}") from None
+        raise ValueError(_invalid(exc.problems)) from None
     except Exception as exc:  # fmpy raises a bare Exception for other malformed content (types, variabilities)
+        md = _with_bare_display_units(path)
+        if md is not None:
+            return with_intermediate_update(md, path)
         raise ValueError(f"invalid modelDescription.xml: {' '.join(str(exc).split())}") from None
+
+
+def _invalid(problems: list) -> str:
+    """The first of fmpy's validation problems, as one line."""
+    problems = [" ".join(str(p).split()) for p in problems] or ["(no detail)"]
+    more = f" (and {len(problems) - 1} more problem{'s' * (len(problems) > 2)})" if len(problems) > 1 else ""
+    return f"invalid modelDescription.xml: {problems[0]}{more}"
+
+
+def _with_bare_display_units(path: Path) -> Any:
+    """The model description of an FMU with variables that declare a ``displayUnit`` but no ``unit``, or None.
+
+    fmpy 0.3's validator fails on such a variable with ``KeyError: None`` (it looks the display unit up under
+    the missing unit), which read "invalid modelDescription.xml: None". Their values' unit is undeclared, as
+    for a variable with no unit at all: the master reads them only with the unit stated in the map
+    (``cosim.unit_map.convert`` refuses to take the display unit on trust). The other checks still run: with
+    those display units set aside, fmpy's validation must pass."""
+    from fmpy import read_model_description, validation
+
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception:  # noqa: BLE001 - the caller reports fmpy's first error
+        return None
+    bare = [v for v in md.modelVariables if v.displayUnit and not (v.unit or getattr(v.declaredType, "unit", None))]
+    if not bare:
+        return None
+    shown = [v.displayUnit for v in bare]
+    for v in bare:
+        v.displayUnit = None
+    try:
+        problems = validation.validate_model_description(md)
+    except Exception:  # noqa: BLE001 - another defect fmpy's validator trips on
+        return None
+    if problems:
+        raise ValueError(_invalid(problems))
+    for v, unit in zip(bare, shown):
+        v.displayUnit = unit
+    return md
 
 
 #: the variable types of FMI 2.0 and 3.0 that carry the master's signals (floats)

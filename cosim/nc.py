@@ -148,6 +148,7 @@ class Identification(StrictConfig):
 
 
 _KINDS = ("rapid", "feed", "dwell", "tool_change")
+_EXAMPLE = {"rapid": "to: 0.4", "feed": "to: 0.45, feed: 0.01", "dwell": "time: 0.2", "tool_change": "position: 0.27"}
 
 
 class ProgramItem(StrictConfig):
@@ -164,6 +165,9 @@ class ProgramItem(StrictConfig):
         if not isinstance(data, dict) or len(data) != 1 or next(iter(data)) not in _KINDS:
             got = list(data) if isinstance(data, dict) else repr(data)
             raise ValueError(f"expected a mapping with exactly one of {', '.join(_KINDS)}, got {got}")
+        kind = next(iter(data))
+        if data[kind] is None:  # `- dwell:` with nothing under it validated as no move at all (StopIteration later)
+            raise ValueError(f"{kind}: expected its settings, e.g. {{{kind}: {{{_EXAMPLE[kind]}}}}}, got nothing")
         return data
 
     @model_serializer(mode="wrap")

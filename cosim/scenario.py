@@ -105,8 +105,24 @@ class Scenario(_Strict):
 
     @property
     def unit_notes(self) -> list[str]:
-        """The plant map's stated unit assumptions (``unit not declared: taken as rad/s``), one per entry."""
-        return [c.note for c in self._conversions.values() if c.note]
+        """The plant map's stated unit assumptions (``unit not declared: taken as rad/s``), one per entry; and a
+        voltage pair without redundancy: ``voltage_ref`` unmapped (the sensors' u_ref then measures the plant's
+        voltage, the master's fallback) or read from the voltage's own variable, whose check passes by construction
+        (the run said "measurements valid" with nothing to say it compared a signal with itself)."""
+        notes = [c.note for c in self._conversions.values() if c.note]
+        roles = self.plant.map
+        parts = {r for c in self.components if c.fmu is not None and isinstance(c.config, dict)
+                 for r in c.config.get("map") or {}} | {r for c in self.components if c.fmu is not None
+                                                        and not isinstance(c.config, dict) for r in c.config.map}
+        if not self._conversions or self.nc is None or self.monitor is None or "voltage_ref" in parts:
+            return notes
+        if "voltage_ref" not in roles:
+            notes.append("voltage_ref not mapped: the sensors' u_ref measures the plant's voltage, so the voltage "
+                         "pair (u against u_ref) has no redundancy and its check passes by construction")
+        elif "voltage" in roles and roles["voltage_ref"].var == roles["voltage"].var:
+            notes.append(f"voltage and voltage_ref both read {roles['voltage'].var}: the voltage pair (u against u_ref) "
+                         "has no redundancy and its check passes by construction")
+        return notes
 
     @property
     def servo_drive(self) -> bool:
@@ -246,9 +262,11 @@ def scenario_from_dict(data: Any, *, source: str = "<dict>", base_dir: str | Pat
     _check_lowpass(scenario)
     plant, md = scenario_plant.resolve_plant(scenario)
     scenario_plant.check_drive_chain(scenario, md)
+    scenario_plant.check_input_ranges(scenario.model_copy(update={"plant": plant}), md)
     check_pole_pairs(scenario.axis.drive, {v.name: v for v in md.modelVariables}, scenario.plant.parameters,
                      scenario.error)
     _check_events(scenario, md)
+    _check_stop(scenario, stop, what)
     return scenario.model_copy(update={"plant": plant, "connections": _servo_connections(scenario),
                                        "components": fmu_components.resolve_components(scenario, FMUConfig, check_map)})
 
@@ -393,6 +411,49 @@ def _implied_sampling(data: dict) -> dict[str, str]:
                    for c in chans)}
 
 
+def _event_step(time: float, t0: float, h: float) -> int:
+    """``cosim.master.event_step`` (the master imports this module): index n of the first grid point t0 + n h >= time."""
+    return max(0, math.ceil((time - t0) / h - 1e-9))
+
+
+def _check_stop(s: Scenario, stop: float, what: str) -> None:
+    """Refuse an event the run ends before: it was dropped without a word (a fault injected at 9.5 s into a 2.1 s
+    run left a healthy verdict)."""
+    hf = s.step / s.plant.oversample
+    ticks = _event_step(stop, 0.0, s.step) * s.plant.oversample
+    for k, ev in enumerate(s.events):
+        if _event_step(ev.time, 0.0, hf) >= ticks:
+            raise s.error(("events", k, "time"), f"{ev.time:g} s is not before the run's end ({stop:.10g} s, {what}): "
+                                                 "the event would never be applied; expected a time before it, or a "
+                                                 "later stop_time")
+
+
+def stop_note(s: Scenario) -> str | None:
+    """What a monitored run's ``stop_time`` leaves unjudged, or None: a high-speed motion of the NC program that the
+    run stops inside (or before the first one). Such a motion is never judged, and the run said nothing of it; a
+    short run is still a valid simulation (a slice of a motion compared between two loops), so it is said, not
+    refused (``cosim run`` prints it; the monitor's report holds ``unfinished_motion``)."""
+    from feeddrive.cosim.nc import RAPID
+
+    if s.stop_time is None or s.monitor is None or s.nc is None:
+        return None
+    stop, motions, plan = s.stop_time, [], plan_program(s.nc)  # (start, end, item) of each run of RAPID pieces
+    for seg, nxt in zip(plan, plan[1:]):
+        if seg[4] == RAPID:
+            if motions and motions[-1][2] == seg[6] and motions[-1][1] == seg[0]:
+                motions[-1][1] = nxt[0]
+            else:
+                motions.append([seg[0], nxt[0], seg[6]])
+    for k, (start, end, _) in enumerate(motions, 1):
+        judged = _event_step(end, 0.0, s.step) * s.step  # the monitor ends a motion at the first sample after it
+        if stop < judged - 1e-9 * s.step and (start < stop or k == 1):
+            where = (f"inside the NC program's high-speed motion {k} ({start:.6g}-{end:.6g} s): it is not judged"
+                     if start < stop else f"before the NC program's first high-speed motion ({start:.6g}-{end:.6g} "
+                     "s): the monitor judges nothing")
+            return f"stop_time: {stop:g} s ends {where}; a stop_time of at least {judged:.10g} s judges it"
+    return None
+
+
 def _check_events(s: Scenario, md: Any) -> None:
     names = {"plant", "nc", "sensors"} | {c.name for c in s.components} | ({"monitor"} if s.monitor else set())
     users = [c.name for c in s.components]
@@ -413,8 +474,8 @@ def _check_events(s: Scenario, md: Any) -> None:
                            and x.variability == "tunable" and x.type in REAL_TYPES]
                 raise s.error(("events", k, "target"), f"{param!r} is not a tunable Real parameter of the plant "
                                                        f"FMU; expected one of: {', '.join(tunable)}")
-            if not isinstance(ev.value, float):
-                raise s.error(("events", k, "value"), f"expected a number for plant.{param}, got {ev.value!r}")
+            if not isinstance(ev.value, float) or not math.isfinite(ev.value):
+                raise s.error(("events", k, "value"), f"expected a finite number for plant.{param}, got {ev.value!r}")
             scenario_plant.check_range(s, ("events", k, "value"), v, ev.value, "the plant FMU")
         elif comp == "sensors":
             _check_sensor_event(s, k, param, ev.value)

@@ -50,6 +50,13 @@ class MapEntry(Strict):
     scale: float | None = None
     offset: float | None = None
 
+    @field_validator("unit")
+    @classmethod
+    def _unit_named(cls, v: str | None) -> str | None:
+        if v is not None and not v.strip():  # read as dimensionless, it was "stated in , role 'speed' needs rad/s"
+            raise ValueError("unit is empty; expected a unit such as 'rpm', or '1' for a dimensionless value")
+        return v
+
     @field_validator("scale")
     @classmethod
     def _scale_nonzero(cls, v: float | None) -> float | None:
@@ -187,7 +194,7 @@ def resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
                                   and (not want or x.causality in want))
                 raise s.error(("plant", key, name), f"{path.name} has no Real "
                               f"{'parameter' if want else 'variable'} {name!r}; expected one of: {kinds}")
-            check_range(s, ("plant", key, name), v, getattr(p, key)[name], path.name)
+            check_setting(s, ("plant", key, name), v, getattr(p, key)[name], path.name)
     plant = p.model_copy(update={"fmu": str(path), "sha256": digest, "map": role_map, "input_hold": hold})
     return plant, md
 
@@ -206,6 +213,59 @@ def check_drive_chain(s: Scenario, md: Any) -> None:
             where = f"plant.parameters.{fmu_name}" if fmu_name in s.plant.parameters else f"the FMU's {fmu_name}"
             raise s.error(("axis", key), f"axis.{key} = {ours:g} contradicts {where} = {float(value):g}; expected "
                                          f"axis: {{{key}: {float(value):g}}}")
+
+
+def check_setting(s: Scenario, key: KeyPath, v: Any, value: float, fmu: str) -> None:
+    """Refuse a ``parameters`` or ``start`` value (``key[-2]``) the FMU would refuse when the run sets it at t = 0:
+    these were run failures (exit 1, "fmi2SetReal returned fmi2Error") for bad input."""
+    name = v.name
+    if getattr(v, "dimensions", None):  # "could not convert string to float: '1 2 3'", "Expected nValues >= 3"
+        raise s.error(key, f"{fmu}: {name!r} is an array variable (FMI 3.0 Dimension); expected a scalar variable")
+    if not math.isfinite(value):
+        raise s.error(key, f"{name} = {value} is not a finite number; expected a finite value")
+    if key[-2] == "start" and (v.start in (None, "") or v.causality == "independent" or v.variability == "constant"):
+        # "n_mot is calculated by the FMU and cannot be set"
+        raise s.error(key, f"{fmu} calculates {name!r} (causality {v.causality}, no start value): it cannot be set; "
+                           "expected a variable with a start value (a state, a parameter, an input)")
+    check_range(s, key, v, value, fmu)
+
+
+def check_input_ranges(s: Scenario, md: Any) -> None:
+    """Refuse an NC program whose motor speed (or load torque) leaves the [min, max] the plant FMU declares for the
+    input it is mapped to: FMI forbids setting an input outside its range (a vendor FMU clips it, or fails), and the
+    run gave no sign of it (660 rpm into an input declared up to 500 rpm: a healthy verdict). The program's planned
+    peak is checked (the position loop's correction comes on top), and the identification motion the monitor may
+    insert."""
+    from feeddrive.cosim.nc import plan_program
+
+    plan, nc = plan_program(s.nc), s.nc
+    peaks: dict[str, tuple[float, KeyPath]] = {"speed_ref": (0.0, ()), "load": (0.0, ())}
+    for seg, nxt in zip(plan, plan[1:]):
+        key = ("nc", "program", seg[6]) if seg[6] >= 0 else ("nc",)
+        v = max(abs(seg[2]), abs(seg[2] + seg[3] * (nxt[0] - seg[0])))
+        w = v * 2 * math.pi * nc.belt_ratio / nc.pitch  # the NC's table speed -> motor speed [rad/s]
+        for role, value in (("speed_ref", w), ("load", abs(seg[5]))):
+            if value > peaks[role][0]:
+                peaks[role] = (value, key)
+    if s.monitor is not None and nc.identification is not None:
+        w = nc.identification.v_max * 2 * math.pi * nc.belt_ratio / nc.pitch
+        if w > peaks["speed_ref"][0]:
+            peaks["speed_ref"] = (w, ("nc", "identification", "v_max"))
+    variables = {v.name: v for v in md.modelVariables}
+    for role, (peak, key) in peaks.items():
+        entry, v = s.plant.map.get(role), None
+        v = variables.get(entry.var) if entry is not None else None
+        if v is None or not key or (v.min in (None, "") and v.max in (None, "")):
+            continue
+        scale, offset = entry.linear()
+        lo, hi = sorted((offset - scale * peak, offset + scale * peak))  # the FMU's values for -peak and +peak
+        for bound, outside, value in ((v.min, lambda b: lo < float(b), lo), (v.max, lambda b: hi > float(b), hi)):
+            if bound not in (None, "") and outside(bound):
+                what = f"a motor speed of {peak:.5g} rad/s" if role == "speed_ref" else f"a load of {peak:.5g} N.m"
+                raise s.error(key, f"the NC program asks {what}: {entry.var} = {value:.5g} (x {scale:.5g}), outside the "
+                                   f"range [{v.min or '-inf'}, {v.max or 'inf'}] that {Path(s.plant.fmu).name} declares "
+                                   f"for its input (FMI: never set outside it); expected slower motions (a lower v_max) "
+                                   "or an FMU whose input allows them")
 
 
 def check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str) -> None:

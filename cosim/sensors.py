@@ -57,7 +57,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from feeddrive.cosim.component import Component
-from feeddrive.cosim.errors import ScenarioError
+from feeddrive.cosim.errors import ScenarioError, SimulationError
 from feeddrive.cosim.nc import StrictConfig, drive_chain_nominal
 
 #: noise samples drawn at once per channel
@@ -237,7 +237,7 @@ class SensorsComponent(Component):
         self._q = 2 * math.pi / (4 * enc.lines)
         self._conv = 2 * math.pi * enc.belt_ratio / enc.pitch
         h_rec = h * m  # the encoder's speed window counts recorded samples
-        self._h, self._window = h_rec, max(1, round(enc.speed_window / h_rec))
+        self._t0, self._h, self._window = t0, h_rec, max(1, round(enc.speed_window / h_rec))
         self._inv_wh = 1.0 / (self._window * h_rec)
         self._setup_chain(channels, h)
         self._inputs: Sequence[float] = (0.0,) * len(self.input_names)
@@ -353,7 +353,14 @@ class SensorsComponent(Component):
                 x = y
             self._lp[j] = x
         if (n + 1) % self.oversample == 0:
-            self._measure(true)
+            try:
+                self._measure(true)
+            except (OverflowError, ValueError):  # the encoder's count of an infinite or NaN position
+                raise SimulationError(
+                    f"{self.name}: the plant's position {true[4]:.4g} m cannot be counted by the encoder at "
+                    f"t={self._t0 + (n + 1) * self._h / self.oversample:.6g} s: the plant diverged (it did not follow "
+                    "the NC's speed reference: a plant that is not a feed drive, or a direction or unit of plant.map?)"
+                ) from None
 
     def get_outputs(self) -> list[float]:
         return self._y

@@ -59,6 +59,8 @@ from feeddrive.estimator.redundancy_servo import PHASES, inverse_park
 #: the component's inputs (SI, peak dq currents, mechanical motor angle, table position)
 INPUTS = ("i_d", "i_q", "theta", "u_d_ref", "u_q_ref", "u_d", "u_q", "x_table")
 INPUT_UNITS = ("A", "A", "rad", "V", "V", "V", "V", "m")
+#: with ``phase_currents: measured``, the plant's own phase currents U, V, W (a vendor FMU's I_U, I_V, I_W outputs)
+PHASE_INPUTS = ("i_u", "i_v", "i_w")
 OUTPUTS = ("I_U", "I_V", "I_W", "I_2", "u_d_ref", "u_q_ref", "u_d", "u_q", "theta_enc", "x_mot", "x_lin")
 OUTPUT_UNITS = ("A", "A", "A", "A", "V", "V", "V", "V", "rad", "m", "m")
 _FIELDS = ("gain", "offset", "noise")
@@ -98,6 +100,12 @@ class ServoSensorsConfig(StrictConfig):
     scales : dict
         Input name -> factor applied to the connected value (a plant's units: 1.4142 for an rms current,
         0.001 for mm, 1/p for an electrical angle); unknown names are refused.
+    phase_currents : {"dq", "measured"}
+        ``dq`` (default): the phase channels measure the inverse Park transform of the inputs ``i_d, i_q`` (a plant
+        that gives only its dq currents); ``measured``: they measure the plant's own phase currents, the extra
+        inputs ``i_u, i_v, i_w``. A vendor FMU that has them should be wired so: its i_q mapped without the rms
+        factor (x 0.707) then disagrees with Park(phase currents) (``dq_current_consistency``), where phases made
+        from that same i_q agreed with it and the monitor validated R +41 %, L_q +41 %, Jt -29 %.
     oversample : int
         Plant steps per recorded sample (the scenario sets it to ``plant.oversample``): the sub-samples of the
         ``mean`` and ``lowpass`` sampling.
@@ -113,7 +121,8 @@ class ServoSensorsConfig(StrictConfig):
     encoder: EncoderConfig = Field(default_factory=lambda: EncoderConfig(
         pitch=drive_chain_nominal("builtin-pmsm")[0], belt_ratio=drive_chain_nominal("builtin-pmsm")[1]))
     scale: LinearScale = LinearScale()
-    scales: dict[Literal[INPUTS], float] = {}  # type: ignore[valid-type]
+    scales: dict[Literal[INPUTS + PHASE_INPUTS], float] = {}  # type: ignore[valid-type]
+    phase_currents: Literal["dq", "measured"] = "dq"
     oversample: int = Field(1, ge=1)
 
     def channels(self) -> dict[str, object]:
@@ -205,11 +214,14 @@ class ServoSensors(Component):
         self._kinds = tuple({"instant": 0, "mean": 1, "lowpass": 2}[channels[c].sampling] for c in OUTPUTS[:8])
         #: the master steps the component at the plant's rate (every sub-sample), not at the recording rate
         self.fine_rate = cfg.oversample > 1 and any(self._kinds)
+        self._measured = cfg.phase_currents == "measured"
+        if self._measured:  # the plant's own phase currents (not the compiled loop's: cosim/fastloop/servo.py)
+            self.input_names = INPUTS + PHASE_INPUTS
 
     def setup(self, t0: float, h: float, n_steps: int) -> None:
         self._params = _params(self.config)
-        self._scales = tuple(self.config.scales.get(k, 1.0) for k in INPUTS)
-        self._inputs: Sequence[float] = (0.0,) * len(INPUTS)
+        self._scales = tuple(self.config.scales.get(k, 1.0) for k in self.input_names)
+        self._inputs: Sequence[float] = (0.0,) * len(self.input_names)
         cfg = self.config
         self._rngs = {c: np.random.default_rng([cfg.seed, zlib.crc32(c.encode())]) for c in cfg.channels()}
         self._p, self._second = cfg.pole_pairs, PHASES.index(cfg.second_sensor_on or "U")
@@ -273,15 +285,20 @@ class ServoSensors(Component):
 
     def _true(self) -> tuple[list[float], float, float]:
         """The analogue channels' true values at this instant (``OUTPUTS[:8]``), the motor angle and the table."""
-        i_d, i_q, theta, u_d_ref, u_q_ref, u_d, u_q, x_table = (v * s for v, s in zip(self._inputs, self._scales))
+        i_d, i_q, theta, u_d_ref, u_q_ref, u_d, u_q, x_table, *phases = (v * s for v, s in zip(self._inputs,
+                                                                                                 self._scales))
         phi = self._p * theta
-        raw = [i_d * math.cos(phi - a) - i_q * math.sin(phi - a) for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
+        raw = phases if self._measured else [i_d * math.cos(phi - a) - i_q * math.sin(phi - a)
+                                              for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
         return [*raw, raw[self._second], u_d_ref, u_q_ref, u_d, u_q], theta, x_table
 
     def _fine(self) -> list[float]:
         """``_true``'s analogue channels, written for the plant-rate loop: one cos and one sin per step
         (``cos(phi - a) = cos phi cos a + sin phi sin a``), the scales unpacked."""
         v, s = self._inputs, self._scales
+        if self._measured:
+            raw = (v[8] * s[8], v[9] * s[9], v[10] * s[10])
+            return [raw[0], raw[1], raw[2], raw[self._second], v[3] * s[3], v[4] * s[4], v[5] * s[5], v[6] * s[6]]
         i_d, i_q = v[0] * s[0], v[1] * s[1]
         phi = self._p * v[2] * s[2]
         c, sn = math.cos(phi), math.sin(phi)

@@ -216,6 +216,11 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
     offset = 0.0 if entry.offset is None else float(entry.offset)
     common = {"role": role, "var": entry.var, "role_unit": target, "unit": unit, "source": source,
               "declared": declared, "display_unit": display}
+    if unit is None and display is not None:  # how a tool shows it, not the unit of its values
+        raise UnitProblem("var", f"{entry.var!r} declares no unit, only the displayUnit {display!r} (the unit a tool "
+                                 "shows it in; FMI defines it relative to the unit, which is missing), so the unit "
+                                 f"of its values is unknown; expected its true unit stated with unit: '...' (e.g. "
+                                 f"unit: '{display}' if its values are in {display}, unit: '{target}' if in {target})")
     if unit is None:
         return Conversion(**common, how="given" if given else "assumed", scale=scale, offset=offset)
     defs = {u.name: u for u in unit_definitions or ()}
@@ -257,11 +262,15 @@ def convert(role: str, entry: Any, variable: Any, unit_definitions: list, kind: 
         bad_offset = not math.isclose(offset, b, rel_tol=SCALE_RTOL, abs_tol=SCALE_RTOL * max(1.0, abs(b)))
         if bad_scale or bad_offset:
             what, have, want = ("scale", scale, a) if bad_scale else ("offset", offset, b)
-            raise UnitProblem(what, f"{what} {have:.6g} contradicts the unit of {entry.var!r} ({source} {unit}; "
-                                    f"{unit} -> {target} is {'x' if what == 'scale' else '+'} {want:.6g}); expected "
-                                    f"no {what} (the units convert), the conversion with the opposite sign "
-                                    f"(scale {-want:.6g}: a direction the FMU counts negative), or the variable's "
-                                    "true unit stated with unit: '...'")
+            # as many digits as tell the two apart: a scale copied from `cosim info --map` (x 0.10472) is 2e-6 off
+            digits = next(d for d in (6, 8, 10, 12, 17) if f"{have:.{d}g}" != f"{want:.{d}g}")
+            close = (f" (agreement to a relative {SCALE_RTOL:g} is asked: state all the digits, or no {what})"
+                     if math.isclose(have, want, rel_tol=1e-3) else "")
+            raise UnitProblem(what, f"{what} {have:.{digits}g} contradicts the unit of {entry.var!r} ({source} {unit}; "
+                                    f"{unit} -> {target} is {'x' if what == 'scale' else '+'} {want:.{digits}g})"
+                                    f"{close}; expected no {what} (the units convert), the conversion with the "
+                                    f"opposite sign (scale {-a:.{max(digits, 6)}g}: a direction the FMU "
+                                    "counts negative), or the variable's true unit stated with unit: '...'")
     return Conversion(**common, how="converted", scale=-a if inverted else a, offset=b, inverted=inverted)
 
 
@@ -290,6 +299,10 @@ def check_map(md: Any, role_map: Mapping[str, Any], fmu_name: str, kind: str = "
                              f"{', '.join(candidates) or 'none'}"))
         elif v.type not in REAL_TYPES:
             problems.append((path, f"{entry.var!r} is a {v.type} variable; expected a Real (FMI 3.0: Float64)"))
+        elif getattr(v, "dimensions", None):  # the run failed setting it: "could not convert string to float: '1 2 3'"
+            problems.append((path, f"{entry.var!r} is an array variable (FMI 3.0 Dimension); role {role!r} needs a "
+                                   f"scalar: expected a scalar Float64 {want} (or the array in an FMU component, "
+                                   "whose ports are its elements)"))
         elif role in INPUT_ROLES and v.causality != "input":
             problems.append((path, f"{entry.var!r} has causality {v.causality!r}; role {role!r} needs an input"))
         elif role in INPUT_ROLES and interface == "me" and v.variability == "discrete":

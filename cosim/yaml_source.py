@@ -112,6 +112,19 @@ def _check_depth(text: str, path: Path, error: type[ValueError]) -> None:
             depth -= 1
 
 
+def _check_unique(node: yaml.MappingNode, path: Path, error: type[ValueError]) -> None:
+    """Refuse a key given twice in one mapping: YAML loaders keep the last one silently (a second ``sensors:``
+    replaced the first whole, its faults and seed gone without a word)."""
+    seen: dict[tuple[str, str], int] = {}
+    for key, _ in node.value:
+        if isinstance(key, yaml.ScalarNode) and key.tag != "tag:yaml.org,2002:merge":
+            line = key.start_mark.line + 1
+            if (key.tag, key.value) in seen:
+                raise error(f"{path}:{line}: {key.value}: duplicate key (first at line {seen[key.tag, key.value]}); "
+                            "expected each key once in a mapping (a YAML loader keeps only the last)")
+            seen[key.tag, key.value] = line
+
+
 def _check_size(root: yaml.Node, path: Path, error: type[ValueError]) -> None:
     """Refuse a document too deep, or too large once its aliases are expanded (linear time: a node
     shared through aliases is counted from a memo, never walked twice)."""
@@ -126,6 +139,8 @@ def _check_size(root: yaml.Node, path: Path, error: type[ValueError]) -> None:
             sizes[key] = -1  # in progress: a recursive alias
             children = [n for kv in node.value for n in kv] if isinstance(node, yaml.MappingNode) else \
                 node.value if isinstance(node, yaml.SequenceNode) else []
+            if isinstance(node, yaml.MappingNode):
+                _check_unique(node, path, error)
             total = 1 + sum(size(c, depth + 1) for c in children)
             sizes[key] = total
         elif sizes[key] < 0:

@@ -90,6 +90,11 @@ def _run(args: argparse.Namespace, workers) -> int:  # noqa: ANN001 - PlotWorker
             gc.enable()
     for note in scenario.unit_notes:  # a unit taken on trust is said, once
         print(f"plant.map: {note}")
+    from feeddrive.cosim.scenario import stop_note
+
+    note = stop_note(scenario)  # a motion the stop time cuts is never judged: said before the run
+    if note:
+        print(note)
     if args.db is not None:
         if scenario.monitor is None:
             raise InputError(f"--db {args.db}: the scenario {args.scenario} has no monitor (monitor: section)")
@@ -182,6 +187,10 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
                 lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
             if m.get("error") and m["error"] not in verdict:
                 lines.append(f"    {m['error']}")
+    unfinished = ((r.get("components") or {}).get("monitor") or {}).get("unfinished_motion")
+    if isinstance(unfinished, (int, float)):  # the run stopped inside it: never judged (it said nothing before)
+        lines.append(f"  motion {int(unfinished)}: not judged: the run stopped inside it at {r['stop_time_s']:.4g} s "
+                     "(stop_time)")
     if r.get("held_inputs"):  # a rejection the set-up's sampling explains (cosim/held_inputs.py)
         lines.append(f"  set-up: {r['held_inputs']}")
     if r.get("sampling_bias"):  # L's discretisation error the set-up's sampling leaves (cosim/held_inputs.py)

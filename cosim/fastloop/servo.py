@@ -35,7 +35,7 @@ def candidate(master: Any, plant: Any, sensors: Any, max_sections: int) -> Any:
         return None
     name = names[j]
     servo = master.components[name]
-    if type(servo) is not ServoSensors:
+    if type(servo) is not ServoSensors or servo.config.phase_currents != "dq":  # C makes the phases from i_d, i_q
         return None
     rate = master.rates[name]
     if servo.fine_rate and (rate != 1 or servo.config.oversample != master.m):
