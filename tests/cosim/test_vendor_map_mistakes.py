@@ -156,6 +156,10 @@ def test_a_stop_time_that_cuts_the_motions_is_said(fmus, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "\nstop_time: 0.1 s ends inside the NC program's high-speed motion 1" in out
     assert "  motion 1: not judged: the run stopped inside it at 0.1 s (stop_time)\n" in out
+    # the page says it at the top too (it read "No high-speed motion was processed in this run.")
+    page = (tmp_path / "o" / "report.html").read_text()
+    assert ('id="unfinished">motion 1: not judged: the run stopped inside it at 0.1 s (stop_time)</p>' in page
+            and "No high-speed motion was processed" not in page)
 
 
 def test_a_plant_that_diverges_is_named_not_an_overflow():
