@@ -172,8 +172,11 @@ def servo_rows(m: Mapping) -> list[dict]:
             bad, "mis-scaled current" if bad else "valid")
     if (c := checks.get("voltage_reference_check")) is not None:
         bad = c.get("valid") is False
+        # the loss the data give when it is not the one stated: valid, with what to state (monitor_servo.servo_checks)
+        unstated = "u_loss_stated" in c and not bad
         row("voltage references against terminal voltages", "dead time modelled",
-            "dead-time loss " + _ci(c.get("u_loss"), c.get("u_loss_ci95"), "V per leg"), bad, "not valid" if bad else "valid")
+            "dead-time loss " + _ci(c.get("u_loss"), c.get("u_loss_ci95"), "V per leg"), bad,
+            "not valid" if bad else f"valid with the measured loss: {c.get('note')}" if unstated else "valid")
     if (c := checks.get("lost_motion")) is not None:
         bad = bool(c.get("detected"))
         row("motor encoder against linear scale", "lost motion of the drive chain",
