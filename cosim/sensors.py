@@ -124,7 +124,7 @@ class SensorsConfig(StrictConfig):
     """The ``sensors:`` section of a scenario; every key is optional, a channel's omitted keys keep
     their defaults (noise levels: see the module docstring)."""
 
-    seed: int = Field(0, ge=0)
+    seed: int = Field(0, ge=0, strict=True)  # strict: a YAML `true` is not seed 1
     current: tuple[CurrentSensor, CurrentSensor] = (CurrentSensor(), CurrentSensor())
     voltage: VoltageSensor = VoltageSensor()
     voltage_ref: VoltageSensor = VoltageSensor()

@@ -111,7 +111,7 @@ class ServoSensorsConfig(StrictConfig):
         ``mean`` and ``lowpass`` sampling.
     """
 
-    seed: int = Field(0, ge=0)
+    seed: int = Field(0, ge=0, strict=True)  # strict: a YAML `true` is not seed 1
     pole_pairs: int = Field(4, ge=1)
     phases: tuple[CurrentSensor, CurrentSensor, CurrentSensor] = (CurrentSensor(), CurrentSensor(), CurrentSensor())
     second_sensor_on: Literal["U", "V", "W"] | None = "U"

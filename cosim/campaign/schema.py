@@ -134,7 +134,7 @@ class Campaign(_Frozen):
 
     name: str = Field(min_length=1)
     base: str | dict[str, Any]
-    seed: int = Field(default=0, ge=0)
+    seed: int = Field(default=0, ge=0, strict=True)  # strict: a YAML `true` is not seed 1
     repetitions: PositiveInt = 1
     sweep: dict[str, list[Any]] = {}
     draw: dict[str, Draw] = {}

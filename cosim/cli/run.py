@@ -150,6 +150,11 @@ def _unit(name: str) -> str:
     return (model_units("dc") | model_units("pmsm")).get(name, "")
 
 
+def _metres(x: float) -> str:
+    """A position to the micrometre; a diverged plant's in significant digits (``%.6f`` of 8e28 m printed 29 digits)."""
+    return f"{x:.6f}" if abs(x) < 1e6 else f"{x:.4g}"
+
+
 def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
     """A few lines: simulated time and speed, final position against the NC's target, motions, files."""
     from feeddrive.cosim.report.verdict import fault_values, verdict_line
@@ -159,7 +164,7 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
              f"({r['steps']} steps of {r['step_s']:.3g} s) -> {result.out_dir}"]
     if "plant.position" in s and "nc.x_ref" in s:
         unit = "rad" if (r.get("drive_chain") or {}).get("kind") == "rotary" else "m"
-        lines.append(f"  position: {s['plant.position'][-1]:.6f} {unit} (NC target {s['nc.x_ref'][-1]:.6f} {unit})")
+        lines.append(f"  position: {_metres(s['plant.position'][-1])} {unit} (NC target {_metres(s['nc.x_ref'][-1])} {unit})")
         if r.get("following"):  # the axis did not follow its NC (cosim.axis.following_note, on every sample)
             lines.append(f"  {r['following']}")
     for k, m in enumerate(r.get("motions") or [], 1):

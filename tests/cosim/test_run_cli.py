@@ -139,3 +139,12 @@ def test_summary_names_the_sensor_fault(example_runs):
     assert any(ln.startswith("  motion 2: sensor fault: Im1 gain 1.03, offset 0.2 A") for ln in lines)
     assert lines.index(next(ln for ln in lines if ln.startswith("  motion 2:"))) < lines.index(
         next(ln for ln in lines if ln.strip().startswith("sensor fault:")))
+
+
+def test_a_diverged_position_is_printed_in_significant_digits():
+    """The summary's position line: micrometres as before; a plant that ran away (audit3: a Feedthrough FMU mapped
+    onto the roles) printed '-82884587084383809020731850752.000000 m'."""
+    from feeddrive.cosim.cli.run import _metres
+
+    assert _metres(0.27) == "0.270000" and _metres(-1e-6) == "-0.000001"
+    assert _metres(-8.2884587084383809e28) == "-8.288e+28"

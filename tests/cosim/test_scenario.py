@@ -84,6 +84,9 @@ def test_changed_fmu_is_refused_by_its_recorded_hash(tmp_path, feeddrive_fmu):
     ("events:\n  - {time: 1.0, target: plant.Jt, value: -1}\n", 2,
      r"events\[0\]\.value: Jt = -1 is outside the range \[0\.0, inf\]"),
     ("nc:\n  program:\n    - rapid: {to: 0.1, accel: -1}\n", 3, r"nc\.program\[0\]\.rapid\.accel: .*greater than 0"),
+    # a YAML `true` was seed 1, "2.0" seed 2 (pydantic's lax integers; found by audit3)
+    ("sensors:\n  seed: true\n", 2, r"sensors\.seed: Input should be a valid integer, got True"),
+    ("sensors:\n  seed: 2.0\n", 2, r"sensors\.seed: Input should be a valid integer, got 2\.0"),
 ])
 def test_each_mistake_gets_its_own_message_with_file_and_line(tmp_path, feeddrive_fmu, snippet, line, pattern):
     base = {k: v for k, v in yaml.safe_load(BASE).items() if k not in yaml.safe_load(snippet)}
