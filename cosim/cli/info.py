@@ -96,6 +96,9 @@ def main(args: argparse.Namespace) -> int:
     problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions,
                          interface=_plant_interface(args.map))
     print(f"map of {args.map} (role [SI unit] <- FMU variable [unit] x scale + offset; -> for the FMU's inputs)")
+    other = _other_plant(args.map, path, str(args.fmu))
+    if other:  # the map is checked against the FMU given, as asked; the run would use the scenario's own plant
+        print(f"  note: {args.map}'s plant is {other}, not {path.name}: its map is checked against {path.name}")
     for role, e in role_map.items():
         if role in conversions:
             print(f"  {conversions[role].describe()}")
@@ -156,6 +159,22 @@ def _plant_interface(scenario: Path) -> str:
     data, _ = read_yaml(scenario)
     plant = data.get("plant") if isinstance(data, dict) else None
     return plant.get("interface", "cs") if isinstance(plant, dict) else "cs"
+
+
+def _other_plant(scenario: Path, fmu: Path, asked: str) -> str | None:
+    """The scenario's ``plant.fmu`` when it is not the FMU ``fmu`` (``asked`` on the command line: a built-in
+    plant's name, or a file; relative paths in the scenario are its file's, as cosim run resolves them), else None."""
+    from feeddrive.cosim.yaml_source import read_yaml
+
+    data, _ = read_yaml(scenario)
+    plant = data.get("plant") if isinstance(data, dict) else None
+    given = plant.get("fmu", "builtin") if isinstance(plant, dict) else "builtin"
+    if not isinstance(given, str):
+        return None  # a wrong value: cosim run says what it expects
+    if given.startswith("builtin"):
+        return None if asked.startswith("builtin") else f"the built-in plant ({given})"  # axis.drive may choose which
+    there = (scenario.parent / given).resolve()
+    return None if there == fmu.resolve() else str(given)
 
 
 def _cannot_run(path: Path, md) -> str | None:  # noqa: ANN001 - fmpy's ModelDescription

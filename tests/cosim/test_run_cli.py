@@ -120,9 +120,13 @@ def test_info_lists_variables_and_checks_a_map(tmp_path, feeddrive_fmu, capsys):
     assert row[:6] == ["Cd", "Real", "parameter", "tunable", "N.m", "1.2"]
     assert " ".join(row[6:]) == "total dry (Coulomb) friction torque"  # the description column
     assert main(["info", "builtin", "--map", str(EXAMPLES / "tool_change.yaml")]) == 0
-    assert "map OK" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "map OK" in out and "note:" not in out  # the scenario's own plant
     assert main(["info", str(feeddrive_fmu), "--map", str(EXAMPLES / "vendor_fmu.yaml")]) == 2
-    err = capsys.readouterr().err.strip()
+    out, err = capsys.readouterr()
+    # the map is checked against the FMU given; that it is not the scenario's plant is said (audit3)
+    assert f"  note: {EXAMPLES / 'vendor_fmu.yaml'}'s plant is vendor_fmu/VendorDrive.fmu, not FeedDrive.fmu" in out
+    err = err.strip()
     assert err.startswith(f"cosim info: error: {EXAMPLES / 'vendor_fmu.yaml'}:") and err.count("\n") == 0
     assert "plant.map.speed_ref.var: FMU 'FeedDrive.fmu' has no variable 'n_cmd'" in err
     assert main(["info", str(tmp_path / "none.fmu")]) == 2
