@@ -335,13 +335,17 @@ def uniform_intervals(n: int, k: int, at: np.ndarray) -> np.ndarray:
     """
     every = (n - 1) // k + 1  # the strided knots 0, k, ..., (every - 1) k
     knots = every + int((n - 1) % k != 0)
-    f = np.floor(at)
-    count = np.minimum(f // k + 1.0, float(every))
+    f = (at + 1.0).astype(np.intp)  # floor(t) + 1 for t >= -1 (truncation); below, a count <= 0 all the same
+    f -= 1
     if knots > every:
-        count += f >= n - 1
-    j = np.clip(count, 1.0, float(knots - 1)).astype(np.intp)  # count - 1 in [0, knots - 2]; below 0: 0
-    j -= 1
-    return j
+        extra = f >= n - 1
+    f //= k
+    f += 1
+    np.minimum(f, every, out=f)
+    if knots > every:
+        f += extra
+    f -= 1
+    return np.clip(f, 0, knots - 2, out=f)  # the interval: the count less one, the ends extrapolated
 
 
 def _intervals(x: np.ndarray, at: np.ndarray) -> np.ndarray:
