@@ -146,7 +146,7 @@ def sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray | None = None) -> np.
     return y, final.reshape(np.shape(zi))
 
 
-def sosfiltfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
+def sosfiltfilt(sos: np.ndarray, x: np.ndarray | list[np.ndarray]) -> np.ndarray:
     """Zero-phase forward-backward filter of ``x`` along its last axis (scipy's ``sosfiltfilt`` defaults:
     odd extension by ``3 * ntaps`` samples at each end, each pass started in the steady state of its
     first sample).
@@ -154,23 +154,31 @@ def sosfiltfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     sos : ndarray, shape (n_sections, 6)
-    x : ndarray, shape (n,) or (m, n)
-        ``n`` must exceed the extension.
+    x : ndarray, shape (n,) or (m, n), or list of m ndarrays of shape (n,)
+        ``n`` must exceed the extension. A list is filtered as its rows stacked (``FilterSpec.apply``'s signals),
+        each written once into the extended array rather than stacked first.
 
     Returns
     -------
-    ndarray, shape of ``x``
+    ndarray, shape of ``x`` ((m, n) for a list)
     """
     sos = np.asarray(sos, dtype=float)
-    x = np.asarray(x, dtype=float)
-    rows = np.atleast_2d(x)
+    if isinstance(x, list):
+        rows = [np.asarray(r, dtype=float) for r in x]
+        x = np.empty((len(rows), rows[0].size))  # its shape only
+    else:
+        x = np.asarray(x, dtype=float)
+        rows = np.atleast_2d(x)
     ntaps = 2 * sos.shape[0] + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
     edge = 3 * ntaps
-    n = rows.shape[-1]
+    n = x.shape[-1]
     if n <= edge:
         raise ValueError(f"sosfiltfilt: the signal has {n} samples; the extension needs more than {edge}")
-    ext = np.concatenate([2 * rows[:, :1] - rows[:, edge:0:-1], rows,
-                          2 * rows[:, -1:] - rows[:, -2:-(edge + 2):-1]], axis=1)
+    ext = np.empty((len(rows), n + 2 * edge))
+    for r, row in zip(ext, rows):  # the odd extension at both ends around the row: np.concatenate's values
+        np.subtract(2 * row[:1], row[edge:0:-1], out=r[:edge])
+        r[edge:edge + n] = row
+        np.subtract(2 * row[-1:], row[-2:-(edge + 2):-1], out=r[edge + n:])
     zi = sosfilt_zi(sos)[:, None, :]
     lib = _library()
     if lib is not None:  # sosfilt's C loop on arrays of its own: no copy of the extension and none of the reversal

@@ -102,6 +102,7 @@ def test_two_sections_rows_in_groups_are_scipys(order):
     for rows in range(1, 9):
         x = rng.standard_normal((rows, 700)).cumsum(axis=1) + 3.0
         np.testing.assert_array_equal(lti.sosfiltfilt(sos, x), signal.sosfiltfilt(sos, x, axis=-1))
+        np.testing.assert_array_equal(lti.sosfiltfilt(sos, list(x)), signal.sosfiltfilt(sos, x, axis=-1))  # rows given
         zi = signal.sosfilt_zi(sos)[:, None, :] * x[None, :, :1] * np.linspace(0.5, 1.5, rows)[None, :, None]
         for actual, expected in zip(lti.sosfilt(sos, x, zi=zi), signal.sosfilt(sos, x, axis=-1, zi=zi)):
             np.testing.assert_array_equal(actual, expected)
