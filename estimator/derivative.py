@@ -91,8 +91,11 @@ def matched_average(x: np.ndarray) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     n = x.size
     out = _M1 * x
-    out[1:-1] += _M3 / 6.0 * (x[2:] - 2.0 * x[1:-1] + x[:-2])
     if n >= PAST + FUTURE + 1:
+        # the symmetric form is left only at sample 1 (2 .. n-2 are the FIR's): that one sample, the same arithmetic
+        out[1] += _M3 / 6.0 * (x[2] - 2.0 * x[1] + x[0])
         c1, c0, cm1, cm2 = _S
         out[PAST:n - FUTURE] = c1 * x[3:] + c0 * x[2:n - 1] + cm1 * x[1:n - 2] + cm2 * x[:n - 3]
+    else:
+        out[1:-1] += _M3 / 6.0 * (x[2:] - 2.0 * x[1:-1] + x[:-2])
     return out

@@ -57,6 +57,20 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
     return np.sqrt(np.einsum("ij,ij->j", Phi, Phi))
 
 
+#: most runs of used rows copied run by run (``_used_runs``); beyond, the rows are gathered by their indices
+MAX_RUNS = 16
+
+
+def _used_runs(r: np.ndarray) -> list[tuple[int, int]] | np.ndarray:
+    """The runs ``[(start, stop), ...]`` of True in ``r`` (n,) bool, or its indices when there are more than
+    ``MAX_RUNS``: a fit's usable rows are a few stretches of the motion (between its speed reversals), and a run
+    is one block copy where a gather by index moves each row alone (the same rows, the same values)."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], r, [False]]).view(np.int8)))
+    if edges.size > 2 * MAX_RUNS:
+        return np.flatnonzero(r)
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
 def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationOptions,
            reference: np.ndarray | None = None, note: str = "", covariance: bool = True,
            memo: dict | None = None) -> _Fit:
@@ -84,16 +98,33 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     if hit:
         index, Xr, ys, scale, empty, Xs, eig, V = kept[1]
     else:
-        index = {id(r): None if r.all() else np.flatnonzero(r) for *_, r in parts}
+        index = {id(r): None if r.all() else _used_runs(r) for *_, r in parts}
 
-    def rows(x, r):  # take() with the indices: the same rows as x[r], twice as fast on (n, p) arrays
-        return x if index[id(r)] is None else x.take(index[id(r)], axis=0)
+    def rows(x, r):  # the same rows as x[r]: a few runs of used rows copied as blocks, else take() by index
+        at = index[id(r)]
+        if at is None:
+            return x
+        if isinstance(at, np.ndarray):
+            return x.take(at, axis=0)
+        out = np.empty((sum(b - a for a, b in at), *x.shape[1:]))  # C order, as take() gives (the products' order)
+        k = 0
+        for a, b in at:
+            out[k:k + b - a] = x[a:b]
+            k += b - a
+        return out
 
     def spread(x, r):  # rows x back in place of the used rows of r, zeros elsewhere: x[r] inverted
-        if index[id(r)] is None:
+        at = index[id(r)]
+        if at is None:
             return x
         out = np.zeros((r.size, *x.shape[1:]))
-        out[index[id(r)]] = x  # integer indices: a third of a boolean mask's time on (n, p) arrays
+        if isinstance(at, np.ndarray):
+            out[at] = x  # integer indices: a third of a boolean mask's time on (n, p) arrays
+            return out
+        k = 0
+        for a, b in at:
+            out[a:b] = x[k:k + b - a]
+            k += b - a
         return out
 
     if not hit:

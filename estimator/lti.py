@@ -146,7 +146,7 @@ def sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray | None = None) -> np.
     return y, final.reshape(np.shape(zi))
 
 
-def sosfiltfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
+def sosfiltfilt(sos: np.ndarray, x: np.ndarray | list[np.ndarray]) -> np.ndarray:
     """Zero-phase forward-backward filter of ``x`` along its last axis (scipy's ``sosfiltfilt`` defaults:
     odd extension by ``3 * ntaps`` samples at each end, each pass started in the steady state of its
     first sample).
@@ -154,23 +154,31 @@ def sosfiltfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     sos : ndarray, shape (n_sections, 6)
-    x : ndarray, shape (n,) or (m, n)
-        ``n`` must exceed the extension.
+    x : ndarray, shape (n,) or (m, n), or list of m ndarrays of shape (n,)
+        ``n`` must exceed the extension. A list is filtered as its rows stacked (``FilterSpec.apply``'s signals),
+        each written once into the extended array rather than stacked first.
 
     Returns
     -------
-    ndarray, shape of ``x``
+    ndarray, shape of ``x`` ((m, n) for a list)
     """
     sos = np.asarray(sos, dtype=float)
-    x = np.asarray(x, dtype=float)
-    rows = np.atleast_2d(x)
+    if isinstance(x, list):
+        rows = [np.asarray(r, dtype=float) for r in x]
+        x = np.empty((len(rows), rows[0].size))  # its shape only
+    else:
+        x = np.asarray(x, dtype=float)
+        rows = np.atleast_2d(x)
     ntaps = 2 * sos.shape[0] + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
     edge = 3 * ntaps
-    n = rows.shape[-1]
+    n = x.shape[-1]
     if n <= edge:
         raise ValueError(f"sosfiltfilt: the signal has {n} samples; the extension needs more than {edge}")
-    ext = np.concatenate([2 * rows[:, :1] - rows[:, edge:0:-1], rows,
-                          2 * rows[:, -1:] - rows[:, -2:-(edge + 2):-1]], axis=1)
+    ext = np.empty((len(rows), n + 2 * edge))
+    for r, row in zip(ext, rows):  # the odd extension at both ends around the row: np.concatenate's values
+        np.subtract(2 * row[:1], row[edge:0:-1], out=r[:edge])
+        r[edge:edge + n] = row
+        np.subtract(2 * row[-1:], row[-2:-(edge + 2):-1], out=r[edge + n:])
     zi = sosfilt_zi(sos)[:, None, :]
     lib = _library()
     if lib is not None:  # sosfilt's C loop on arrays of its own: no copy of the extension and none of the reversal
@@ -247,6 +255,48 @@ _SOURCE = r"""
    zi (m, ns, 2) updated; sections normalised (a0 = 1); reverse != 0: from the last sample to the first (the
    backward pass of a zero-phase filter, on the forward pass's output without a reversed copy) */
 typedef double fd_v2 __attribute__((vector_size(16)));
+/* two sections (the 4th-order low-pass), up to three row pairs at a time with their states in local variables
+   (registers) rather than in the array indexed by the pair: the same operations in the same order per row, a
+   third of the loads and stores; three pairs keep three independent chains in flight, as the loop below */
+#define FD_DECL(p) fd_v2 s##p##a = z[4 * (p)], s##p##b = z[4 * (p) + 1], s##p##c = z[4 * (p) + 2], \
+                         s##p##d = z[4 * (p) + 3];
+#define FD_STEP(p) { double* q = x + 2 * (p) * n + k; fd_v2 xc = {q[0], q[n]}, xn; \
+    xn = c0 * xc + s##p##a; s##p##a = c1 * xc - c3 * xn + s##p##b; s##p##b = c2 * xc - c4 * xn; xc = xn; \
+    xn = d0 * xc + s##p##c; s##p##c = d1 * xc - d3 * xn + s##p##d; s##p##d = d2 * xc - d4 * xn; \
+    q[0] = xn[0]; q[n] = xn[1]; }
+#define FD_SAVE(p) z[4 * (p)] = s##p##a; z[4 * (p) + 1] = s##p##b; z[4 * (p) + 2] = s##p##c; z[4 * (p) + 3] = s##p##d;
+static void fd_sos2_pairs(long g, long n, const fd_v2* c, double* x, fd_v2* z, long reverse) {
+  const fd_v2 c0 = c[0], c1 = c[1], c2 = c[2], c3 = c[3], c4 = c[4], d0 = c[5], d1 = c[6], d2 = c[7], d3 = c[8],
+              d4 = c[9];
+  long j, k;
+  if (g == 3) {
+    FD_DECL(0) FD_DECL(1) FD_DECL(2)
+    for (j = 0; j < n; ++j) { k = reverse ? n - 1 - j : j; FD_STEP(0) FD_STEP(1) FD_STEP(2) }
+    FD_SAVE(0) FD_SAVE(1) FD_SAVE(2)
+  } else if (g == 2) {
+    FD_DECL(0) FD_DECL(1)
+    for (j = 0; j < n; ++j) { k = reverse ? n - 1 - j : j; FD_STEP(0) FD_STEP(1) }
+    FD_SAVE(0) FD_SAVE(1)
+  } else {
+    FD_DECL(0)
+    for (j = 0; j < n; ++j) { k = reverse ? n - 1 - j : j; FD_STEP(0) }
+    FD_SAVE(0)
+  }
+}
+static void fd_sos2_row(long n, const double* sos, double* x, double* z, long reverse) {
+  const double c0 = sos[0], c1 = sos[1], c2 = sos[2], c3 = sos[4], c4 = sos[5];
+  const double d0 = sos[6], d1 = sos[7], d2 = sos[8], d3 = sos[10], d4 = sos[11];
+  double sa = z[0], sb = z[1], sc = z[2], sd = z[3], xc, xn;
+  long j, k;
+  for (j = 0; j < n; ++j) {
+    k = reverse ? n - 1 - j : j;
+    xc = x[k];
+    xn = c0 * xc + sa; sa = c1 * xc - c3 * xn + sb; sb = c2 * xc - c4 * xn; xc = xn;
+    xn = d0 * xc + sc; sc = d1 * xc - d3 * xn + sd; sd = d2 * xc - d4 * xn;
+    x[k] = xn;
+  }
+  z[0] = sa; z[1] = sb; z[2] = sc; z[3] = sd;
+}
 void fd_sosfilt(long m, long n, long ns, const double* sos, double* x, double* zi, long reverse) {
   long i, j, k, s, pairs = m / 2;
   /* sample k of every row before sample k + 1 of any: each row's recursion is a chain of dependent
@@ -266,6 +316,12 @@ void fd_sosfilt(long m, long n, long ns, const double* sos, double* x, double* z
   for (i = 0; i < pairs; ++i)
     for (j = 0; j < 2 * ns; ++j)
       z[i * ns * 2 + j] = (fd_v2){zi[2 * i * ns * 2 + j], zi[(2 * i + 1) * ns * 2 + j]};
+  if (ns == 2) {
+    for (i = 0; i < pairs; i += 3)
+      fd_sos2_pairs(pairs - i < 3 ? pairs - i : 3, n, c, x + 2 * i * n, z + i * 4, reverse);
+    for (i = 2 * pairs; i < m; ++i)
+      fd_sos2_row(n, sos, x + i * n, zi + i * 4, reverse);
+  } else
   for (j = 0; j < n; ++j) {
     k = reverse ? n - 1 - j : j;
     for (i = 0; i < pairs; ++i) {

@@ -296,6 +296,16 @@ def input_noise_variance(filter: FilterSpec, h: float, step: int, L: float, R: f
     integrated over the record's band (midpoint rule, ``points`` frequencies); the filter's cut-off is far
     below the decimated Nyquist frequency (``check_rate_factor``), so what the decimation folds is neglected.
     ``sigma_v^2 = sigma_u^2 + K^2 sigma_w^2`` for independent voltage and speed sensor noises."""
+    filtered, zd = _filter_power(filter, h, step, points)
+    b, a = bilinear_first_order(L, R, h * step)
+    gain = filtered * np.abs((b[0] + b[1] * zd) / (a[0] + a[1] * zd)) ** 2
+    return float(sigma_v ** 2 * np.mean(gain))
+
+
+@lru_cache(maxsize=16)
+def _filter_power(filter: FilterSpec, h: float, step: int, points: int) -> tuple[np.ndarray, np.ndarray]:
+    """The filter's power gain at ``input_noise_variance``'s frequencies and ``exp(-i w step)`` there, both (points,)
+    and read-only: the same for every motion of an axis (its filter, period and decimation), so formed once."""
     w = (np.arange(points) + 0.5) * (np.pi / points)  # rad per record sample
     z1, z2 = np.exp(-1j * w), np.exp(-2j * w)
     gain = np.ones(points)
@@ -303,10 +313,7 @@ def input_noise_variance(filter: FilterSpec, h: float, step: int, L: float, R: f
         gain *= np.abs((b0 + b1 * z1 + b2 * z2) / (1 + a1 * z1 + a2 * z2)) ** 2
     if filter.zero_phase:  # forward and backward: the magnitude squared twice
         gain *= gain
-    b, a = bilinear_first_order(L, R, h * step)
-    zd = np.exp(-1j * w * step)
-    gain *= np.abs((b[0] + b[1] * zd) / (a[0] + a[1] * zd)) ** 2
-    return float(sigma_v ** 2 * np.mean(gain))
+    return _read_only(gain), _read_only(np.exp(-1j * w * step))
 
 
 def _read_only(x: np.ndarray) -> np.ndarray:

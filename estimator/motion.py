@@ -429,12 +429,9 @@ def stationary_score_covariance(parts: list[tuple[np.ndarray, np.ndarray]], lags
     (L: the current transients) rests on the few blocks that carry it and scatters by a factor of 3 from
     one noise draw to the next. The regressor's own structure is known exactly here.
     """
-    from feeddrive.estimator.kernels import toeplitz_score_covariance
+    from feeddrive.estimator.toeplitz import score_covariance_sum  # the sets' transforms batched
 
-    p = parts[0][0].shape[1]
-    S = np.zeros((p, p))
-    for W, e in parts:
-        S += toeplitz_score_covariance(W, e, lags)
+    S = score_covariance_sum(parts, lags)
     return 0.5 * (S + S.T)
 
 

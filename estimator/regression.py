@@ -12,7 +12,7 @@ its physical parameters: ``residual = sum_j p_j phi_j(signals) + r0(signals)``. 
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -41,9 +41,10 @@ def numpy_function(f: ca.Function):
            for op, *_ in ops):
         return None
 
-    def run(x: np.ndarray) -> np.ndarray:
+    def run(x: np.ndarray | Sequence[np.ndarray]) -> np.ndarray:
+        """``x``: the inputs' rows, (m, n) or a sequence of m arrays (n,) (read by index, never stacked)."""
         work: dict[int, np.ndarray | float] = {}
-        out = np.empty((f.nnz_out(0), x.shape[1]))
+        out = np.empty((f.nnz_out(0), len(x[0])))
         for op, i, o, c in ops:
             if op == ca.OP_INPUT:
                 work[o[0]] = x[i[1]]
@@ -123,10 +124,11 @@ class Regression:
         missing = [s for s in self.signals if values.get(s) is None]
         if missing:
             raise EstimatorInputError(f"{self.equation} regression needs signals {missing}")
-        stack = np.vstack([np.asarray(values[s], dtype=float) for s in self.signals])
-        if self.vectorised is not None:
-            out = self.vectorised(stack)
+        rows = [np.asarray(values[s], dtype=float) for s in self.signals]
+        if self.vectorised is not None:  # the signals' rows as they are: a stacked copy of them was read only
+            out = self.vectorised(rows)
         else:  # an operation numpy_function does not know: CasADi's own (slower) map
+            stack = np.vstack(rows)
             out = np.asarray(self.function.map(stack.shape[1])(stack))
         return out[0], out[1:].T
 

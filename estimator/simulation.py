@@ -151,7 +151,8 @@ def simulate(equations: tuple[str, ...], inputs: Mapping[str, np.ndarray], param
         raise NumericalFailure(f"the simulation of the {' and '.join(equations)} equation(s) is unstable or non-finite "
                                f"with an integration step of {k * h:.3g} s" + (f" ({hint})" if hint else ""))
     if k > 1 or at is not None:
-        X = _spline(idx.astype(float), X, np.arange(n, dtype=float) if at is None else np.asarray(at, dtype=float))
+        at = np.arange(n, dtype=float) if at is None else np.asarray(at, dtype=float)
+        X = _spline(idx.astype(float), X, at, uniform_intervals(n, k, at))
     return {s: X[j] for j, s in enumerate(states)}
 
 
@@ -246,7 +247,7 @@ def _roll(model, equations: tuple[str, ...], inputs: tuple[str, ...], m: int, su
     return np.asarray(roll(x, S, p, h)).reshape(len(x), -1)
 
 
-def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray) -> np.ndarray:
+def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray, j: np.ndarray | None = None) -> np.ndarray:
     """``CubicSpline(x, Y, axis=1)(at)`` (not-a-knot, extrapolated), its arithmetic step by step, bit for bit.
 
     ``x`` (n,) increasing knots, ``Y`` (m, n) finite values, ``at`` (q,): returns (m, q). scipy's class spends
@@ -254,7 +255,8 @@ def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray) -> np.ndarray:
     and building a PPoly; the simulation's knots are known to be increasing and its states finite. The same
     banded system (its diagonals, right-hand side and LAPACK solve), the same coefficients and the same
     evaluation (``sum c_k u^k`` with the powers of ``u`` built by products, as scipy's ``evaluate_poly1``);
-    tests/estimator/test_speed.py compares the two. Fewer than 4 knots: scipy's own.
+    tests/estimator/test_speed.py compares the two. Fewer than 4 knots: scipy's own. ``j`` (q,), optional: the
+    interval of each time (``_interval_of(x, at)``), when the caller knows it (``uniform_intervals``).
     """
     n = x.size
     if n < 4:
@@ -264,7 +266,7 @@ def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray) -> np.ndarray:
     from feeddrive.estimator import spline_c
 
     if spline_c.available():  # the same steps in two C loops around the same gtsv (0.3 -> 0.1 ms a call)
-        return spline_c.spline(x, Y, at, _interval_of(x, at))
+        return spline_c.spline(x, Y, at, _interval_of(x, at) if j is None else j)
     from scipy.linalg.lapack import dgtsv
 
     y = Y.T
@@ -289,7 +291,7 @@ def _spline(x: np.ndarray, Y: np.ndarray, at: np.ndarray) -> np.ndarray:
     if info > 0:
         raise np.linalg.LinAlgError("singular matrix")
     t = (s[:-1] + s[1:] - 2 * slope) / dxr
-    j = _interval_of(x, at)
+    j = _interval_of(x, at) if j is None else j
     # take() along the rows: the same values as indexing with j, without the general indexing's iterator
     # (2.4x faster on these (n, 1) arrays)
     u = (at - x.take(j))[:, None]
@@ -320,6 +322,30 @@ def _interval_of(x: np.ndarray, at: np.ndarray) -> np.ndarray:
     j.setflags(write=False)
     _LAST_INTERVALS = (x.copy(), at.copy(), j)
     return j
+
+
+def uniform_intervals(n: int, k: int, at: np.ndarray) -> np.ndarray:
+    """``_interval_of(x, at)`` for the simulation's knots ``x``: every ``k``-th of ``n`` samples (``0, k, 2k, ...``)
+    and the last one, ``n - 1``, when the stride steps over it; from the integers, not a search.
+
+    A knot ``i k`` (an integer) is <= ``t`` exactly when it is <= ``floor(t)``: ``floor(t) // k + 1`` of the
+    strided knots are, at most all ``(n - 1) // k + 1`` of them, and the last knot ``n - 1`` when ``floor(t)``
+    reaches it; the interval is that count less one, clipped to the first and the last (the same integers as
+    the search, tests/estimator/test_simulation_intervals.py). ``at`` (q,) finite [samples]; returns (q,) intp.
+    """
+    every = (n - 1) // k + 1  # the strided knots 0, k, ..., (every - 1) k
+    knots = every + int((n - 1) % k != 0)
+    f = (at + 1.0).astype(np.intp)  # floor(t) + 1 for t >= -1 (truncation); below, a count <= 0 all the same
+    f -= 1
+    if knots > every:
+        extra = f >= n - 1
+    f //= k
+    f += 1
+    np.minimum(f, every, out=f)
+    if knots > every:
+        f += extra
+    f -= 1
+    return np.clip(f, 0, knots - 2, out=f)  # the interval: the count less one, the ends extrapolated
 
 
 def _intervals(x: np.ndarray, at: np.ndarray) -> np.ndarray:

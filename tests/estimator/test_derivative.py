@@ -51,3 +51,20 @@ def test_sinusoid_error_is_second_order_in_the_step():
 def test_bad_input_is_refused(x, h):
     with pytest.raises(EstimatorInputError):
         zero_forcing_derivative(x, h)
+
+
+def test_matched_average_is_its_two_forms():
+    """``matched_average``: the 4-tap FIR ``S`` at samples 2 .. n-2 (where the derivative is), the symmetric
+    second-order form ``m1 x + m3 / 6 (x[k+1] - 2 x[k] + x[k-1])`` at sample 1 and ``m1 x`` at both ends; bit for
+    bit for every length (the symmetric form is computed at sample 1 only), and a constant passes with gain m1."""
+    from feeddrive.estimator.derivative import _M1, _M3, _S, matched_average
+
+    rng = np.random.default_rng(12)
+    for n in [*range(1, 12), 997]:
+        x = rng.standard_normal(n) * 10.0 ** rng.uniform(-4, 4)
+        expected = _M1 * x
+        expected[1:-1] += _M3 / 6.0 * (x[2:] - 2.0 * x[1:-1] + x[:-2])
+        if n >= 4:
+            expected[2:n - 1] = _S[0] * x[3:] + _S[1] * x[2:n - 1] + _S[2] * x[1:n - 2] + _S[3] * x[:n - 3]
+        np.testing.assert_array_equal(matched_average(x), expected)
+    np.testing.assert_allclose(matched_average(np.full(50, 3.0)), 3.0 * _M1, rtol=1e-14)

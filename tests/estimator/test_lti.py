@@ -90,6 +90,24 @@ def test_many_rows_are_filtered_as_each_alone(loops):
         close(actual, expected)
 
 
+@pytest.mark.parametrize("order", [3, 4])
+def test_two_sections_rows_in_groups_are_scipys(order):
+    """Two sections (the identical 4th-order filter) take the C loop's pairs three at a time with their states in
+    registers, and a last odd row alone: 1 to 8 rows (groups of 3, 2 and 1 pairs, with and without an odd row),
+    both directions, from their own initial states, bit for bit with scipy, final states too."""
+    assert lti._library() is not None, "no C compiler here: the compiled loops are not tested"
+    rng = np.random.default_rng(order)
+    sos = signal.butter(order, 0.01, output="sos")
+    assert len(sos) == 2
+    for rows in range(1, 9):
+        x = rng.standard_normal((rows, 700)).cumsum(axis=1) + 3.0
+        np.testing.assert_array_equal(lti.sosfiltfilt(sos, x), signal.sosfiltfilt(sos, x, axis=-1))
+        np.testing.assert_array_equal(lti.sosfiltfilt(sos, list(x)), signal.sosfiltfilt(sos, x, axis=-1))  # rows given
+        zi = signal.sosfilt_zi(sos)[:, None, :] * x[None, :, :1] * np.linspace(0.5, 1.5, rows)[None, :, None]
+        for actual, expected in zip(lti.sosfilt(sos, x, zi=zi), signal.sosfilt(sos, x, axis=-1, zi=zi)):
+            np.testing.assert_array_equal(actual, expected)
+
+
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(a1=st.floats(1e-5, 1.0), a0=st.floats(1e-3, 10.0), h=st.sampled_from([1e-5, 1e-4, 1e-3]),
        n=st.integers(1, 2000), seed=st.integers(0, 2 ** 32 - 1))

@@ -208,3 +208,25 @@ def test_bad_input_is_named():
         with pytest.raises(EstimatorInputError, match=match):
             check_model(y["u"], y["i"], y["w"], H, TRUTH, FILTER, covariance=cov, names=names)
 
+
+
+def test_input_noise_variance_forms_the_filter_once():
+    """The filter's power gain is kept per (filter, period, decimation): a motion's L and R still give their own
+    Tustin gain (the integral formed in full here, bit for bit), and the kept arrays cannot be changed."""
+    from feeddrive.estimator.kernels import bilinear_first_order
+    from feeddrive.estimator.mismatch import _filter_power
+
+    filt, h, step = FilterSpec(50.0), 1e-4, 5
+    w = (np.arange(2048) + 0.5) * (np.pi / 2048)
+    z1, z2 = np.exp(-1j * w), np.exp(-2j * w)
+    for L, R in ((4e-3, 0.6), (2e-3, 1.1)):
+        gain = np.ones(2048)
+        for b0, b1, b2, _, a1, a2 in filt.sos(h):
+            gain *= np.abs((b0 + b1 * z1 + b2 * z2) / (1 + a1 * z1 + a2 * z2)) ** 2
+        gain *= gain
+        b, a = bilinear_first_order(L, R, h * step)
+        zd = np.exp(-1j * w * step)
+        gain *= np.abs((b[0] + b[1] * zd) / (a[0] + a[1] * zd)) ** 2
+        assert input_noise_variance(filt, h, step, L, R, 0.3) == float(0.3 ** 2 * np.mean(gain))
+    kept, zd = _filter_power(filt, h, step, 2048)
+    assert not kept.flags.writeable and not zd.flags.writeable

@@ -208,3 +208,35 @@ def test_rows_transformed_together_are_the_rows_transformed_alone() -> None:
             together = rfft(X, nfft, axis=-1)
             for r in range(rows):
                 np.testing.assert_array_equal(together[r], rfft(X[r], nfft))
+
+
+def test_score_covariance_of_the_sets_together_is_each_set_alone() -> None:
+    """toeplitz.score_covariance_sum transforms the IV halves' residues, instruments and kernels together: the same
+    bits as toeplitz_score_covariance of each half added in turn (halves one sample apart in length, unused rows
+    zero, a set of another transform length, one set alone), and the time-domain sum W^T Gamma W to rounding."""
+    from feeddrive.estimator.kernels import toeplitz_score_covariance
+    from feeddrive.estimator.toeplitz import score_covariance_sum
+
+    rng = np.random.default_rng(31)
+
+    def part(n: int, unused: slice | None = None) -> tuple[np.ndarray, np.ndarray]:
+        W, e = rng.standard_normal((n, 3)) * [1.0, 1e3, 1e-2], rng.standard_normal(n)
+        if unused is not None:
+            W[unused], e[unused] = 0.0, 0.0
+        return W, e
+
+    cases = [[part(5712), part(5713)], [part(5712, slice(2000, 2600)), part(5713, slice(100, 900))],
+             [part(901), part(2400)], [part(1200)]]
+    for parts in cases:
+        alone = np.zeros((3, 3))
+        for W, e in parts:
+            alone += toeplitz_score_covariance(W, e, 83)
+        np.testing.assert_array_equal(score_covariance_sum(parts, 83), alone)
+    W, e = part(700, slice(300, 350))
+    lags = 25
+    used = (e != 0).astype(float)
+    gamma = [float(e[: e.size - k] @ e[k:]) / float(used[: e.size - k] @ used[k:]) for k in range(lags + 1)]
+    lag = np.abs(np.subtract.outer(np.arange(e.size), np.arange(e.size)))
+    Gamma = np.where(lag <= lags, np.take(gamma + [0.0], np.minimum(lag, lags + 1)), 0.0)
+    np.testing.assert_allclose(score_covariance_sum([(W, e), (W, e)], lags), 2 * W.T @ Gamma @ W, rtol=1e-11,
+                               atol=1e-11 * np.abs(W.T @ Gamma @ W).max())
