@@ -271,7 +271,7 @@ def _prepare() -> None:
 RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.estimator.estimate",
                "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
                "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
-               "feeddrive.estimator.spline_c", "feeddrive.cosim.held_inputs",
+               "feeddrive.estimator.spline_c", "feeddrive.estimator.toeplitz", "feeddrive.cosim.held_inputs",
                "multiprocessing.synchronize", "feeddrive.cosim.sensors_servo", "feeddrive.estimator.redundancy_servo",
                # imported by the estimator's functions when first called (estimator.distributions, .kernels)
                "scipy.special", "scipy.fft")
