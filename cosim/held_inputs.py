@@ -18,6 +18,13 @@ from collections.abc import Mapping, Sequence
 MEAN_OVERSAMPLE = 4
 
 
+def _unaveraged(oversample: int, sampling: Mapping[str, str]) -> list[str] | None:
+    """The channels not averaged over the recorded sample (``instant``, ``lowpass``), or None when the set-up
+    averages enough (``MEAN_OVERSAMPLE`` sub-steps, every channel ``mean``): the notes do not apply then."""
+    unaveraged = sorted(c for c, s in sampling.items() if s != "mean")
+    return None if oversample >= MEAN_OVERSAMPLE and not unaveraged else unaveraged
+
+
 def held_input_note(input_hold: str | None, oversample: int, sampling: Mapping[str, str],
                     motions: Sequence[object]) -> str | None:
     """The note for report.json ``held_inputs`` and the console, or None when it does not apply.
@@ -38,8 +45,8 @@ def held_input_note(input_hold: str | None, oversample: int, sampling: Mapping[s
         return None
     rejected = [k for k, m in enumerate(motions, 1) if isinstance(m, Mapping) and isinstance(m.get("mismatch"), Mapping)
                 and m["mismatch"].get("passed") is False]
-    unaveraged = sorted(c for c, s in sampling.items() if s != "mean")
-    if not rejected or (oversample >= MEAN_OVERSAMPLE and not unaveraged):
+    unaveraged = _unaveraged(oversample, sampling)
+    if not rejected or unaveraged is None:
         return None
     which = f"motion {rejected[0]}" if len(rejected) == 1 else f"motions {', '.join(map(str, rejected))}"
     how = (f"sampled {'once' if oversample == 1 else f'{oversample} times'} per recorded sample (plant.oversample "
@@ -88,8 +95,8 @@ def sampling_bias_note(input_hold: str | None, step: float, oversample: int, sam
     """
     if input_hold != "foh":  # a held input's error is larger and not this one (README, "Known limitations")
         return None
-    unaveraged = sorted(c for c, s in sampling.items() if s != "mean")
-    if oversample >= MEAN_OVERSAMPLE and not unaveraged:
+    unaveraged = _unaveraged(oversample, sampling)
+    if unaveraged is None:
         return None
     found = []
     for k, m in enumerate(motions, 1):

@@ -213,12 +213,7 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     monitor = report["components"].get("monitor")
     if isinstance(monitor, dict) and "motions" in monitor:
         report["motions"] = monitor["motions"]
-        held = _held_input_note(scenario, report)
-        if held:
-            report["held_inputs"] = held
-        bias = _held_input_note(scenario, report, bias=True)
-        if bias:
-            report["sampling_bias"] = bias
+        report |= {k: v for k, v in _set_up_notes(scenario, report).items() if v}
     report["files"] = {k: ([os.path.relpath(p, out_dir) for p in v] if k == "plots" else v.name)
                        for k, v in paths.items()}
     paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
@@ -294,19 +289,19 @@ def column_sampling(scenario: Scenario, names: Sequence[str]) -> dict[str, Sampl
     return out
 
 
-def _held_input_note(scenario: Scenario, report: dict, bias: bool = False) -> str | None:
-    """cosim.held_inputs' note for this run (``bias``: its ``sampling_bias_note`` on L): its plant's input hold,
-    oversampling and voltage/current sampling."""
+def _set_up_notes(scenario: Scenario, report: dict) -> dict[str, str | None]:
+    """cosim.held_inputs' notes for this run (report.json ``held_inputs`` and ``sampling_bias``), from its plant's
+    input hold, oversampling and voltage/current sampling; none for a user's plant component or the servo drive's
+    own sensors (nothing is known of their sampling)."""
     from feeddrive.cosim.held_inputs import held_input_note, sampling_bias_note
 
     sensors, plant = scenario.sensors, report["components"].get("plant")
     if not isinstance(plant, dict) or not hasattr(sensors, "voltage") or not hasattr(sensors, "current"):
-        return None  # a user's plant component or the servo drive's own sensors: nothing known of its sampling
+        return {}
     sampling = {"voltage": sensors.voltage.sampling, "current": sensors.current[0].sampling}
-    if bias:
-        return sampling_bias_note(plant.get("input_hold"), scenario.step, scenario.plant.oversample, sampling,
-                                  report["motions"])
-    return held_input_note(plant.get("input_hold"), scenario.plant.oversample, sampling, report["motions"])
+    hold, m, motions = plant.get("input_hold"), scenario.plant.oversample, report["motions"]
+    return {"held_inputs": held_input_note(hold, m, sampling, motions),
+            "sampling_bias": sampling_bias_note(hold, scenario.step, m, sampling, motions)}
 
 
 def _write_page(out_dir: Path, report: dict) -> None:

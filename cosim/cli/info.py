@@ -93,10 +93,10 @@ def main(args: argparse.Namespace) -> int:
         return 0
     role_map, error = load_plant_map(args.map)
     conversions: dict = {}
-    problems = check_map(md, role_map, path.name, _axis_kind(args.map), conversions,
-                         interface=_plant_interface(args.map))
+    axis_kind, interface, plant_fmu = _plant_keys(args.map)
+    problems = check_map(md, role_map, path.name, axis_kind, conversions, interface=interface)
     print(f"map of {args.map} (role [SI unit] <- FMU variable [unit] x scale + offset; -> for the FMU's inputs)")
-    other = _other_plant(args.map, path, str(args.fmu))
+    other = _other_plant(plant_fmu, args.map, path, str(args.fmu))
     if other:  # the map is checked against the FMU given, as asked; the run would use the scenario's own plant
         print(f"  note: {args.map}'s plant is {other}, not {path.name}: its map is checked against {path.name}")
     for role, e in role_map.items():
@@ -143,32 +143,22 @@ def _components(path: Path, md, scenario: Path) -> bool:  # noqa: ANN001 - fmpy'
     return not here((data.get("plant") or {}).get("fmu") if isinstance(data.get("plant"), dict) else None)
 
 
-def _axis_kind(scenario: Path) -> str:
-    """``axis.kind`` of a scenario file (the position role of a rotary axis is in rad), default linear."""
+def _plant_keys(scenario: Path) -> tuple[str, str, object]:
+    """From one reading of a scenario file: ``axis.kind`` (the position role of a rotary axis is in rad; default
+    linear), ``plant.interface`` (``me``: an input role needs a continuous input; default cs) and ``plant.fmu``
+    (default builtin)."""
     from feeddrive.cosim.yaml_source import read_yaml
 
     data, _ = read_yaml(scenario)
-    axis = data.get("axis") if isinstance(data, dict) else None
-    return axis.get("kind", "linear") if isinstance(axis, dict) else "linear"
+    axis, plant = ((data.get(k) if isinstance(data, dict) else None) for k in ("axis", "plant"))
+    axis, plant = (x if isinstance(x, dict) else {} for x in (axis, plant))
+    return axis.get("kind", "linear"), plant.get("interface", "cs"), plant.get("fmu", "builtin")
 
 
-def _plant_interface(scenario: Path) -> str:
-    """``plant.interface`` of a scenario file (``me``: an input role needs a continuous input), default cs."""
-    from feeddrive.cosim.yaml_source import read_yaml
-
-    data, _ = read_yaml(scenario)
-    plant = data.get("plant") if isinstance(data, dict) else None
-    return plant.get("interface", "cs") if isinstance(plant, dict) else "cs"
-
-
-def _other_plant(scenario: Path, fmu: Path, asked: str) -> str | None:
-    """The scenario's ``plant.fmu`` when it is not the FMU ``fmu`` (``asked`` on the command line: a built-in
-    plant's name, or a file; relative paths in the scenario are its file's, as cosim run resolves them), else None."""
-    from feeddrive.cosim.yaml_source import read_yaml
-
-    data, _ = read_yaml(scenario)
-    plant = data.get("plant") if isinstance(data, dict) else None
-    given = plant.get("fmu", "builtin") if isinstance(plant, dict) else "builtin"
+def _other_plant(given: object, scenario: Path, fmu: Path, asked: str) -> str | None:
+    """The scenario's ``plant.fmu`` (``given``) when it is not the FMU ``fmu`` (``asked`` on the command line: a
+    built-in plant's name, or a file; relative paths in the scenario are its file's, as cosim run resolves them),
+    else None."""
     if not isinstance(given, str):
         return None  # a wrong value: cosim run says what it expects
     if given.startswith("builtin"):
