@@ -189,7 +189,8 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
             if isinstance(m.get("mismatch"), dict) and not m["mismatch"].get("passed", True):
                 lines.append(f"    model mismatch ({m['mismatch']['test']} test): parameters not validated")
             for d in m.get("diagnosis") or []:
-                lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
+                if d["fault"] not in verdict:  # the verdict line names it already
+                    lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
             if m.get("error") and m["error"] not in verdict:
                 lines.append(f"    {m['error']}")
     unfinished = ((r.get("components") or {}).get("monitor") or {}).get("unfinished_motion")

@@ -54,8 +54,16 @@ def fault_text(f: Mapping) -> str:
     return f"{f.get('sensor', '?')} {fault_values(f)}"
 
 
+#: estimator.diagnosis.UNEXPLAINED, the fault of a drift no Table I row explains (not imported: numpy; a test
+#: compares them)
+UNEXPLAINED = "unexplained drift"
+#: the monitor's own words for a kind (cosim/monitor_checks.motion_verdict writes ``diagnosed``)
+_ALIASES = {"diagnosed": "diagnosis"}
+
+
 def _kind_of(text: str) -> str:
     low = text.lower()
+    low = next((kind + low[len(word):] for word, kind in _ALIASES.items() if low.startswith(word)), low)
     return next((k for k in KINDS if low.startswith(k)), "healthy" if low.startswith("healthy") else "not validated")
 
 
@@ -114,10 +122,14 @@ def _derive(m: Mapping, statuses: Mapping[str, str]) -> tuple[str, str]:
     if not m.get("validated"):
         reasons = [n.removeprefix("not validated: ") for n in m.get("notes") or () if n.startswith("not validated")]
         return "not validated", "not validated: " + ("; ".join(reasons) or "no model check")
-    if m.get("diagnosis"):
-        faults = "; ".join(dict.fromkeys(d.get("fault", "?") for d in m["diagnosis"]))
-        params = ", ".join(dict.fromkeys(p for d in m["diagnosis"] for p in d.get("parameters", ())))
+    diagnosis = m.get("diagnosis") or []
+    if any(d.get("fault") != UNEXPLAINED for d in diagnosis):
+        faults = "; ".join(dict.fromkeys(d.get("fault", "?") for d in diagnosis))
+        params = ", ".join(dict.fromkeys(p for d in diagnosis for p in d.get("parameters", ())))
         return "diagnosis", f"diagnosis: {faults} ({params})"
+    if diagnosis:  # only drifts no Table I fault explains: the monitor calls the motion drifting
+        params = ", ".join(dict.fromkeys(p for d in diagnosis for p in d.get("parameters", ())))
+        return "drifting", f"drifting: {UNEXPLAINED} of {params} (no Table I fault matches)"
     drifting = [k for k, s in statuses.items() if s == "drifting"]
     if drifting:
         return "drifting", f"drifting: {', '.join(drifting)} beyond half the alarm band (no fault diagnosed)"

@@ -143,3 +143,29 @@ def test_the_monitor_consoles_residue_check_line_does_not_write_p_zero():
     assert adequacy_line(a) == ("model check (own residue): MODEL MISMATCH (p < 1e-300 at alpha = 0.01): "
                                 "the electrical equation lacks a term")
     assert "(p = 0.0234 at alpha" in adequacy_line(a | {"p_value": 0.0234})
+
+
+@pytest.mark.parametrize("changes, kind, text", [
+    ({"diagnosis": [{"fault": "demagnetisation", "parameters": ["psi_f"], "evidence": []}]}, "diagnosis",
+     "diagnosis: demagnetisation (psi_f)"),
+    ({"diagnosis": [{"fault": "unexplained drift", "parameters": ["Cd", "ft"], "evidence": []}]}, "drifting",
+     "drifting: unexplained drift of Cd, ft (no Table I fault matches)"),
+    ({}, "healthy", "healthy: validated, no drift"),
+    ({"sensor_faults": [FAULT]}, "sensor fault", "sensor fault: Im1 gain 1.03, offset 0.2 A; parameters estimated"),
+    ({"validated": False, "notes": ["not validated: Jt refused"]}, "not validated", "not validated: Jt refused"),
+])
+def test_the_monitors_words_give_the_pages_kind(changes, kind, text):
+    """The word the monitor writes (report.json ``verdict``, cosim/monitor_checks.motion_verdict) gives the page's
+    kind, colour and detail: a PMSM motion the monitor called ``diagnosed`` (demagnetisation) was shown as a grey
+    "diagnosed" badge without its fault, the colour of a motion not judged."""
+    from feeddrive.cosim.monitor_checks import motion_verdict as monitor_word
+    from feeddrive.cosim.report.verdict import UNEXPLAINED
+    from feeddrive.estimator.diagnosis import UNEXPLAINED as ESTIMATOR_UNEXPLAINED
+
+    assert UNEXPLAINED == ESTIMATOR_UNEXPLAINED
+    m = motion(**changes)
+    m["verdict"] = monitor_word(m, mismatch=False)
+    v = motion_verdict(m)
+    assert (v["kind"], v["text"]) == (kind, text)
+    assert v["css"] == {"diagnosis": "diagnosed", "drifting": "drifting", "healthy": "healthy",
+                        "sensor fault": "bad", "not validated": "not-judged"}[kind]
