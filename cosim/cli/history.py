@@ -78,7 +78,8 @@ def main(args: argparse.Namespace) -> int:
 def thresholds(db: Path, axis: str, motions: list[dict]) -> dict:
     """The alarm band's thresholds for a history page: those of the newest judged motion (what the monitor used:
     its z, relative changes and baseline size), else the monitor's defaults; the healthy baseline as the monitor
-    reads it from ``db``."""
+    reads it from ``db``, or the one that motion was judged against when it was not learnt from the axis's motions
+    (``monitor.baseline: nominal`` or a stated file)."""
     from feeddrive.cosim.monitor import MonitorConfig, MonitorPipeline
     from feeddrive.estimator.history import History
 
@@ -92,6 +93,10 @@ def thresholds(db: Path, axis: str, motions: list[dict]) -> dict:
         from feeddrive.estimator.distributions import norm_sf
 
         out |= {"z_crit": used["z_crit"], "min_relative": used["min_relative"], "alpha": 2 * norm_sf(used["z_crit"])}
+        if used.get("baseline_mode") not in (None, "motions") and used.get("baseline"):
+            # judged against the nominal parameters or a stated file, not against the axis's learnt motions: the
+            # page showed "not learnt yet" beside motions diagnosed against the nominal values
+            out |= {"baseline": used["baseline"], "baseline_mode": used["baseline_mode"]}
     return out
 
 

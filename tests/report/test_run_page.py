@@ -199,3 +199,27 @@ def test_single_motion_trend_reads_well(runs):
         import matplotlib.pyplot as plt
 
         plt.close(fig)
+
+
+def test_a_nominal_baseline_is_said_on_the_run_page_and_the_history_page(example_runs, tmp_path):
+    """worn_axis.yaml is judged against its nominal parameters (``monitor.baseline: nominal``). Its run page said
+    "the mean of the first 3 validated motions without a diagnosis; 0 learnt so far", and its axis's history page
+    "not learnt yet" in every baseline cell, beside two parameters diagnosed against the nominal values."""
+    import shutil
+
+    report, root = load(example_runs["out"]["worn_axis"])
+    nominal = report["components"]["monitor"]["diagnosis_thresholds"]["baseline"]
+    assert nominal["Cd"] == {"value": 1.2, "std": 0.0} and nominal["ft"] == {"value": 0.02, "std": 0.0}
+    for page in (root, None):
+        if page is None:  # the history page of the axis, from a copy of the examples' history
+            db = tmp_path / "history.sqlite"
+            shutil.copy(example_runs["work"] / "runs" / "history.sqlite", db)
+            assert main(["history", str(db), "--axis", "worn-X", "--html", str(tmp_path / "h.html")]) == 0
+            page = checks.parse(tmp_path / "h.html")
+        source = page.find(".//*[@id='baseline-source']")
+        assert source is not None and "nominal parameters" in "".join(source.itertext())
+        text = "".join(page.itertext())
+        assert "learnt so far" not in text and "not learnt yet" not in text
+        table = page.find(".//*[@id='baseline']")
+        rows = {c[0]: c for c in map(checks.cells, table.iter("tr")) if c}
+        assert checks.numbers(rows["Cd"][2]) == [1.2] and checks.numbers(rows["ft"][2]) == [0.02]
