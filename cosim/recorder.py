@@ -42,6 +42,9 @@ class Recorder:
         self.n = 0
         self._stream: Any = None
         self._stream_path: Path | None = None
+        #: rows written to the stream so far: a block whose writing was interrupted (Ctrl-C) is written with the
+        #: next, not skipped (the file had a row missing before the last, the times around it one step apart)
+        self._written = 0
 
     def stream(self, path: str | Path) -> None:
         """Write signals.csv while recording: the header now, each block of rows as ``extend`` gets it.
@@ -52,14 +55,18 @@ class Recorder:
         self._stream_path = Path(path)
         self._stream = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed by write_csv
         self._stream.write(self._header() + "\n")
-        self._write_rows(0, self.n)
+        self._written = 0
+        self._write_rows()
 
     def _header(self) -> str:
         return ",".join(f"{n} [{u}]" if u else n for n, u in zip(("time",) + self.names, ("s",) + self.units))
 
-    def _write_rows(self, a: int, b: int) -> None:
+    def _write_rows(self) -> None:
+        """Write the rows recorded and not written yet, and flush them to the operating system."""
+        a, b = self._written, self.n
         if b > a:
             self._stream.write(format_rows(np.column_stack([self.t0 + self.h * np.arange(a, b), self.data[a:b]])))
+            self._written = b
         self._stream.flush()
 
     def extend(self, rows: Sequence[Sequence[float]]) -> None:
@@ -68,7 +75,7 @@ class Recorder:
             self.data[self.n:self.n + len(rows)] = rows
             self.n += len(rows)
             if self._stream is not None:
-                self._write_rows(self.n - len(rows), self.n)
+                self._write_rows()
 
     @property
     def time(self) -> np.ndarray:
@@ -87,7 +94,8 @@ class Recorder:
         """
         path = Path(path)
         if self._stream is not None and self._stream_path == path:
-            self._stream.close()  # already written block by block
+            self._write_rows()  # already written block by block, but for a block an interruption cut short
+            self._stream.close()
             self._stream = None
             return path
         with open(path, "w", encoding="utf-8") as out:

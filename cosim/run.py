@@ -196,9 +196,12 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
             workers.close(wait=False)  # idle now: they exit while report.json and report.html are written
     except BaseException as exc:
         rec = master.recorder
-        report |= {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
+        report |= {"status": "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed",
+                   "error": "interrupted (Ctrl-C / SIGINT)" if isinstance(exc, KeyboardInterrupt)
+                   else f"{type(exc).__name__}: {exc}",
                    "wall_time_s": round(_time.perf_counter() - wall, 3),
                    "recorded_until_s": float(rec.time[-1]) if rec is not None and rec.n else None}
+        _keep_judged(master, report)
         paths["report"].write_text(json.dumps(report, indent=2, default=_json_default), encoding="utf-8")
         if page:
             _write_page(out_dir, report)
@@ -220,6 +223,17 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
     if page:
         _write_page(out_dir, report)
     return RunResult(out_dir, recorder.time, signals, dict(zip(recorder.names, recorder.units)), report, paths)
+
+
+def _keep_judged(master: Master, report: dict) -> None:
+    """The motions the monitor judged before a run failed or was interrupted, into ``report`` (they are in the
+    history already): a failed run keeps its results up to the failure."""
+    try:
+        monitor = master.reports().get("monitor")
+    except Exception:  # noqa: BLE001 - the failure is what the report says; its motions are a bonus
+        return
+    if isinstance(monitor, dict) and monitor.get("motions"):
+        report["motions"] = monitor["motions"]
 
 
 def plot_jobs(master: Master, time: np.ndarray, signals: dict[str, np.ndarray], folder: Path, title: str,

@@ -53,6 +53,8 @@ REAPER = "feeddrive-reap"
 #: children that sent their result and were not reaped yet (``REAP_IN_THREAD`` False)
 _UNREAPED: list[int] = []
 LOG_FILE = "run.log"
+#: how long an interrupted child (Ctrl-C) may take to write report.json and report.html before it is killed [s]
+INTERRUPT_GRACE_S = 5.0
 
 
 class RunCrashed(SimulationError):
@@ -139,7 +141,10 @@ def supervise(target: Callable[..., Any], *args: Any, timeout: float | None = No
     os.close(write_fd)
     try:
         return _watch(pid, read_fd, rec, timeout)
-    except BaseException:  # Ctrl-C or an error here: never leave the child behind
+    except KeyboardInterrupt:  # Ctrl-C: the child writes what it has (report.json, signals.csv), then goes
+        _stop(pid, read_fd)
+        raise
+    except BaseException:  # an error here: never leave the child behind
         _kill(pid)
         raise
     finally:
@@ -151,10 +156,40 @@ def supervise(target: Callable[..., Any], *args: Any, timeout: float | None = No
             pass
 
 
+def _interrupt_once(signum: int, frame: Any) -> None:  # pragma: no cover - runs in the child
+    """The child's SIGINT handler: KeyboardInterrupt once, then SIGINT ignored, so that the terminal's Ctrl-C and
+    the parent's forwarded one (:func:`_stop`) do not cut the writing of what the run has short."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
+def _stop(pid: int, fd: int) -> None:
+    """Interrupt the child (SIGINT: a terminal's Ctrl-C reaches it too, a ``kill -INT`` of this process does not),
+    give it ``INTERRUPT_GRACE_S`` to write its report and close its pipe, then kill it; a second Ctrl-C kills it
+    at once."""
+    try:
+        os.kill(pid, signal.SIGINT)
+        deadline = time.monotonic() + INTERRUPT_GRACE_S
+        while (left := deadline - time.monotonic()) > 0:
+            ready, _, _ = select.select([fd], [], [], min(left, POLL_S))
+            if ready and not os.read(fd, 1 << 20):
+                break  # the pipe closed: the child has written what it had and is exiting
+    except ProcessLookupError:
+        pass
+    finally:
+        _kill(pid)
+        try:
+            os.waitpid(pid, 0)
+        except ChildProcessError:
+            pass
+
+
 def _child(target: Callable[..., Any], args: tuple, rec: Any, fd: int,
            log_path: str | Path | None) -> None:  # pragma: no cover - runs in the child
     code = 0
     try:
+        if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:  # a run started ignoring it (nohup, &) still does
+            signal.signal(signal.SIGINT, _interrupt_once)
         fmi_progress.install(rec)
         log = open(log_path, "a", encoding="utf-8", buffering=1) if log_path else None  # noqa: SIM115
         faulthandler.disable()  # an inherited handler (PYTHONFAULTHANDLER, pytest) would print to the terminal
@@ -313,12 +348,18 @@ def run_supervised(scenario: Any, out_dir: str | Path, *, progress: bool = False
     log = out_dir / LOG_FILE
     log.write_text("", encoding="utf-8")
     history = Path(default_history) if default_history is not None else None
-    outcome = supervise(_run_child, scenario, out_dir, progress, history, plots, workers, timeout=timeout,
-                        log_path=log)
+    try:
+        outcome = supervise(_run_child, scenario, out_dir, progress, history, plots, workers, timeout=timeout,
+                            log_path=log)
+    except KeyboardInterrupt:
+        _interrupted(scenario, out_dir, progress)
+        raise
     if outcome.status == "ok":
         return outcome.value
     if outcome.status == "error":
         exc = outcome.error
+        if isinstance(exc, KeyboardInterrupt):  # the child alone was interrupted (kill -INT of its pid)
+            _interrupted(scenario, out_dir, progress)
         if isinstance(exc, _REPORTED) or not isinstance(exc, Exception):
             raise exc
         # a bug, not a user's mistake: one line for the user, the traceback is in run.log
@@ -331,6 +372,16 @@ def run_supervised(scenario: Any, out_dir: str | Path, *, progress: bool = False
         f.write(f"supervisor: {message}\n")
     _write_failure_report(scenario, out_dir, outcome, message)
     raise RunCrashed(message, outcome)
+
+
+def _interrupted(scenario: Any, out_dir: Path, progress: bool) -> None:
+    """report.json and report.html of an interrupted run: what the child wrote (the motions judged so far) kept,
+    marked interrupted with the time recorded until; signals.csv holds every block recorded before."""
+    if progress and sys.stderr.isatty():
+        sys.stderr.write("\r\x1b[K")
+    at = last_recorded_time(out_dir / "signals.csv")
+    _write_failure_report(scenario, out_dir, Outcome("interrupted"), "interrupted (Ctrl-C / SIGINT)"
+                          + (f" at t={at:.6g} s" if at is not None else ""))
 
 
 def _write_failure_report(scenario: Any, out_dir: Path, outcome: Outcome, message: str) -> None:

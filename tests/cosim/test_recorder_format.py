@@ -59,3 +59,31 @@ def test_streamed_and_final_signals_csv_are_the_same_file(tmp_path):
     assert text.splitlines()[0] == "time [s],x [A],y,z [m]"
     back = np.loadtxt(tmp_path / "a.csv", delimiter=",", skiprows=1)
     assert np.allclose(back[:, 1:], data, rtol=1e-9, atol=0) and np.allclose(back[:, 0], np.arange(3000) * 1e-4)
+
+
+def test_a_block_whose_writing_was_interrupted_is_written_with_the_next(tmp_path, monkeypatch):
+    """Ctrl-C while a block of rows was being formatted (most of a block's time) left that block out of the
+    streamed signals.csv and wrote the next one after it: a row missing, the times around it one step apart
+    more. The rows recorded and not written are written with the next block, or when the file is closed."""
+    import feeddrive.cosim.recorder as recorder_module
+
+    rec = Recorder(["a", "b"], ["V", "A"], 10, 0.0, 1e-4)
+    path = tmp_path / "signals.csv"
+    rec.stream(path)
+    rec.extend(np.array([[1.0, 2.0], [3.0, 4.0]]))
+    calls = {"n": 0}
+
+    def interrupted_once(table):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise KeyboardInterrupt
+        return format_rows(table)
+
+    monkeypatch.setattr(recorder_module, "format_rows", interrupted_once)
+    with pytest.raises(KeyboardInterrupt):
+        rec.extend(np.array([[5.0, 6.0]]))  # recorded, its writing interrupted
+    rec.extend(np.array([[7.0, 8.0]]))  # the run's last rows (cosim/master.py's failure path)
+    rec.write_csv(path)
+    table = np.loadtxt(path, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(table[:, 1:], [[1, 2], [3, 4], [5, 6], [7, 8]])
+    np.testing.assert_allclose(table[:, 0], [0.0, 1e-4, 2e-4, 3e-4], rtol=0, atol=1e-15)
