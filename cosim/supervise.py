@@ -57,6 +57,10 @@ LOG_FILE = "run.log"
 INTERRUPT_GRACE_S = 5.0
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """``cosim run`` interrupted (Ctrl-C): its message says until when and what was kept."""
+
+
 class RunCrashed(SimulationError):
     """The run's process died by a signal or was stopped by the watchdog (``outcome`` says which)."""
 
@@ -352,14 +356,13 @@ def run_supervised(scenario: Any, out_dir: str | Path, *, progress: bool = False
         outcome = supervise(_run_child, scenario, out_dir, progress, history, plots, workers, timeout=timeout,
                             log_path=log)
     except KeyboardInterrupt:
-        _interrupted(scenario, out_dir, progress)
-        raise
+        raise RunInterrupted(_interrupted(scenario, out_dir, progress)) from None
     if outcome.status == "ok":
         return outcome.value
     if outcome.status == "error":
         exc = outcome.error
         if isinstance(exc, KeyboardInterrupt):  # the child alone was interrupted (kill -INT of its pid)
-            _interrupted(scenario, out_dir, progress)
+            raise RunInterrupted(_interrupted(scenario, out_dir, progress))
         if isinstance(exc, _REPORTED) or not isinstance(exc, Exception):
             raise exc
         # a bug, not a user's mistake: one line for the user, the traceback is in run.log
@@ -374,17 +377,21 @@ def run_supervised(scenario: Any, out_dir: str | Path, *, progress: bool = False
     raise RunCrashed(message, outcome)
 
 
-def _interrupted(scenario: Any, out_dir: Path, progress: bool) -> None:
+def _interrupted(scenario: Any, out_dir: Path, progress: bool) -> str:
     """report.json and report.html of an interrupted run: what the child wrote (the motions judged so far) kept,
-    marked interrupted with the time recorded until; signals.csv holds every block recorded before."""
+    marked interrupted with the time recorded until; signals.csv holds every block recorded before. Returns what
+    the console says of it."""
     if progress and sys.stderr.isatty():
         sys.stderr.write("\r\x1b[K")
     at = last_recorded_time(out_dir / "signals.csv")
-    _write_failure_report(scenario, out_dir, Outcome("interrupted"), "interrupted (Ctrl-C / SIGINT)"
-                          + (f" at t={at:.6g} s" if at is not None else ""))
+    where = f" at t={at:.6g} s" if at is not None else ""
+    report = _write_failure_report(scenario, out_dir, Outcome("interrupted"), f"interrupted (Ctrl-C / SIGINT){where}")
+    judged = len(report.get("motions") or ())
+    kept = "signals.csv up to then, " if at is not None else ""
+    return f"{where.strip()}; {kept}report.json ({judged} motion{'s' * (judged != 1)} judged) in {out_dir}"
 
 
-def _write_failure_report(scenario: Any, out_dir: Path, outcome: Outcome, message: str) -> None:
+def _write_failure_report(scenario: Any, out_dir: Path, outcome: Outcome, message: str) -> dict[str, Any]:
     report: dict[str, Any] = {}
     path = out_dir / "report.json"
     try:
@@ -404,6 +411,7 @@ def _write_failure_report(scenario: Any, out_dir: Path, outcome: Outcome, messag
     from feeddrive.cosim.run import _write_page
 
     _write_page(out_dir, report)
+    return report
 
 
 def last_recorded_time(signals_csv: Path) -> float | None:

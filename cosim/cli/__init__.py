@@ -127,8 +127,8 @@ def _main(argv: list[str]) -> int:
     except _failure_errors() as exc:
         print(f"cosim {args.command}: failed: {_one_line(exc)}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"cosim {args.command}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # a run's says until when and what was kept (cosim/supervise.py)
+        print(f"cosim {args.command}: interrupted{' ' + str(exc) if str(exc) else ''}", file=sys.stderr)
         return 130
     except BrokenPipeError:  # output piped into `head` and the like
         sys.stderr.close()

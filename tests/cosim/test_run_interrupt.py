@@ -34,9 +34,10 @@ def test_ctrl_c_keeps_the_motions_judged_and_the_signals_recorded(tmp_path, feed
     assert proc.poll() is None, "the run ended before it could be interrupted"
     os.killpg(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "cosim run: interrupted", err
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
     until = last_recorded_time(csv)
+    assert proc.returncode == 130 and err.strip().splitlines()[-1] == (
+        f"cosim run: interrupted at t={until:.6g} s; signals.csv up to then, report.json (1 motion judged) in run"), err
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
     assert report["status"] == "interrupted" and 4.2 <= until < 7.9
     assert report["recorded_until_s"] == pytest.approx(until) and report["error"].startswith("interrupted")
     # motion 1, judged before the interruption, is in the report as the monitor wrote it: Im1's injected
