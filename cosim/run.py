@@ -232,8 +232,10 @@ def _keep_judged(master: Master, report: dict) -> None:
         monitor = master.reports().get("monitor")
     except Exception:  # noqa: BLE001 - the failure is what the report says; its motions are a bonus
         return
-    if isinstance(monitor, dict) and monitor.get("motions"):
-        report["motions"] = monitor["motions"]
+    if isinstance(monitor, dict):  # its motions, thresholds and the motion it was inside (never judged)
+        report["components"] = {"monitor": monitor}
+        if monitor.get("motions"):
+            report["motions"] = monitor["motions"]
 
 
 def plot_jobs(master: Master, time: np.ndarray, signals: dict[str, np.ndarray], folder: Path, title: str,

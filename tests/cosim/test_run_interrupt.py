@@ -48,3 +48,6 @@ def test_ctrl_c_keeps_the_motions_judged_and_the_signals_recorded(tmp_path, feed
     np.testing.assert_allclose(np.diff(t), 1e-4, rtol=1e-6)  # every row up to the last complete block
     page = (tmp_path / "run" / "report.html").read_text()
     assert 'id="status">interrupted<' in page and "interrupted (Ctrl-C / SIGINT) at t=" in page
+    # motion 2 had started (at 4.19 s): never judged, and said so
+    assert report["components"]["monitor"]["unfinished_motion"] == 2
+    assert "motion 2: not judged: the run was interrupted inside it at" in page
