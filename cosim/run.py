@@ -228,8 +228,11 @@ def run_scenario(scenario: Scenario | str | Path, out_dir: str | Path, *, progre
 def _keep_judged(master: Master, report: dict) -> None:
     """The motions the monitor judged before a run failed or was interrupted, into ``report`` (they are in the
     history already): a failed run keeps its results up to the failure."""
-    try:
-        monitor = master.reports().get("monitor")
+    component = master.components.get("monitor")
+    if component is None:
+        return
+    try:  # the monitor's report alone: a failed FMU's is not asked for (its instance may be gone)
+        monitor = component.report()
     except Exception:  # noqa: BLE001 - the failure is what the report says; its motions are a bonus
         return
     if isinstance(monitor, dict):  # its motions, thresholds and the motion it was inside (never judged)
