@@ -65,11 +65,12 @@ __all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionDa
            "instrumental_variables", "least_squares", "owners", "prepare", "too_short", "update_constants"]
 
 
-def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -> Prepared:
+def prepare(data: MotionData, options: EstimationOptions, strict: bool = True, remember: bool = True) -> Prepared:
     """Filter, differentiate and align the signals; derive the regressions the data allow.
 
     With ``strict`` False an equation without enough fast samples is left out and its parameters are
-    listed in ``Prepared.refused`` with the reason, instead of raising ``NotEnoughExcitation``.
+    listed in ``Prepared.refused`` with the reason, instead of raising ``NotEnoughExcitation``. With
+    ``remember`` False the filtered signals are not kept for reuse (``FilterSpec.apply``).
 
     Returns
     -------
@@ -92,7 +93,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
     if options.filter.zero_phase and data.n <= 3 * (2 * len(options.filter.sos(h)) + 1):  # sosfiltfilt's padding
         raise too_short(data, options, edge)
-    f = options.filter.apply(raw, h)
+    f = options.filter.apply(raw, h, remember)
     for name, delay in data.delays.items():
         if delay and name in f:  # a sample stamped t_n is the signal at t_n - delay: read it `delay` later
             x = f[name]
@@ -354,7 +355,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     # read one record sample, 1 / (2 D) of theirs, off
     every = decimation_factor(options.filter.cutoff_hz, data.h, data.n, options.decimation)
     half_options = replace(options, decimation=every)
-    halves = (prepare(odd, half_options, strict=check), prepare(even, half_options, strict=check))
+    # the halves are new views of the record, filtered here only: not kept for reuse (no copy of their samples)
+    halves = tuple(prepare(half, half_options, strict=check, remember=False) for half in (odd, even))
     if [r.equation for r in halves[0].regressions] != [r.equation for r in halves[1].regressions]:
         raise NotEnoughExcitation(sorted(set(halves[0].refused) | set(halves[1].refused)),
                                   "the odd and even samples do not allow the same equations")

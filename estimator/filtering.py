@@ -47,7 +47,7 @@ class FilterSpec:
                 f"filter cutoff {self.cutoff_hz} Hz must be below 0.45 x Nyquist ({0.45 * nyquist:g} Hz at h={h:g} s)")
         return _butter_sos(int(self.order), float(self.cutoff_hz), float(h)).copy()  # a writable copy: the cached one is shared
 
-    def apply(self, signals: Mapping[str, np.ndarray], h: float) -> dict[str, np.ndarray]:
+    def apply(self, signals: Mapping[str, np.ndarray], h: float, remember: bool = True) -> dict[str, np.ndarray]:
         """Filter every signal identically.
 
         Parameters
@@ -56,6 +56,9 @@ class FilterSpec:
             Signals sampled every ``h`` seconds (None values are passed through).
         h : float
             Sampling period [s].
+        remember : bool
+            Keep the results for a later call on the same values (``_MEMO``: a copy of each signal). False for
+            signals no later phase filters again (the IV halves' samples): no copy, no memo entry.
 
         Returns
         -------
@@ -91,7 +94,8 @@ class FilterSpec:
                 y.setflags(write=False)  # shared by the callers that filter the same array
                 for k, row in zip(todo, y):
                     out[k] = row
-                    _remember(_key(self, h, arrays[k]), (arrays[k].copy(), row))
+                    if remember:
+                        _remember(_key(self, h, arrays[k]), (arrays[k].copy(), row))
             return {k: out[k] for k in signals}
         for name, x in signals.items():
             if x is None:

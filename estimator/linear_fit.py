@@ -162,7 +162,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         # LS: the Gram matrix of the condition number (the same sum, the same bits)
         A = gram if Ws is Xs and not hit else sum(W.T @ X for W, X in zip(Ws, Xs))
         n = min(len(y) for y, *_ in parts)
-        G = np.zeros((n, p))
+        G = None  # the first set's scores themselves, not added to zeros (no (n, p) memset and pass)
         res2 = out2 = 0.0
         stationary = []  # (instruments, errors) with the unused rows zero, for the stationary-error floor
         for (y, _, _, r), W, X, yr in zip(parts, Ws, Xs, ys):
@@ -170,7 +170,11 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
             res2 += e @ e
             out2 += yr @ yr
             Wf, ef = spread(W, r), spread(e, r)
-            G += (Wf * ef[:, None])[:n]  # the scores, zero on the unused rows: W e on the used ones, bit for bit
+            score = (Wf * ef[:, None])[:n]  # the scores, zero on the unused rows: W e on the used ones, bit for bit
+            if G is None:
+                G = score
+            else:
+                G += score
             stationary.append((Wf, ef))
         Ai = np.linalg.inv(A)
         cov, dof, nb = parameter_covariance(G, Ai, block, stationary_score_covariance(stationary, block))
