@@ -117,14 +117,18 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         at = index[id(r)]
         if at is None:
             return x
-        out = np.zeros((r.size, *x.shape[1:]))
         if isinstance(at, np.ndarray):
+            out = np.zeros((r.size, *x.shape[1:]))
             out[at] = x  # integer indices: a third of a boolean mask's time on (n, p) arrays
             return out
-        k = 0
+        out = np.empty((r.size, *x.shape[1:]))  # each row written once: the runs copied, the gaps between zeroed
+        k = last = 0
         for a, b in at:
+            out[last:a] = 0.0
             out[a:b] = x[k:k + b - a]
             k += b - a
+            last = b
+        out[last:] = 0.0
         return out
 
     if not hit:
