@@ -221,20 +221,25 @@ def _remember(key: tuple, value: tuple) -> None:
         _MEMO.pop(next(iter(_MEMO)))
 
 
-def share_filtered(spec: FilterSpec, h: float, x: np.ndarray, filtered: np.ndarray) -> None:
+def share_filtered(spec: FilterSpec, h: float, x: np.ndarray, filtered: np.ndarray, own: bool = False) -> None:
     """Let ``spec.apply`` give ``filtered`` for ``x`` (sampled every ``h`` [s]) without filtering it again.
 
     For a signal built as a linear combination of signals already filtered (measurement validation's mean of
     two sensors, or a sensor corrected by its gain and offset): F is linear, so the same combination of their
     filtered rows is F of it, to the rounding of one addition (~1e-16 of the signal) instead of a filter pass.
-    ``x`` (n,) is copied (its values are compared before ``filtered`` is given for it); ``filtered`` (n,) is
-    made read-only and shared, as ``apply``'s results are.
+    ``x`` (n,) is copied (its values are compared before ``filtered`` is given for it); with ``own`` (the
+    caller made ``x`` and owns its memory) ``x`` itself is made read-only and kept instead of a copy.
+    ``filtered`` (n,) is made read-only and shared, as ``apply``'s results are.
     """
     x = np.asarray(x, dtype=float)
     if spec.zero_phase and x.ndim == 1 and np.shape(filtered) == x.shape:
         filtered = np.asarray(filtered, dtype=float)
         filtered.setflags(write=False)
-        _remember(_key(spec, h, x), (x.copy(), filtered))
+        if own and x.base is None:  # nothing else writes to its memory once read-only
+            x.setflags(write=False)
+        else:
+            x = x.copy()
+        _remember(_key(spec, h, x), (x, filtered))
 
 
 def clear_filter_memo() -> None:

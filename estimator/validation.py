@@ -413,8 +413,8 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
                                   tuple(pair_notes))
     for q, (s1, _) in PAIRS.items():  # the signals passed on, filtered already: the estimator's and model checks'
         x, xf = best[symbol[q]]  # low-pass of them is this one (a mean or a correction of filtered rows)
-        if x is not raw[s1]:
-            share_filtered(filter, h, x, xf)
+        if x is not raw[s1]:  # the pair's mean or a corrected sensor, made here: kept itself, read-only
+            share_filtered(filter, h, x, xf, own=not any(x is r for r in raw.values()))
     faulty_pairs = [q for q, p in pairs.items() if p.residue is not None and p.residue.kind != "none"]
     if len(faulty_pairs) > 1:
         notes.append(f"faults on several quantities ({', '.join(faulty_pairs)}): each isolation used the "
