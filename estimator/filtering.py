@@ -90,12 +90,14 @@ class FilterSpec:
                 if not todo:
                     continue
                 # row by row the same arithmetic as one call per signal (tests/estimator/test_speed.py)
-                y = lti.sosfiltfilt(sos, [arrays[k] for k in todo])  # the rows written once, into the extension
+                # the rows written once, into the extension, which is kept as the memo's copy of the values
+                y, kept = lti.sosfiltfilt(sos, [arrays[k] for k in todo], keep_input=True) if remember else \
+                    (lti.sosfiltfilt(sos, [arrays[k] for k in todo]), None)
                 y.setflags(write=False)  # shared by the callers that filter the same array
-                for k, row in zip(todo, y):
+                for j, (k, row) in enumerate(zip(todo, y)):
                     out[k] = row
                     if remember:
-                        _remember(_key(self, h, arrays[k]), (arrays[k].copy(), row))
+                        _remember(_key(self, h, arrays[k]), (kept[j], row))
             return {k: out[k] for k in signals}
         for name, x in signals.items():
             if x is None:
