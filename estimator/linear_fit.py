@@ -106,9 +106,16 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         if isinstance(at, np.ndarray):
             return x.take(at, axis=0)
         out = np.empty((sum(b - a for a, b in at), *x.shape[1:]))  # C order, as take() gives (the products' order)
+        # a regression's columns are contiguous (evaluate()): copied column by column, one strided write each,
+        # rather than row by row into C order (a call of numpy's copy loop per row of 3-4 values)
+        cols = x.ndim == 2 and not x.flags.c_contiguous
         k = 0
         for a, b in at:
-            out[k:k + b - a] = x[a:b]
+            if cols:
+                for j in range(x.shape[1]):
+                    out[k:k + b - a, j] = x[a:b, j]
+            else:
+                out[k:k + b - a] = x[a:b]
             k += b - a
         return out
 

@@ -77,7 +77,7 @@ import numpy as np
 from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
-from feeddrive.estimator.kernels import bilinear_first_order, erode, label_runs, label_slices
+from feeddrive.estimator.kernels import bilinear_first_order, columns, erode, label_runs, label_slices
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.estimator.validation import MeasurementValidation, model_reference, noise_std
@@ -463,7 +463,7 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         D = sensitivity_directions(lambda p, s=simulate, k=k: s(p, fi)[k], params, names, covariance, USES[name],
                                    base[k], undetermined)
         if name == "speed":
-            D = np.column_stack([D, free_responses(labels, params, h)[k]])
+            D = columns([D, free_responses(labels, params, h)[k]])
         X = np.column_stack([fi[s] for s in INPUTS[name]])[k]
         tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[k], D, X, h, alpha, rate_hz, lags,
                                                ar_order, noise.get(name), noise_dof,
