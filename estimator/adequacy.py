@@ -315,9 +315,9 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     # (the integrated speed noise against its derivative, the current noise against R i) is biased
     lag = int(np.ceil(LAG_PERIODS / (filter.cutoff_hz * h)))
     rows = _rows(s["w"], h, filter.cutoff_hz, speed_fraction, lag)
-    if rows.sum() < 64:
+    if np.count_nonzero(rows) < 64:
         return AdequacyResult("not enough excitation", None, alpha,
-                              f"{int(rows.sum())} samples with |speed| above {speed_fraction:g} of its peak")
+                              f"{np.count_nonzero(rows)} samples with |speed| above {speed_fraction:g} of its peak")
     sgn, aw = np.sign(s["w"]), np.abs(s["w"])
 
     # everything tested is read on the rows only: a term read LAG samples away is taken there (the rows keep

@@ -85,7 +85,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     and ``reference`` are the same objects (only the instruments change from one IV iteration to the next).
     """
     p = parts[0][1].shape[1]
-    used = sum(int(r.sum()) for *_, r in parts)
+    used = sum(np.count_nonzero(r) for *_, r in parts)  # counts: bit for bit r.sum(), a third of its time
     if used < 20 * p:
         raise NotEnoughExcitation(list(reg.names) + ([reg.normaliser] if reg.normaliser else []),
                                   f"motion too short: {used} usable samples in the {reg.equation} "

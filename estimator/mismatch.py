@@ -465,8 +465,8 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         simulated = simulate(params, f)
         k = keep[name]
         sel = _one_run(k)  # the current's samples are one run: read as views (a slice), not gathered by the mask
-        if k.sum() < 2 / h * MIN_SEGMENT_S:
-            raise EstimatorInputError(f"model check ({name}): only {k.sum()} samples to test")
+        if np.count_nonzero(k) < 2 / h * MIN_SEGMENT_S:
+            raise EstimatorInputError(f"model check ({name}): only {np.count_nonzero(k)} samples to test")
         base = simulated if fi is f else simulate(params, fi)
         D = sensitivity_directions(lambda p, s=simulate, k=sel: s(p, fi)[k], params, names, covariance, USES[name],
                                    base[sel], undetermined)
