@@ -47,7 +47,7 @@ from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_f
 from feeddrive.estimator.distributions import f_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
-from feeddrive.estimator.kernels import block_iv, erode, nonzero_norms, right_singular, thin_q
+from feeddrive.estimator.kernels import block_iv, columns, erode, nonzero_norms, right_singular, thin_q
 from feeddrive.estimator.pvalue_text import p_text
 
 #: nuisance directions with less than this fraction of their norm outside the model's span are not tested
@@ -315,9 +315,9 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     # (the integrated speed noise against its derivative, the current noise against R i) is biased
     lag = int(np.ceil(LAG_PERIODS / (filter.cutoff_hz * h)))
     rows = _rows(s["w"], h, filter.cutoff_hz, speed_fraction, lag)
-    if rows.sum() < 64:
+    if np.count_nonzero(rows) < 64:
         return AdequacyResult("not enough excitation", None, alpha,
-                              f"{int(rows.sum())} samples with |speed| above {speed_fraction:g} of its peak")
+                              f"{np.count_nonzero(rows)} samples with |speed| above {speed_fraction:g} of its peak")
     sgn, aw = np.sign(s["w"]), np.abs(s["w"])
 
     # everything tested is read on the rows only: a term read LAG samples away is taken there (the rows keep
@@ -350,7 +350,10 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
             fixed[p] = terms.pop(p)
             y = y - known[p] * fixed[p]
         X = np.column_stack(list(terms.values())) if terms else np.zeros((y.size, 0))
-        Xr, Zr = X.take(take, axis=0), instruments(X)  # once: the fit and the test use the same instruments
+        # once: the fit and the test use the same instruments. X's rows gathered a column at a time (take() of a
+        # 2-D array copies each row of a few values alone): the same C-ordered rows
+        Xr = columns([x.take(take) for x in terms.values()]) if terms else X.take(take, axis=0)
+        Zr = instruments(X)
         yhat = fitted(X, Xr, Zr, y) if terms else np.zeros_like(y)
         # a known parameter's own term is a nuisance too: a wrong value, or a logged command taken for the
         # voltage, leaves a lack of fit along it. A derivative is read LAG away (its noise is the residue's);

@@ -124,7 +124,14 @@ def compiled_step(step: ca.Function, key: str):
 
     def run(x0: np.ndarray, S: np.ndarray, p: np.ndarray, h: float) -> np.ndarray:
         x0 = np.ascontiguousarray(x0, dtype=float)
-        St = np.ascontiguousarray(np.asarray(S, dtype=float).T)  # column k of S contiguous
+        S = np.asarray(S, dtype=float)
+        # column k of S contiguous: S transposed into a C array an input at a time (one strided copy each, where
+        # ascontiguousarray called numpy's copy loop once per step for its 2-4 values)
+        St = S.T
+        if not St.flags.c_contiguous:
+            St = np.empty(S.shape[::-1])
+            for j, row in enumerate(S):
+                St[:, j] = row
         p = np.ascontiguousarray(p, dtype=float)
         steps = St.shape[0]
         X = np.empty((steps, nx))

@@ -39,9 +39,22 @@ def zero_forcing_derivative(x: np.ndarray, h: float) -> tuple[np.ndarray, slice]
     if not h > 0:
         raise EstimatorInputError(f"zero_forcing_derivative: h must be > 0 s, got {h}")
     n = x.size
-    a, b, c, d = ZERO_FORCING_WEIGHTS
-    dx = (a * x[3:] + b * x[2:n - 1] + c * x[1:n - 2] + d * x[:n - 3]) / h
-    return dx, slice(PAST, n - FUTURE)
+    return _fir(ZERO_FORCING_WEIGHTS, x, np.empty(n - 3), h), slice(PAST, n - FUTURE)
+
+
+def _fir(taps, x: np.ndarray, out: np.ndarray, h: float | None = None) -> np.ndarray:
+    """``(t0 x[3:] + t1 x[2:-1] + t2 x[1:-2] + t3 x[:-3]) [/ h]`` written into ``out`` (n - 3,): the same
+    products, sums and division in the same order as the expression, in two arrays instead of seven."""
+    n = x.size
+    a, b, c, d = taps
+    tmp = np.empty(n - 3)
+    np.multiply(a, x[3:], out=out)
+    np.add(out, np.multiply(b, x[2:n - 1], out=tmp), out=out)
+    np.add(out, np.multiply(c, x[1:n - 2], out=tmp), out=out)
+    np.add(out, np.multiply(d, x[:n - 3], out=tmp), out=out)
+    if h is not None:
+        np.divide(out, h, out=out)
+    return out
 
 
 # taps of the operator relative to the sample it differentiates (x(t+h), x(t), x(t-h), x(t-2h))
@@ -90,12 +103,13 @@ def matched_average(x: np.ndarray) -> np.ndarray:
     """
     x = np.asarray(x, dtype=float)
     n = x.size
-    out = _M1 * x
     if n >= PAST + FUTURE + 1:
-        # the symmetric form is left only at sample 1 (2 .. n-2 are the FIR's): that one sample, the same arithmetic
+        # m1 x at the ends, the symmetric form at sample 1, the FIR at 2 .. n-2 written in place (each sample once)
+        out = np.empty(n)
+        out[0], out[1], out[n - 1] = _M1 * x[0], _M1 * x[1], _M1 * x[n - 1]
         out[1] += _M3 / 6.0 * (x[2] - 2.0 * x[1] + x[0])
-        c1, c0, cm1, cm2 = _S
-        out[PAST:n - FUTURE] = c1 * x[3:] + c0 * x[2:n - 1] + cm1 * x[1:n - 2] + cm2 * x[:n - 3]
+        _fir(_S, x, out[PAST:n - FUTURE])
     else:
+        out = _M1 * x
         out[1:-1] += _M3 / 6.0 * (x[2:] - 2.0 * x[1:-1] + x[:-2])
     return out

@@ -65,11 +65,12 @@ __all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionDa
            "instrumental_variables", "least_squares", "owners", "prepare", "too_short", "update_constants"]
 
 
-def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -> Prepared:
+def prepare(data: MotionData, options: EstimationOptions, strict: bool = True, remember: bool = True) -> Prepared:
     """Filter, differentiate and align the signals; derive the regressions the data allow.
 
     With ``strict`` False an equation without enough fast samples is left out and its parameters are
-    listed in ``Prepared.refused`` with the reason, instead of raising ``NotEnoughExcitation``.
+    listed in ``Prepared.refused`` with the reason, instead of raising ``NotEnoughExcitation``. With
+    ``remember`` False the filtered signals are not kept for reuse (``FilterSpec.apply``).
 
     Returns
     -------
@@ -92,7 +93,7 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
     edge = max(0, int(np.ceil(options.edge_guard / (options.filter.cutoff_hz * h))) - min(PAST, FUTURE))
     if options.filter.zero_phase and data.n <= 3 * (2 * len(options.filter.sos(h)) + 1):  # sosfiltfilt's padding
         raise too_short(data, options, edge)
-    f = options.filter.apply(raw, h)
+    f = options.filter.apply(raw, h, remember)
     for name, delay in data.delays.items():
         if delay and name in f:  # a sample stamped t_n is the signal at t_n - delay: read it `delay` later
             x = f[name]
@@ -163,9 +164,9 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
         r = np.ones(len(sig["w"]), dtype=bool)
         if "sgn_w" in reg.signals:
             fast = speed >= threshold
-            if fast.sum() < 20 * len(reg.names):  # the real cause, with numbers, rather than "too short"
+            if np.count_nonzero(fast) < 20 * len(reg.names):  # the real cause, with numbers, rather than "too short"
                 names = list(reg.names) + ([reg.normaliser] if reg.normaliser else [])
-                why = (f"{int((~fast).sum())} of {fast.size} samples have |speed| < speed_threshold {threshold:.3g} "
+                why = (f"{fast.size - np.count_nonzero(fast)} of {fast.size} samples have |speed| < speed_threshold {threshold:.3g} "
                        f"{options.speed_unit} (largest |speed| {peak:.3g} {options.speed_unit}); the {reg.equation} "
                        f"equation needs at least {20 * len(reg.names)} faster ones")
                 if strict:
@@ -175,9 +176,10 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True) -
             # the filter smears sign(w) over about 1/cutoff around each zero crossing: widen the gap
             guard = int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h)))
             r &= erode(fast, guard, border=True)
+            slow = fast.size - np.count_nonzero(fast)  # counts of the masks: r.sum()'s integers, in a third of its time
             notes[reg.equation] = (
-                f"{int(r.sum())} of {r.size} samples usable: {int((~fast).sum())} have |speed| < {threshold:.3g} "
-                f"{options.speed_unit}, {int((fast & ~r).sum())} more are within the sign guard of {guard} samples "
+                f"{np.count_nonzero(r)} of {r.size} samples usable: {slow} have |speed| < {threshold:.3g} "
+                f"{options.speed_unit}, {np.count_nonzero(fast & ~r)} more are within the sign guard of {guard} samples "
                 f"({guard * h:.3g} s = sign_guard {options.sign_guard:g} / filter cut-off "
                 f"{options.filter.cutoff_hz:.3g} Hz) around them")
         rows[reg.equation] = r
@@ -354,7 +356,8 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     # read one record sample, 1 / (2 D) of theirs, off
     every = decimation_factor(options.filter.cutoff_hz, data.h, data.n, options.decimation)
     half_options = replace(options, decimation=every)
-    halves = (prepare(odd, half_options, strict=check), prepare(even, half_options, strict=check))
+    # the halves are new views of the record, filtered here only: not kept for reuse (no copy of their samples)
+    halves = tuple(prepare(half, half_options, strict=check, remember=False) for half in (odd, even))
     if [r.equation for r in halves[0].regressions] != [r.equation for r in halves[1].regressions]:
         raise NotEnoughExcitation(sorted(set(halves[0].refused) | set(halves[1].refused)),
                                   "the odd and even samples do not allow the same equations")

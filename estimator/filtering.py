@@ -47,7 +47,7 @@ class FilterSpec:
                 f"filter cutoff {self.cutoff_hz} Hz must be below 0.45 x Nyquist ({0.45 * nyquist:g} Hz at h={h:g} s)")
         return _butter_sos(int(self.order), float(self.cutoff_hz), float(h)).copy()  # a writable copy: the cached one is shared
 
-    def apply(self, signals: Mapping[str, np.ndarray], h: float) -> dict[str, np.ndarray]:
+    def apply(self, signals: Mapping[str, np.ndarray], h: float, remember: bool = True) -> dict[str, np.ndarray]:
         """Filter every signal identically.
 
         Parameters
@@ -56,6 +56,9 @@ class FilterSpec:
             Signals sampled every ``h`` seconds (None values are passed through).
         h : float
             Sampling period [s].
+        remember : bool
+            Keep the results for a later call on the same values (``_MEMO``: a copy of each signal). False for
+            signals no later phase filters again (the IV halves' samples): no copy, no memo entry.
 
         Returns
         -------
@@ -87,11 +90,14 @@ class FilterSpec:
                 if not todo:
                     continue
                 # row by row the same arithmetic as one call per signal (tests/estimator/test_speed.py)
-                y = lti.sosfiltfilt(sos, [arrays[k] for k in todo])  # the rows written once, into the extension
+                # the rows written once, into the extension, which is kept as the memo's copy of the values
+                y, kept = lti.sosfiltfilt(sos, [arrays[k] for k in todo], keep_input=True) if remember else \
+                    (lti.sosfiltfilt(sos, [arrays[k] for k in todo]), None)
                 y.setflags(write=False)  # shared by the callers that filter the same array
-                for k, row in zip(todo, y):
+                for j, (k, row) in enumerate(zip(todo, y)):
                     out[k] = row
-                    _remember(_key(self, h, arrays[k]), (arrays[k].copy(), row))
+                    if remember:
+                        _remember(_key(self, h, arrays[k]), (kept[j], row))
             return {k: out[k] for k in signals}
         for name, x in signals.items():
             if x is None:
@@ -217,20 +223,25 @@ def _remember(key: tuple, value: tuple) -> None:
         _MEMO.pop(next(iter(_MEMO)))
 
 
-def share_filtered(spec: FilterSpec, h: float, x: np.ndarray, filtered: np.ndarray) -> None:
+def share_filtered(spec: FilterSpec, h: float, x: np.ndarray, filtered: np.ndarray, own: bool = False) -> None:
     """Let ``spec.apply`` give ``filtered`` for ``x`` (sampled every ``h`` [s]) without filtering it again.
 
     For a signal built as a linear combination of signals already filtered (measurement validation's mean of
     two sensors, or a sensor corrected by its gain and offset): F is linear, so the same combination of their
     filtered rows is F of it, to the rounding of one addition (~1e-16 of the signal) instead of a filter pass.
-    ``x`` (n,) is copied (its values are compared before ``filtered`` is given for it); ``filtered`` (n,) is
-    made read-only and shared, as ``apply``'s results are.
+    ``x`` (n,) is copied (its values are compared before ``filtered`` is given for it); with ``own`` (the
+    caller made ``x`` and owns its memory) ``x`` itself is made read-only and kept instead of a copy.
+    ``filtered`` (n,) is made read-only and shared, as ``apply``'s results are.
     """
     x = np.asarray(x, dtype=float)
     if spec.zero_phase and x.ndim == 1 and np.shape(filtered) == x.shape:
         filtered = np.asarray(filtered, dtype=float)
         filtered.setflags(write=False)
-        _remember(_key(spec, h, x), (x.copy(), filtered))
+        if own and x.base is None:  # nothing else writes to its memory once read-only
+            x.setflags(write=False)
+        else:
+            x = x.copy()
+        _remember(_key(spec, h, x), (x, filtered))
 
 
 def clear_filter_memo() -> None:

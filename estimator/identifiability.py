@@ -24,7 +24,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from feeddrive.estimator.distributions import chi2_sf, norm_ppf
-from feeddrive.estimator.kernels import ls_theta
+from feeddrive.estimator.kernels import columns, ls_theta
 
 #: Smallest ratio of the two time constants for the second lag to matter to L.
 MIN_LAG_RATIO = 0.1
@@ -63,7 +63,7 @@ def second_lag(y: np.ndarray, Phi: np.ndarray, names: tuple[str, ...], Di: np.nd
     """
     if not {resistance, slope} <= set(names):
         return None
-    fit = _augmented(y, np.column_stack([Phi, *([] if extra is None else [extra]), np.gradient(Di, h)]), block)
+    fit = _augmented(y, columns([Phi, *([] if extra is None else [extra]), np.gradient(Di, h)]), block)
     if fit is None:
         return None
     theta, cov = fit
@@ -119,7 +119,7 @@ def lag_terms(y: np.ndarray, Phi: np.ndarray, extra: np.ndarray, block: int) -> 
         terms are zero}``; None when the fit cannot be made (too few samples, non-finite values).
     """
     k = extra.shape[1] if extra.ndim == 2 else 1
-    fit = _augmented(y, np.column_stack([Phi, extra]), block)
+    fit = _augmented(y, columns([Phi, extra]), block)
     if fit is None:
         return None
     theta, cov = fit

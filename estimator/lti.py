@@ -12,8 +12,8 @@ module gives the same numbers (tests/estimator/test_lti.py: within 1e-12 relativ
 * :func:`lfilter`, :func:`lfilter_zi`, :func:`bilinear_first_order` (``cont2discrete`` of ``1 / (a1 s + a0)``,
   bit for bit).
 
-The recursions run as C loops with scipy's own order of operations (compiled once by estimator.compiled's
-facility and cached): bit for bit scipy's numbers, which matters, since the model checks amplify a
+The recursions run as C loops with scipy's own order of operations (estimator/lti_c.py, compiled once by
+estimator.compiled's facility and cached): bit for bit scipy's numbers, which matters, since the model checks amplify a
 1e-14 change of a filtered signal to 1e-3 of a p-value. Without a C compiler they are evaluated block by block: the filter in transposed direct form II is a state-space
 system ``z[k+1] = A z[k] + B u[k]``, ``y[k] = C z[k] + D u[k]``; within a block of ``BLOCK`` samples the
 output is the block's initial state through ``C A^j`` plus its inputs through the impulse response
@@ -22,10 +22,12 @@ record then costs ~300 Python steps instead of 35 000, at the rounding of a sum 
 """
 from __future__ import annotations
 
-import ctypes
 from functools import lru_cache
 
 import numpy as np
+
+# the compiled loops: called through this module's names (the tests replace _library here for the numpy path)
+from feeddrive.estimator.lti_c import ROWS_PER_CALL, _c_sosfilt, _library, _ptr, available  # noqa: F401
 
 #: samples per block of the recursions (the Toeplitz product costs BLOCK multiply-adds per sample)
 BLOCK = 128
@@ -146,7 +148,8 @@ def sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray | None = None) -> np.
     return y, final.reshape(np.shape(zi))
 
 
-def sosfiltfilt(sos: np.ndarray, x: np.ndarray | list[np.ndarray]) -> np.ndarray:
+def sosfiltfilt(sos: np.ndarray, x: np.ndarray | list[np.ndarray], keep_input: bool = False
+                ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Zero-phase forward-backward filter of ``x`` along its last axis (scipy's ``sosfiltfilt`` defaults:
     odd extension by ``3 * ntaps`` samples at each end, each pass started in the steady state of its
     first sample).
@@ -157,10 +160,16 @@ def sosfiltfilt(sos: np.ndarray, x: np.ndarray | list[np.ndarray]) -> np.ndarray
     x : ndarray, shape (n,) or (m, n), or list of m ndarrays of shape (n,)
         ``n`` must exceed the extension. A list is filtered as its rows stacked (``FilterSpec.apply``'s signals),
         each written once into the extended array rather than stacked first.
+    keep_input : bool
+        Also return a copy of the input rows (``FilterSpec.apply``'s memo compares them with later calls'): the
+        extended array the rows were written into, kept, for the forward pass writes into another (no second
+        copy of each row).
 
     Returns
     -------
     ndarray, shape of ``x`` ((m, n) for a list)
+    ndarray, shape of ``x``, read-only
+        With ``keep_input``: the input's values.
     """
     sos = np.asarray(sos, dtype=float)
     if isinstance(x, list):
@@ -183,14 +192,21 @@ def sosfiltfilt(sos: np.ndarray, x: np.ndarray | list[np.ndarray]) -> np.ndarray
     lib = _library()
     if lib is not None:  # sosfilt's C loop on arrays of its own: no copy of the extension and none of the reversal
         coefs = np.ascontiguousarray(sos / sos[:, 3:4])
+        out = np.empty_like(ext) if keep_input else ext  # the forward pass into another array: ext stays the input
         for backward in (0, 1):  # the backward pass starts in the steady state of the forward output's last sample
-            z = np.ascontiguousarray((zi * ext[None, :, -1:] if backward else zi * ext[None, :, :1]).transpose(1, 0, 2))
-            _c_sosfilt(lib, coefs, ext, z, backward)
-        return ext[:, edge:-edge].reshape(x.shape)
-    y, _ = sosfilt(sos, ext, zi * ext[None, :, :1])
-    y = y[:, ::-1]
-    y, _ = sosfilt(sos, y, zi * y[None, :, :1])
-    return y[:, ::-1][:, edge:-edge].reshape(x.shape)
+            z = np.ascontiguousarray((zi * out[None, :, -1:] if backward else zi * ext[None, :, :1]).transpose(1, 0, 2))
+            _c_sosfilt(lib, coefs, out, z, backward, None if backward else ext)
+        y = out[:, edge:-edge].reshape(x.shape)
+    else:
+        y, _ = sosfilt(sos, ext, zi * ext[None, :, :1])
+        y = y[:, ::-1]
+        y, _ = sosfilt(sos, y, zi * y[None, :, :1])
+        y = y[:, ::-1][:, edge:-edge].reshape(x.shape)
+    if not keep_input:
+        return y
+    kept = ext[:, edge:-edge].reshape(x.shape)
+    kept.setflags(write=False)
+    return y, kept
 
 
 def lfilter_zi(b: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -248,162 +264,6 @@ def bilinear_first_order(a1: float, a0: float, h: float) -> tuple[np.ndarray, np
     dd = 0.0 + 0.5 * (C * bd)
     # ss2tf: den = poly(ad), num = poly(ad - bd cd) + (dd - 1) den
     return np.array([1.0 + (dd - 1.0), -(ad - bd * cd) + (dd - 1.0) * -ad]), np.array([1.0, -ad])
-
-
-_SOURCE = r"""
-/* scipy's sosfilt (signal/_sosfilt.pyx), in its order of operations: the rows of x (m, n) in place,
-   zi (m, ns, 2) updated; sections normalised (a0 = 1); reverse != 0: from the last sample to the first (the
-   backward pass of a zero-phase filter, on the forward pass's output without a reversed copy) */
-typedef double fd_v2 __attribute__((vector_size(16)));
-/* two sections (the 4th-order low-pass), up to three row pairs at a time with their states in local variables
-   (registers) rather than in the array indexed by the pair: the same operations in the same order per row, a
-   third of the loads and stores; three pairs keep three independent chains in flight, as the loop below */
-#define FD_DECL(p) fd_v2 s##p##a = z[4 * (p)], s##p##b = z[4 * (p) + 1], s##p##c = z[4 * (p) + 2], \
-                         s##p##d = z[4 * (p) + 3];
-#define FD_STEP(p) { double* q = x + 2 * (p) * n + k; fd_v2 xc = {q[0], q[n]}, xn; \
-    xn = c0 * xc + s##p##a; s##p##a = c1 * xc - c3 * xn + s##p##b; s##p##b = c2 * xc - c4 * xn; xc = xn; \
-    xn = d0 * xc + s##p##c; s##p##c = d1 * xc - d3 * xn + s##p##d; s##p##d = d2 * xc - d4 * xn; \
-    q[0] = xn[0]; q[n] = xn[1]; }
-#define FD_SAVE(p) z[4 * (p)] = s##p##a; z[4 * (p) + 1] = s##p##b; z[4 * (p) + 2] = s##p##c; z[4 * (p) + 3] = s##p##d;
-static void fd_sos2_pairs(long g, long n, const fd_v2* c, double* x, fd_v2* z, long reverse) {
-  const fd_v2 c0 = c[0], c1 = c[1], c2 = c[2], c3 = c[3], c4 = c[4], d0 = c[5], d1 = c[6], d2 = c[7], d3 = c[8],
-              d4 = c[9];
-  long j, k;
-  if (g == 3) {
-    FD_DECL(0) FD_DECL(1) FD_DECL(2)
-    for (j = 0; j < n; ++j) { k = reverse ? n - 1 - j : j; FD_STEP(0) FD_STEP(1) FD_STEP(2) }
-    FD_SAVE(0) FD_SAVE(1) FD_SAVE(2)
-  } else if (g == 2) {
-    FD_DECL(0) FD_DECL(1)
-    for (j = 0; j < n; ++j) { k = reverse ? n - 1 - j : j; FD_STEP(0) FD_STEP(1) }
-    FD_SAVE(0) FD_SAVE(1)
-  } else {
-    FD_DECL(0)
-    for (j = 0; j < n; ++j) { k = reverse ? n - 1 - j : j; FD_STEP(0) }
-    FD_SAVE(0)
-  }
-}
-static void fd_sos2_row(long n, const double* sos, double* x, double* z, long reverse) {
-  const double c0 = sos[0], c1 = sos[1], c2 = sos[2], c3 = sos[4], c4 = sos[5];
-  const double d0 = sos[6], d1 = sos[7], d2 = sos[8], d3 = sos[10], d4 = sos[11];
-  double sa = z[0], sb = z[1], sc = z[2], sd = z[3], xc, xn;
-  long j, k;
-  for (j = 0; j < n; ++j) {
-    k = reverse ? n - 1 - j : j;
-    xc = x[k];
-    xn = c0 * xc + sa; sa = c1 * xc - c3 * xn + sb; sb = c2 * xc - c4 * xn; xc = xn;
-    xn = d0 * xc + sc; sc = d1 * xc - d3 * xn + sd; sd = d2 * xc - d4 * xn;
-    x[k] = xn;
-  }
-  z[0] = sa; z[1] = sb; z[2] = sc; z[3] = sd;
-}
-void fd_sosfilt(long m, long n, long ns, const double* sos, double* x, double* zi, long reverse) {
-  long i, j, k, s, pairs = m / 2;
-  /* sample k of every row before sample k + 1 of any: each row's recursion is a chain of dependent
-     multiply-adds, and the rows' chains, independent, then overlap in the processor (6 rows: 2.3x faster
-     than row after row). Two rows share the two lanes of a vector: the same multiplications, additions and
-     subtractions, each rounded as the scalar ones (no fused multiply-add: -ffp-contract=off), in the same
-     order, so each row's numbers are unchanged; a last odd row runs alone */
-  fd_v2 c[ns * 5 + 1], z[pairs * ns * 2 + 1];
-  for (s = 0; s < ns; ++s) {
-    const double* cs = sos + 6 * s;
-    c[5 * s] = (fd_v2){cs[0], cs[0]};
-    c[5 * s + 1] = (fd_v2){cs[1], cs[1]};
-    c[5 * s + 2] = (fd_v2){cs[2], cs[2]};
-    c[5 * s + 3] = (fd_v2){cs[4], cs[4]};
-    c[5 * s + 4] = (fd_v2){cs[5], cs[5]};
-  }
-  for (i = 0; i < pairs; ++i)
-    for (j = 0; j < 2 * ns; ++j)
-      z[i * ns * 2 + j] = (fd_v2){zi[2 * i * ns * 2 + j], zi[(2 * i + 1) * ns * 2 + j]};
-  if (ns == 2) {
-    for (i = 0; i < pairs; i += 3)
-      fd_sos2_pairs(pairs - i < 3 ? pairs - i : 3, n, c, x + 2 * i * n, z + i * 4, reverse);
-    for (i = 2 * pairs; i < m; ++i)
-      fd_sos2_row(n, sos, x + i * n, zi + i * 4, reverse);
-  } else
-  for (j = 0; j < n; ++j) {
-    k = reverse ? n - 1 - j : j;
-    for (i = 0; i < pairs; ++i) {
-      double* a = x + 2 * i * n + k;
-      fd_v2* zp = z + i * ns * 2;
-      fd_v2 x_cur = {a[0], a[n]}, x_new;
-      for (s = 0; s < ns; ++s) {
-        const fd_v2* cs = c + 5 * s;
-        x_new = cs[0] * x_cur + zp[2 * s];
-        zp[2 * s] = cs[1] * x_cur - cs[3] * x_new + zp[2 * s + 1];
-        zp[2 * s + 1] = cs[2] * x_cur - cs[4] * x_new;
-        x_cur = x_new;
-      }
-      a[0] = x_cur[0];
-      a[n] = x_cur[1];
-    }
-    for (i = 2 * pairs; i < m; ++i) {
-      double* zs = zi + i * ns * 2;
-      double x_cur = x[i * n + k], x_new;
-      for (s = 0; s < ns; ++s) {
-        const double* cs = sos + 6 * s;
-        x_new = cs[0] * x_cur + zs[2 * s];
-        zs[2 * s] = cs[1] * x_cur - cs[4] * x_new + zs[2 * s + 1];
-        zs[2 * s + 1] = cs[2] * x_cur - cs[5] * x_new;
-        x_cur = x_new;
-      }
-      x[i * n + k] = x_cur;
-    }
-  }
-  for (i = 0; i < pairs; ++i)
-    for (j = 0; j < 2 * ns; ++j) {
-      zi[2 * i * ns * 2 + j] = z[i * ns * 2 + j][0];
-      zi[(2 * i + 1) * ns * 2 + j] = z[i * ns * 2 + j][1];
-    }
-}
-/* scipy's lfilter (transposed direct form II, a[0] = 1, len(a) = len(b) = nb >= 2) of one signal */
-void fd_lfilter(long n, long nb, const double* b, const double* a, const double* x, double* y, double* z) {
-  long k, j;
-  for (k = 0; k < n; ++k) {
-    double xn = x[k];
-    double yn = z[0] + b[0] * xn;
-    for (j = 0; j < nb - 2; ++j)
-      z[j] = z[j + 1] + xn * b[j + 1] - yn * a[j + 1];
-    z[nb - 2] = xn * b[nb - 1] - yn * a[nb - 1];
-    y[k] = yn;
-  }
-}
-"""
-
-
-@lru_cache(maxsize=1)
-def _library() -> ctypes.CDLL | None:
-    """The C loops, built once into the cache (estimator.compiled); None without a compiler or with
-    ``$FEEDDRIVE_NO_COMPILED_FILTERS`` set (the block-wise numpy evaluation then)."""
-    from feeddrive.estimator.compiled import load_library  # casadi with it: only when first filtering
-
-    dp, n = ctypes.c_void_p, ctypes.c_long  # the arrays by address (_ptr)
-    return load_library(_SOURCE, "FEEDDRIVE_NO_COMPILED_FILTERS",
-                        {"fd_sosfilt": [n, n, n, dp, dp, dp, n], "fd_lfilter": [n, n, dp, dp, dp, dp, dp]})
-
-
-def available() -> bool:
-    """True when the C loops could be built here."""
-    return _library() is not None
-
-
-#: rows per call of the C sosfilt: its states live on the C stack (a vector per row pair and section state)
-ROWS_PER_CALL = 64
-
-
-def _c_sosfilt(lib: ctypes.CDLL, coefs: np.ndarray, x: np.ndarray, z: np.ndarray, reverse: int) -> None:
-    """``fd_sosfilt`` on the rows of ``x`` (m, n) in place, ``z`` (m, n_sections, 2) (both C-contiguous), in blocks
-    of ``ROWS_PER_CALL`` rows (each row's recursion is its own: the same numbers in one call or several)."""
-    for i in range(0, x.shape[0], ROWS_PER_CALL):
-        rows, states = x[i:i + ROWS_PER_CALL], z[i:i + ROWS_PER_CALL]  # contiguous blocks of rows
-        lib.fd_sosfilt(rows.shape[0], x.shape[1], coefs.shape[0], _ptr(coefs), _ptr(rows), _ptr(states), reverse)
-
-
-def _ptr(a: np.ndarray) -> int:
-    # the address itself (the arguments are declared void *): ``ctypes.data_as`` builds a pointer object per
-    # call, ~5 us, and a motion's model check makes ~100 of these calls. The caller keeps ``a`` alive.
-    return a.ctypes.data
 
 
 def _normalised(b: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -77,7 +77,7 @@ import numpy as np
 from feeddrive.estimator import lti
 from feeddrive.estimator.errors import EstimatorInputError, NumericalFailure
 from feeddrive.estimator.filtering import FilterSpec, check_rate_factor
-from feeddrive.estimator.kernels import bilinear_first_order, erode, label_runs, label_slices
+from feeddrive.estimator.kernels import bilinear_first_order, columns, erode, label_runs, label_slices
 from feeddrive.estimator.residue_tests import TestResult, block_samples, integrated_noise_covariance, residue_tests
 from feeddrive.estimator.simulation import MODEL
 from feeddrive.estimator.validation import MeasurementValidation, model_reference, noise_std
@@ -316,6 +316,13 @@ def _filter_power(filter: FilterSpec, h: float, step: int, points: int) -> tuple
     return _read_only(gain), _read_only(np.exp(-1j * w * step))
 
 
+def _one_run(mask: np.ndarray) -> slice | np.ndarray:
+    """``mask`` (n,) bool as the slice of its one run of True (indexing by it gives the same values as views), or
+    itself when its True samples are not one run."""
+    idx = np.flatnonzero(mask)
+    return slice(int(idx[0]), int(idx[-1]) + 1) if idx.size and idx[-1] - idx[0] + 1 == idx.size else mask
+
+
 def _read_only(x: np.ndarray) -> np.ndarray:
     x.setflags(write=False)
     return x
@@ -457,17 +464,18 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
     for name, (x, simulate) in simulators.items():
         simulated = simulate(params, f)
         k = keep[name]
-        if k.sum() < 2 / h * MIN_SEGMENT_S:
-            raise EstimatorInputError(f"model check ({name}): only {k.sum()} samples to test")
+        sel = _one_run(k)  # the current's samples are one run: read as views (a slice), not gathered by the mask
+        if np.count_nonzero(k) < 2 / h * MIN_SEGMENT_S:
+            raise EstimatorInputError(f"model check ({name}): only {np.count_nonzero(k)} samples to test")
         base = simulated if fi is f else simulate(params, fi)
-        D = sensitivity_directions(lambda p, s=simulate, k=k: s(p, fi)[k], params, names, covariance, USES[name],
-                                   base[k], undetermined)
+        D = sensitivity_directions(lambda p, s=simulate, k=sel: s(p, fi)[k], params, names, covariance, USES[name],
+                                   base[sel], undetermined)
         if name == "speed":
-            D = np.column_stack([D, free_responses(labels, params, h)[k]])
-        X = np.column_stack([fi[s] for s in INPUTS[name]])[k]
-        tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[k], D, X, h, alpha, rate_hz, lags,
+            D = columns([D, free_responses(labels, params, h)[sel]])
+        X = np.column_stack([fi[s] for s in INPUTS[name]])[sel]
+        tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[sel], D, X, h, alpha, rate_hz, lags,
                                                ar_order, noise.get(name), noise_dof,
-                                               labels[k] if name == "speed" else None, constant=name == "current",
+                                               labels[sel] if name == "speed" else None, constant=name == "current",
                                                # with a null covariance the peak test runs too: the speed
                                                # only (on the vendor FMU the current residue's acceleration
                                                # transients stood 4.9 MAD out on 1 of 40 healthy motions), and

@@ -16,7 +16,7 @@ from feeddrive.estimator.blocks_c import row_block_sums
 from feeddrive.estimator.distributions import chi2_sf, f_sf, norm_isf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.glsar import glsar_fit
-from feeddrive.estimator.kernels import ar_order_bic, last_columns_f_test, lstsq, pinv_rank
+from feeddrive.estimator.kernels import ar_order_bic, columns, last_columns_f_test, lstsq, pinv_rank
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
 MAX_AR = 12
@@ -225,7 +225,7 @@ def residue_tests(name: str, residue: np.ndarray, nuisance: np.ndarray, inputs: 
     # the current: a constant (a voltage or current sensor offset) is a nuisance. Not for the speed: a
     # constant and the segments' free responses (nuisance) span the response to a constant torque, so a
     # load torque or a friction change between two segments would pass unseen
-    Z = np.column_stack([nuisance, np.ones(residue.size)]) if constant else nuisance
+    Z = columns([nuisance, np.ones(residue.size)]) if constant else nuisance
     r_all, Z_all, lagged = [], [], []  # block means of each segment; lagged inputs after the warm-up
     for idx in parts:
         nb = idx.size // block

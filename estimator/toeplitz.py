@@ -41,10 +41,11 @@ def score_covariance_sum(parts: list[tuple[np.ndarray, np.ndarray]], lags: int) 
         return S
     nfft = nffts.pop()
     rows = 1 + p  # each set's residue, then its instruments' columns (toeplitz_score_covariance's order)
-    X = np.zeros((len(parts) * rows, max(ns)))  # a shorter set's rows zero-padded: transformed at nfft all alike
+    X = np.empty((len(parts) * rows, max(ns)))  # a shorter set's rows zero-padded: transformed at nfft all alike
     for k, (W, e) in enumerate(parts):
         X[k * rows, :e.size] = e
         X[k * rows + 1:(k + 1) * rows, :e.size] = W.T
+        X[k * rows:(k + 1) * rows, e.size:] = 0.0  # the padding only: each value written once
     F = rfft(X, nfft, axis=-1)
     fe = F[::rows]
     num = irfft(fe * np.conj(fe), nfft)[:, :m + 1]

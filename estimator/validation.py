@@ -308,10 +308,13 @@ def gain_ratio(x1f: np.ndarray, x2f: np.ndarray, step: int = 1) -> float:
     if step > 1:
         x1f, x2f = x1f[::step], x2f[::step]
     d1, d2 = x1f - x1f.mean(), x2f - x2f.mean()
-    keep = np.abs(d2) > 0.2 * np.max(np.abs(d2))
+    a2 = np.abs(d2)
+    keep = a2 > 0.2 * np.max(a2)
     if not keep.any():
         raise EstimatorInputError("gain_ratio: the second signal is constant; no gain ratio")
-    return float(np.mean(d1[keep] / d2[keep]))
+    with np.errstate(divide="ignore", invalid="ignore"):  # the samples left out may divide by 0
+        ratio = np.divide(d1, d2, out=d1)  # every quotient, then those kept: one gather instead of two
+    return float(np.mean(ratio[keep]))
 
 
 def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrical: Mapping[str, float] | None,
@@ -413,8 +416,8 @@ def validate_measurements(signals: Mapping[str, np.ndarray], h: float, electrica
                                   tuple(pair_notes))
     for q, (s1, _) in PAIRS.items():  # the signals passed on, filtered already: the estimator's and model checks'
         x, xf = best[symbol[q]]  # low-pass of them is this one (a mean or a correction of filtered rows)
-        if x is not raw[s1]:
-            share_filtered(filter, h, x, xf)
+        if x is not raw[s1]:  # the pair's mean or a corrected sensor, made here: kept itself, read-only
+            share_filtered(filter, h, x, xf, own=not any(x is r for r in raw.values()))
     faulty_pairs = [q for q, p in pairs.items() if p.residue is not None and p.residue.kind != "none"]
     if len(faulty_pairs) > 1:
         notes.append(f"faults on several quantities ({', '.join(faulty_pairs)}): each isolation used the "

@@ -68,3 +68,15 @@ def test_matched_average_is_its_two_forms():
             expected[2:n - 1] = _S[0] * x[3:] + _S[1] * x[2:n - 1] + _S[2] * x[1:n - 2] + _S[3] * x[:n - 3]
         np.testing.assert_array_equal(matched_average(x), expected)
     np.testing.assert_allclose(matched_average(np.full(50, 3.0)), 3.0 * _M1, rtol=1e-14)
+
+
+def test_derivative_is_the_expression_bit_for_bit():
+    """The operator written into one array (two buffers, no temporaries) gives the bits of its expression
+    ``(a x[k+1] + b x[k] + c x[k-1] + d x[k-2]) / h`` for every length."""
+    a, b, c, d = ZERO_FORCING_WEIGHTS
+    rng = np.random.default_rng(13)
+    for n in [*range(4, 12), 997]:
+        x = rng.standard_normal(n) * 10.0 ** rng.uniform(-4, 4)
+        dx, valid = zero_forcing_derivative(x, 7e-5)
+        np.testing.assert_array_equal(dx, (a * x[3:] + b * x[2:n - 1] + c * x[1:n - 2] + d * x[:n - 3]) / 7e-5)
+        assert valid == slice(2, n - 1)

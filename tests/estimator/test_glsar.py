@@ -61,3 +61,27 @@ def test_ar_coefficients_of_a_long_ar2_record_are_recovered():
     white = fit.whiten(y - X @ fit.params)
     lag1 = float(white[1:] @ white[:-1] / (white @ white))
     assert abs(lag1) < 0.03  # whitened: no correlation left at lag 1
+
+
+@pytest.mark.parametrize("order", [1, 3])
+def test_qr_fit_is_the_svd_fit_within_1e9(order, monkeypatch):
+    """Stated method change: a tall full-rank whitened design is fitted from its QR factors, not statsmodels' SVD
+    pseudo-inverse. On a model-check-sized record (158 x 26, AR errors) both give the same coefficients, covariance
+    and independence F-test within 1e-9 relative (the SVD path forced by a zero condition limit)."""
+    import feeddrive.estimator.glsar as glsar
+
+    y, X = _data(4, 158, 26, (0.7, -0.2), False)
+    X[:, 1] = X[:, 0] + 1e-3 * X[:, 1]  # a condition number ~1e3, as the lag regressors' near-collinear columns
+    qr = glsar_fit(y, X, order, maxiter=6)
+    assert glsar._qr_fit(*[glsar.whiten(a, qr.rho) for a in (X, y)]) is not None  # the QR path is taken
+    monkeypatch.setattr(glsar, "QR_MAX_CONDITION", 0.0)
+    svd = glsar_fit(y, X, order, maxiter=6)
+    np.testing.assert_allclose(qr.rho, svd.rho, rtol=1e-9)
+    np.testing.assert_allclose(qr.params, svd.params, rtol=1e-9, atol=1e-9 * np.max(np.abs(svd.params)))
+    np.testing.assert_allclose(qr.cov_params(), svd.cov_params(), rtol=1e-9,
+                               atol=1e-9 * np.max(np.abs(svd.cov_params())))
+    assert (qr.df_resid, qr.iterations) == (svd.df_resid, svd.iterations)
+    mine, theirs = last_columns_f_test(qr, 10), last_columns_f_test(svd, 10)
+    assert mine[1:3] == theirs[1:3]
+    assert mine[0] == pytest.approx(theirs[0], rel=1e-9)
+    assert mine[3] == pytest.approx(theirs[3], rel=1e-9)

@@ -40,3 +40,24 @@ def test_fits_from_runs_are_the_fits_from_indices(monkeypatch):
     # physics: the noise-free model's parameters within their intervals
     truth = dict(zip(runs.iv.names, runs.iv.values))
     assert abs(truth["R"] - 0.6) < 0.05 * 0.6 + 3 * np.sqrt(runs.iv.covariance[0, 0])
+
+
+def test_column_reference_is_the_norm_of_the_repeated_row():
+    """``_column_reference``: the norm of n equal values taken as |value| sqrt(n), within 1e-14 of the n-sample
+    norm it replaced (the row evaluated once and repeated n times), for both equations of a motion."""
+    from feeddrive.estimator.estimate import prepare
+    from feeddrive.estimator.model_terms import signals_for
+
+    h = 1e-3
+    t = np.arange(1600) * h
+    sig = simulate_closed_loop(np.interp(t, [0, 0.05, 0.35, 0.6, 0.9, 1.0, 1.3, 1.59], [0, 0, 60, 60, 0, -60, -60, 0]), h)
+    p = prepare(MotionData(h, u=sig["u"], i=sig["i"], w=sig["w"]), EstimationOptions())
+    for reg in p.regressions:
+        s = signals_for(p, reg)
+        n = len(s["w"])
+        proxy = {k: (1.0 if k == "sgn_w" else float(np.sqrt(np.mean(np.square(s[k[1:]] if k.startswith("D") else s[k]))))
+                     / (n * p.h if k.startswith("D") else 1.0)) for k in reg.signals}
+        y1, Phi1 = reg.evaluate({k: np.full(1, v) for k, v in proxy.items()})
+        Phi = np.repeat(np.vstack([y1, Phi1.T]), n, axis=1)[1:].T
+        np.testing.assert_allclose(linear_fit._column_reference(reg, s, p.h), np.sqrt(np.einsum("ij,ij->j", Phi, Phi)),
+                                   rtol=1e-14)

@@ -103,6 +103,11 @@ def test_two_sections_rows_in_groups_are_scipys(order):
         x = rng.standard_normal((rows, 700)).cumsum(axis=1) + 3.0
         np.testing.assert_array_equal(lti.sosfiltfilt(sos, x), signal.sosfiltfilt(sos, x, axis=-1))
         np.testing.assert_array_equal(lti.sosfiltfilt(sos, list(x)), signal.sosfiltfilt(sos, x, axis=-1))  # rows given
+        # the forward pass out of the extension into another array: the same bits, the input's values kept
+        y, kept = lti.sosfiltfilt(sos, list(x), keep_input=True)
+        np.testing.assert_array_equal(y, signal.sosfiltfilt(sos, x, axis=-1))
+        np.testing.assert_array_equal(kept, x)
+        assert not kept.flags.writeable
         zi = signal.sosfilt_zi(sos)[:, None, :] * x[None, :, :1] * np.linspace(0.5, 1.5, rows)[None, :, None]
         for actual, expected in zip(lti.sosfilt(sos, x, zi=zi), signal.sosfilt(sos, x, axis=-1, zi=zi)):
             np.testing.assert_array_equal(actual, expected)

@@ -230,3 +230,16 @@ def test_input_noise_variance_forms_the_filter_once():
         assert input_noise_variance(filt, h, step, L, R, 0.3) == float(0.3 ** 2 * np.mean(gain))
     kept, zd = _filter_power(filt, h, step, 2048)
     assert not kept.flags.writeable and not zd.flags.writeable
+
+
+def test_one_run_mask_reads_the_same_samples():
+    """The model check reads a mask of one run of samples (the current's: the filter edges out) by its slice: the
+    same values as the mask gives; a mask of several runs (the speed's segments), or none, is kept as it is."""
+    from feeddrive.estimator.mismatch import _one_run
+
+    x = np.arange(50.0)
+    for mask in (np.arange(50) >= 7, (np.arange(50) >= 7) & (np.arange(50) < 43), np.ones(50, bool),
+                 np.isin(np.arange(50), [3, 4, 9]), np.zeros(50, bool)):
+        sel = _one_run(mask)
+        np.testing.assert_array_equal(x[sel], x[mask])
+        assert isinstance(sel, slice) == (mask.any() and np.ptp(np.flatnonzero(mask)) + 1 == mask.sum())

@@ -182,6 +182,11 @@ def test_validation_passes_on_its_signals_filtered() -> None:
         direct = lti.sosfiltfilt(spec.sos(h), x)
         assert not shared[k].flags.writeable
         np.testing.assert_allclose(shared[k], direct, rtol=0, atol=1e-12 * np.max(np.abs(direct)))
+    # the means are validation's own arrays: kept in the memo themselves (no copy), so read-only for everyone
+    from feeddrive.estimator.filtering import _MEMO
+    assert any(kept is v.u for kept, _ in _MEMO.values())
+    with pytest.raises(ValueError, match="read-only"):
+        v.u[5] += 1.0  # a change behind the memo's back is refused, never a stale filtered signal
     x = v.u.copy()
     x[5] += 1.0  # not the values shared: filtered afresh
     np.testing.assert_array_equal(spec.apply({"u": x}, h)["u"], lti.sosfiltfilt(spec.sos(h), x))

@@ -110,3 +110,18 @@ def test_lag_terms_recover_the_lag_free_fit_and_test_the_lag():
     plain = lag_terms(Phi @ theta + e, Phi, Di[:, None], 20)
     assert plain["p_value"] > 0.05
     np.testing.assert_allclose(plain["theta"], np.linalg.lstsq(Phi, Phi @ theta + e, rcond=None)[0], atol=1e-3)
+
+
+def test_columns_are_column_stack():
+    """``kernels.columns``: numpy's column_stack written column by column: the same values, C-ordered, for 1-D
+    columns and 2-D blocks in either memory order (a regression's F-ordered columns, the nuisance's C rows)."""
+    from feeddrive.estimator.kernels import columns
+
+    rng = np.random.default_rng(21)
+    m = 257
+    blocks = [rng.standard_normal((m, 3)), np.asfortranarray(rng.standard_normal((m, 2))), rng.standard_normal(m),
+              rng.standard_normal((2 * m, 4))[::2], np.ones(m)]
+    for k in range(1, len(blocks) + 1):
+        out = columns(blocks[:k])
+        np.testing.assert_array_equal(out, np.column_stack(blocks[:k]))
+        assert out.flags.c_contiguous and out.dtype == np.float64

@@ -272,3 +272,17 @@ def test_missing_redundancy_passes_the_sensor_on_with_a_note():
     volt = v.pairs["voltage"]
     assert volt.residue is None and volt.trusted == "u" and volt.valid and "unchecked" in volt.notes[0]
     np.testing.assert_array_equal(v.u, meas["u"])
+
+
+def test_gain_ratio_is_the_mean_of_the_kept_quotients_bit_for_bit():
+    """Eq. 12's ratio from every quotient gathered once: the bits of ``mean(d1[keep] / d2[keep])``, also with
+    samples of the second signal at its mean (a quotient by zero, left out)."""
+    rng = np.random.default_rng(8)
+    for step in (1, 3):
+        x2 = np.sin(np.linspace(0, 9, 3001)) + 0.01 * rng.standard_normal(3001)
+        x2[::7] = x2[::step].mean()  # d2 == 0 there
+        x1 = 1.02 * x2 + 0.01 * rng.standard_normal(3001)
+        a, b = x1[::step], x2[::step]
+        d1, d2 = a - a.mean(), b - b.mean()
+        keep = np.abs(d2) > 0.2 * np.max(np.abs(d2))
+        assert gain_ratio(x1, x2, step) == float(np.mean(d1[keep] / d2[keep]))
