@@ -431,7 +431,8 @@ def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOpt
     Returns
     -------
     MotionEstimate
-        LS always; IV for methods ``iv`` and ``oe``; OE for ``oe`` (falls back to IV with a message).
+        LS always; IV for methods ``iv`` and ``oe`` (``lagged_iv.iv_with_fallbacks``: the lagged IV, then LS, stand
+        in when it fails, labelled ``iv`` with the reason); OE for ``oe`` (falls back to IV with a message).
 
     Raises
     ------
@@ -444,10 +445,13 @@ def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOpt
     ls = least_squares(p, options)
     iv = oe = None
     if options.method in ("iv", "oe"):
-        try:
-            iv = instrumental_variables(data, ls, options)
-        except (NumericalFailure, np.linalg.LinAlgError) as exc:  # e.g. L/R far below the instruments' step
-            iv = fell_back(ls, "iv", f"IV fell back to LS: {exc}")
+        # the fall-backs of the monitor's and `cosim estimate`'s IV (partial.estimate_parameters): the split-sample
+        # IV, else the lagged IV, else LS, each labelled; it fell back to LS at once here, so a campaign's table
+        # scored another estimate than the monitor's under the same label
+        from feeddrive.estimator.lagged_iv import iv_with_fallbacks
+
+        iv = iv_with_fallbacks(data, ls, options, {}, {r.equation for r in p.regressions})
+        check_result(iv, options)  # every parameter or none (the monitor's path refuses them one at a time)
     if options.method == "oe":
         from feeddrive.estimator.oe import output_error
 

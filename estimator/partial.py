@@ -51,14 +51,12 @@ from feeddrive.estimator.estimate import (
     _solve,
     constant_sensitivities,
     derived_estimates,
-    fell_back,
-    instrumental_variables,
     ls_parts,
     prepare,
     update_constants,
 )
 from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_lag
-from feeddrive.estimator.lagged_iv import fallback
+from feeddrive.estimator.lagged_iv import iv_with_fallbacks
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.nc_rate import rate_rule, systematic
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
@@ -449,8 +447,8 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
         final = ls
         iv = oe = None
         if options.method in ("iv", "oe"):
-            iv = _iv(data, ls, replace(options, known={**options.known, **fixed}), fixed,
-                     {r.equation for r in p.regressions})
+            iv = iv_with_fallbacks(data, ls, replace(options, known={**options.known, **fixed}), fixed,
+                                   {r.equation for r in p.regressions})
             final = iv
         if options.method == "oe":
             oe = _oe(p, iv, options, fixed)
@@ -483,32 +481,6 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
                           lumped={n: float(final.values[final.names.index(n)]) for n in lumped if n in final.names},
                           joint=_subset(unconditional, list(shown.names)),
                           derived=derived_estimates(shown, options.model), rate_hz=1.0 / p.h)
-
-
-def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float],
-        equations: set[str]) -> MethodResult:
-    """IV from ``ls``, or ``ls`` labelled ``iv`` with the reason it could not run."""
-    # an equation whose derivative coefficient is fixed at 0 cannot be simulated: its measured state is its own
-    # instrument (IV = LS for it), the other equation still gets simulated instruments
-    model = options.model
-    dynamic = {}
-    for eq in model.equations.values():  # the parameter that multiplies the equation's derivative (L, L_q, Jt)
-        slope = ca.jacobian(eq.residual, model.derivative[eq.solves_for])
-        n = next((v.name for v in model.of_kind("physical") if ca.depends_on(slope, v.sym)), None)
-        if n is not None and fixed.get(n) == 0.0:
-            dynamic[eq.name] = n
-    if equations <= set(dynamic):
-        return fell_back(ls, "iv", f"IV fell back to LS: {', '.join(dynamic.values())} fixed at 0, the instruments "
-                                   f"cannot be simulated")
-    try:
-        res = instrumental_variables(data, ls, options, check=False, skip=tuple(dynamic))
-        if dynamic:
-            res = replace(res, message=f"IV without simulated instruments for the {', '.join(dynamic)} equation "
-                                       f"({', '.join(n + ' fixed at 0' for n in dynamic.values())})")
-    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:  # NotEnoughExcitation, NumericalFailure
-        return fallback(data, ls, options, equations, str(exc))  # the lagged-regressor IV, or LS when it fails too
-    finite = np.all(np.isfinite(res.values)) and np.all(np.isfinite(res.covariance))
-    return res if finite else fallback(data, ls, options, equations, "non-finite IV estimate")
 
 
 def _oe(p, iv: MethodResult, options: EstimationOptions, fixed: Mapping[str, float]) -> MethodResult:
