@@ -25,6 +25,7 @@ from feeddrive.estimator.estimate import EstimationOptions, MotionData
 from feeddrive.estimator.history import History
 from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
 from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.segmentation import at_rest
 from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
 
@@ -144,6 +145,8 @@ class MonitorPipeline:
             result["error"] = (f"motion of {(n - 1) * h:.3g} s is shorter than "
                                f"min_motion_s = {self.config.min_motion_s} s (a scenario's monitor.min_motion_s, "
                                "cosim monitor's --min-motion)")
+        elif (rest := self._at_rest(signals)) is not None:  # no motion: its sensor noise is nothing to estimate from
+            result["error"] = rest
         else:
             try:
                 mismatch = self._identify(signals, h, start, trace)
@@ -158,6 +161,13 @@ class MonitorPipeline:
         result["within_budget"] = result["processing_cpu_s"] <= self.config.budget_s
         self.history.record(self.axis, result, scenario=scenario, time=time)
         return trace
+
+    def _at_rest(self, signals: Mapping[str, np.ndarray]) -> str | None:
+        """``segmentation.at_rest`` of the motion's speed (the tachometer's, else the encoder's): an axis that did
+        not move (a plant held still, a recording at rest) is said so with its threshold, not refused parameter by
+        parameter."""
+        w = signals.get("w_tach", signals.get("w_enc"))
+        return None if w is None else at_rest(w, "rad/s", self.config.speed_threshold)
 
     def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> bool:
         """Validation, estimation, model check and diagnosis of one motion; True when the model check that

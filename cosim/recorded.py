@@ -327,15 +327,32 @@ def assumed_units(rec: Recording) -> tuple[str, ...]:
 
 def motions(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None,
             state: np.ndarray | None) -> list:
-    """``--segment``'s motions of each record (a split recording's motions never cross a gap)."""
-    from feeddrive.estimator.segmentation import Segment, segment
+    """``--segment``'s motions of each record (a split recording's motions never cross a gap); none from the speed
+    profile of a recording at rest (``segmentation.at_rest``: its noise would be cut into motions)."""
+    from feeddrive.estimator.segmentation import Segment, at_rest, segment
 
+    if args.segment == "auto" and state is None and speed is not None and at_rest(speed) is not None:
+        return []
     out = []
     for a, b in rec.bounds():
         part = segment(args.segment, b - a, rec.h, None if speed is None else speed[a:b],
                        None if state is None else state[a:b])
         out += [Segment(s.start + a, s.stop + a) for s in part]
     return out
+
+
+def no_motion(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None, state: np.ndarray | None) -> str:
+    """Why ``motions`` found no motion, in one line with its numbers: the recording at rest (the threshold it used),
+    an NC state never 1, or no run of the speed long enough."""
+    from feeddrive.estimator.segmentation import at_rest
+
+    unit = "m/s" if rec.side == "table" else "rad/s"
+    if state is not None:
+        return (f"no high-speed motion: nothing to judge (the NC state is never 1 (rapid) in {rec.n} samples; values "
+                f"{', '.join(f'{v:g}' for v in np.unique(state)[:5])}; --segment none takes the whole recording)")
+    rest = None if speed is None else at_rest(speed, unit)
+    return rest or (f"no high-speed motion found (--segment {args.segment}: no run of |speed| above 10 % of its largest "
+                    f"value lasts 0.3 s; --segment none takes the whole recording)")
 
 
 def start_clock(rec: Recording, start_time: str | None = None) -> tuple[float, str]:
