@@ -272,5 +272,8 @@ def check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str
     """Refuse a value outside the [min, max] the FMU declares for the variable (bad input, not a run failure)."""
     for bound, outside in ((variable.min, lambda b: value < b), (variable.max, lambda b: value > b)):
         if bound not in (None, "") and outside(float(bound)):
-            raise s.error(key, f"{variable.name} = {value:g} is outside the range [{variable.min or '-inf'}, "
-                               f"{variable.max or 'inf'}] that {fmu} declares")
+            low, strict = f"[{variable.min or '-inf'}", ""
+            if variable.min not in (None, "") and float(variable.min) == math.nextafter(0.0, 1.0):  # a strict bound
+                low, strict = "(0", f" (min {variable.min}, the smallest double above 0: {variable.name} > 0)"
+            raise s.error(key, f"{variable.name} = {value:g} is outside the range {low}, "
+                               f"{variable.max or 'inf'}] that {fmu} declares{strict}")
