@@ -57,7 +57,8 @@ def _estimates(signals: Mapping[str, np.ndarray], rows: slice, h: float, faulty:
     (``cosim.monitor.MonitorConfig``), so that the table scores the estimator the monitor validates.
     """
     from feeddrive.cosim.monitor import centred_speed, interval_mean_speed
-    from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
+    from feeddrive.estimator.all_or_none import estimate_motion
+    from feeddrive.estimator.estimate import EstimationOptions, MotionData
 
     sampling = getattr(config, "sampling", {})  # interval means (plant.oversample > 1): as the monitor aligns them
 
@@ -269,6 +270,7 @@ def _prepare() -> None:
 
 #: modules every co-simulation run with a monitor imports (some lazily, in the run): imported by ``prepare``
 RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.estimator.estimate",
+               "feeddrive.estimator.all_or_none", "feeddrive.estimator.lagged_iv",
                "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
                "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
                "feeddrive.estimator.spline_c", "feeddrive.estimator.toeplitz", "feeddrive.cosim.held_inputs",

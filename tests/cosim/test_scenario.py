@@ -65,7 +65,7 @@ def test_changed_fmu_is_refused_by_its_recorded_hash(tmp_path, feeddrive_fmu):
 
 @pytest.mark.parametrize("snippet, line, pattern", [
     ("plant:\n  fmu: builtin\n  fmuu: x\n", 3,
-     r"plant\.fmuu: unknown key 'fmuu'; expected one of: call_timeout, fmu, input_hold, interface, map, oversample, parameters, sha256, start, tolerance"),
+     r"plant\.fmuu: unknown key 'fmuu'; expected one of: build, call_timeout, fmu, input_hold, interface, map, oversample, parameters, sha256, start, tolerance"),
     ("step: fast\n", 1, r"step: Input should be a valid number.*got 'fast'"),
     ("step: -1.0e-4\n", 1, r"step: Input should be greater than 0, got -0.0001"),
     ("plant:\n  fmu: missing/plant.fmu\n", 2, r"plant\.fmu: FMU file not found: .*missing/plant\.fmu \(expected"),
