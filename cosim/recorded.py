@@ -331,6 +331,9 @@ def motions(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None,
     profile of a recording at rest (``segmentation.at_rest``: its noise would be cut into motions)."""
     from feeddrive.estimator.segmentation import Segment, at_rest, segment
 
+    if args.segment == "nc" and state is None:
+        raise InputError("--segment nc: the NC state is not mapped; expected --map state=COLUMN (1 = rapid), or "
+                         "--segment auto (the speed profile) or none (the whole recording)")
     if args.segment == "auto" and state is None and speed is not None and at_rest(speed) is not None:
         return []
     out = []

@@ -78,6 +78,8 @@ def at_rest(w: np.ndarray, unit: str = "rad/s", threshold: float | None = None) 
         limit, how = float(threshold), "speed_threshold"
     if peak > limit:
         return None
+    if peak == 0:
+        return f"no high-speed motion: nothing to judge (the speed is 0 on all {w.size} samples)"
     return (f"no high-speed motion: nothing to judge (largest |speed| {peak:.3g} {unit}, not above {limit:.3g} "
             f"{unit}: {how})")
 

@@ -46,6 +46,7 @@ from feeddrive.cosim.recorded import (
     filter_cutoff,
     mapped_roles,
     motions,
+    no_motion,
     pairs,
     read_recording,
     recording_json,
@@ -132,7 +133,7 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
         speed = rec.gradient(sig["position"])
     segments = motions(args, rec, speed, rec.signals.get("state"))
     if not segments:
-        raise NothingEstimated(f"{path}: no high-speed motion found (--segment {args.segment})")
+        raise NothingEstimated(f"{path}: {no_motion(args, rec, speed, rec.signals.get('state'))}")
     results, datas = [], []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}

@@ -46,7 +46,8 @@ def test_the_speed_noise_is_read_from_second_differences_and_a_ramp_does_not_rai
     why = at_rest(noise)
     assert why.startswith("no high-speed motion: nothing to judge (largest |speed| ")
     assert f"not above {REST_SNR * speed_noise(noise):.3g} rad/s: {REST_SNR:g} x the speed's noise" in why
-    assert at_rest(np.zeros(100)) is not None and at_rest(np.full(100, 0.5), threshold=1.0).endswith("speed_threshold)")
+    assert at_rest(np.zeros(100)) == "no high-speed motion: nothing to judge (the speed is 0 on all 100 samples)"
+    assert at_rest(np.full(100, 0.5), threshold=1.0).endswith("speed_threshold)")
 
 
 def test_a_recording_at_rest_is_nothing_judged_with_the_threshold_exit_3(tmp_path, capsys):
@@ -102,3 +103,17 @@ def test_the_pipeline_says_a_plant_held_still_has_no_motion():
         result = MonitorPipeline(MonitorConfig(), history, "X").process(signals, H, 0.0, 1, 0.0).result
     assert result["error"].startswith("no high-speed motion: nothing to judge (largest |speed| ")
     assert result["verdict"] == f"not estimated: {result['error']}" and not result["parameters"]
+
+
+def test_cosim_estimate_on_a_recording_at_rest_says_why_in_one_line(tmp_path, capsys):
+    """``cosim estimate`` keeps its documented exit 2 when no motion is found, now with the numbers."""
+    data = at_rest_csv(tmp_path / "rest.csv")
+    code = cosim(["estimate", str(data), "--map", "time=t", "voltage=u", "current=i", "speed=w"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.count("\n") == 0, err
+    assert err.startswith(f"cosim estimate: error: {data}: no high-speed motion: nothing to judge (largest |speed| ")
+    code = cosim(["estimate", str(data), "--map", "time=t", "voltage=u", "current=i", "speed=w", "--segment", "nc"])
+    err = capsys.readouterr().err.strip()  # it said "segmentation 'nc' needs an NC state signal (role 'state')"
+    assert code == 2 and err == ("cosim estimate: error: --segment nc: the NC state is not mapped; expected --map "
+                                 "state=COLUMN (1 = rapid), or --segment auto (the speed profile) or none (the whole "
+                                 "recording)")
