@@ -130,6 +130,21 @@ def parameter_entry(p, joint, unit: str) -> dict:  # noqa: ANN001 - estimator Pa
     return {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": unit}
 
 
+def wide_intervals(entries: Mapping[str, dict], max_relative_std: float, conditioned: Sequence[str]) -> dict[str, str]:
+    """The given parameters whose shown 95 % interval (``parameter_entry``: the wider of the estimator's and the one
+    not conditional on ``conditioned``, refused parameters fixed at their estimates) is wider than the estimator's
+    rule allows (``+-1.96 max_relative_std`` of the value, ``partial._rule``): name -> the refusal's reason."""
+    limit = 1.959963984540054 * max_relative_std
+    out = {}
+    for name, e in entries.items():
+        rel = (e["ci95"][1] - e["value"]) / abs(e["value"]) if e["value"] else float("inf")
+        if not rel <= limit:
+            given = f" (its interval given {', '.join(conditioned)} at their estimates passed)" if conditioned else ""
+            out[name] = (f"95 % interval +-{rel:.0%} of the value when the refused parameters are not taken as known, "
+                         f"more than +-{limit:.0%}{given}: {e['value']:.4g}")
+    return out
+
+
 def known_parameters(known: Mapping[str, float], units: Mapping[str, str]) -> dict[str, dict]:
     """Known parameters as report.json parameter entries (``known: true``, no interval)."""
     return {k: {"value": float(v), "std": 0.0, "ci95": [float(v), float(v)], "unit": units.get(k, ""), "known": True}

@@ -240,16 +240,24 @@ class MonitorPipeline:
         # fixed at its own estimate, as several files are compared (cosim estimate A B C); the conditional ones were
         # 5 times narrower on an HSM150 repeat and made the same machine "drifting"
         joint = est.joint.parameters if est.joint is not None else {}
-        result["parameters"] = {k: checks.parameter_entry(p, joint.get(k), units.get(k, "")) for k, p in params.items()}
+        entries = {k: checks.parameter_entry(p, joint.get(k), units.get(k, "")) for k, p in params.items()}
+        # the interval shown is that wider one: judged by the estimator's rule too, or a parameter passed on its
+        # interval given a refused one would be shown with one the rule refuses (REGBOT: K +-170 %, from -0.0085)
+        wide = checks.wide_intervals(entries, self.estimation_options.max_relative_std,
+                                     [n for n in est.refused if est.fixed.get(n, 0.0) != 0.0])
+        params = {k: p for k, p in params.items() if k not in wide}
+        result["parameters"] = {k: e for k, e in entries.items() if k not in wide}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error),
                    "estimation_rate_hz": est.rate_hz}  # the record's rate, or its decimated one
-        result["refused"] = dict(est.refused)
+        refused = dict(est.refused) | wide
+        result["refused"] = {n: refused[n] for n in sorted(refused, key=lambda n: (n not in self.names,
+                                                                                   self.names.index(n) if n in self.names else 0))}
         if est.result.message:  # a fallback (IV -> LS) is stated with its reason
             result["notes"].append(est.result.message)
         if est.method_used != result["method"]:  # which method gave the numbers: iv-lag or ls standing in for iv
             result["method_used"] = est.method_used
         if not params:  # every parameter refused: nothing to validate, to diagnose or to add to the baseline
-            result["error"] = (f"every parameter refused ({', '.join(est.refused) or 'none given'}), each with its "
+            result["error"] = (f"every parameter refused ({', '.join(result['refused']) or 'none given'}), each with its "
                                "reason: nothing to validate")
             return adequacy is not None and adequacy.mismatch
         flags = dict(est.flags)
@@ -257,7 +265,7 @@ class MonitorPipeline:
             result["flags"] = flags
         # the model checks simulate the model as fitted: a refused parameter at the value the fit held it at
         # (its own estimate, 0, or the lumped term); only the given parameters are validated and stored
-        fitted = {k: float(v) for k, v in {**est.fixed, **est.lumped}.items()}
+        fitted = {k: float(v) for k, v in {**est.fixed, **est.lumped}.items()} | {k: entries[k]["value"] for k in wide}
         if fitted:
             result["fitted"] = fitted
         values = {k: p.value for k, p in params.items()} | fitted | known
