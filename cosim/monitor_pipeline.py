@@ -207,7 +207,14 @@ class MonitorPipeline:
             result |= {"measurements_valid": not faults, "sensor_faults": faults, "residues": residues}
             result["notes"] += notes
             valid, u, i, w = not faults, best.get("u"), best.get("i"), best["w"]
-        torque = signals.get("torque")
+        # the torque pair (measurement, command) is checked like u and u_ref (monitor_checks.torque_pair)
+        if full and "torque" in have:  # (detect_subset checks it otherwise)
+            best = {}
+            checks.torque_pair(signals, h, self.validation_options, have, result["residues"], result["sensor_faults"],
+                               best, result["notes"])
+            valid = bool(valid and result["residues"].get("torque", {}).get("valid", True))
+            result["measurements_valid"] = bool(result["measurements_valid"] and valid)
+        torque = best.get("torque") if "torque" in have else None
         # a torque's offset T0 needs both directions: in one, sign(w) is a constant and Cd absorbs it
         peak = float(np.max(np.abs(w))) if np.size(w) else 0.0
         both = bool(np.max(w) > cfg.speed_fraction * peak and np.min(w) < -cfg.speed_fraction * peak)

@@ -268,14 +268,14 @@ def to_motor_side(rec: Recording, args: argparse.Namespace) -> Recording:
     if declared == {"motor"} and "x_lin" not in rec.signals:  # a linear scale: the pitch puts the encoder by it
         raise InputError(f"{rec.path}: --pitch converts table-side columns (m, m/s, N), but the columns are on the "
                          f"motor side ({rec.units})")
-    mechanical = ("position", "speed", "torque")
+    mechanical = MECHANICAL
     for r in mechanical:
         if r in rec.signals and r not in sided and declared == {"table", "motor"}:
             raise InputError(f"{rec.path}: column {rec.columns[r]!r} (role {r}) states no unit, and the others are "
                              "on both sides; give its unit in the header or a scale (--map ROLE=COLUMN*SCALE)")
     k = 2 * np.pi * args.ratio / pitch  # motor rad per m of table travel
-    factors = {"position": k, "speed": k, "torque": 1 / k}
-    units = {"position": "rad", "speed": "rad/s", "torque": "N*m"}
+    factors = {"position": k, "speed": k, "torque": 1 / k, "torque_ref": 1 / k}
+    units = {"position": "rad", "speed": "rad/s", "torque": "N*m", "torque_ref": "N*m"}
     convert = [r for r in mechanical if r in rec.signals and sided.get(r, "table") == "table"]
     signals = {r: v * factors[r] if r in convert else v for r, v in rec.signals.items()}
     return replace(rec, signals=signals, units=rec.units | {r: units[r] for r in convert if r in rec.units})

@@ -2,7 +2,8 @@
 
 Roles: ``time``, ``voltage`` (terminal) and ``voltage_ref`` (regulator reference) [V], ``current1`` and
 ``current2`` [A], ``torque`` [N.m] (instead of current and voltage: only the mechanical equation, Jt, ft,
-Cd and an offset T0), ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
+Cd and an offset T0) and ``torque_ref`` [N.m] (the drive's torque command: checked against ``torque`` as a
+redundant pair, like ``voltage_ref``), ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
 position in m with ``--pitch``/``--ratio``], ``state`` (NC state, 1 = rapid). Required: a current or a
 torque, and ``speed`` or ``position``; everything else is optional (cosim/monitor_checks.py): each check
 that cannot run says "not checked" with the missing sensor. The encoder angle is differentiated
@@ -62,7 +63,7 @@ from feeddrive.estimator.pvalue_text import p_text
 UNITS = parameter_units("motor")
 #: role -> monitor signal (the DC drive's; a PMSM's: ``recorded_servo.PMSM_ROLES``)
 ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
-         "speed": "w_tach", "position": None, "torque": "torque", "state": None} | PMSM_ROLES
+         "speed": "w_tach", "position": None, "torque": "torque", "torque_ref": "torque_ref", "state": None} | PMSM_ROLES
 #: roles of both drives
 COMMON = ("time", "speed", "position", "state")
 #: exit status when no motion was judged: none found, or every one not estimated (each says why); 0 when at
