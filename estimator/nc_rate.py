@@ -73,7 +73,7 @@ def systematic(data: MotionData, ls: MethodResult, result: MethodResult, options
         ``d = mean(LS_halves) - LS`` (LS's noise bias, IV fell back), and a note in ``message``. At 2 ms noise-free IV's L_d was -6.3 % +-6.1 % (LS -3.5 %); at 2 ms, 30 dB,
         the fall-back LS gave Jt -18 % +-17 % (the halves' LS -35 %: the bias of noisy Dw doubles).
     """
-    if _phase(data, options) <= MAX_HALF_PHASE or result.method != "iv" or result.method_used == LAGGED:
+    if _phase(data, options) <= MAX_HALF_PHASE or result.method not in ("iv", "ls") or result.method_used == LAGGED:
         return result  # the lagged IV reads the whole record (no halves to alias), its instruments not the noise
     names = [n for n in result.names if n in ls.names]
     if result.method_used == "iv":

@@ -446,6 +446,8 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
                                       lead="cannot identify" if missing else "not enough excitation to identify")
         final = ls
         iv = oe = None
+        if options.method == "ls":  # LS asked for: its noise bias in its intervals at an NC's rate, as when it stands in
+            final = systematic(data, ls, ls, options, fixed, _fit_ls)
         if options.method in ("iv", "oe"):
             iv = iv_with_fallbacks(data, ls, replace(options, known={**options.known, **fixed}), fixed,
                                    {r.equation for r in p.regressions})
