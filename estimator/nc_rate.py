@@ -57,8 +57,8 @@ def systematic(data: MotionData, ls: MethodResult, result: MethodResult, options
     ls : MethodResult
         LS of the whole record.
     result : MethodResult
-        IV, or LS labelled ``iv`` when IV fell back (``result.ran == "ls"``); the lagged IV
-        (``lagged_iv.LAGGED``) is returned unchanged.
+        IV, LS asked for (method ``ls``), or LS labelled ``iv`` when IV fell back (``result.ran == "ls"``); the lagged
+        IV (``lagged_iv.LAGGED``) is returned unchanged.
     options : EstimationOptions
     fixed : dict
         Parameters fixed in the re-fit (they stay fixed in the halves' LS).

@@ -14,7 +14,7 @@ and names the others with the rule that refuses them and its numbers:
   equation (DC: ``u = R i + K w``). And at an NC's rate (``nc_rate.MAX_HALF_PHASE``) a parameter on which IV (its
   halves sampled every 2 h alias the signals) and LS disagree beyond what LS's noise bias explains
   (``nc_rate.rate_rule``); below that, every interval there holds the method's systematic error
-  (``nc_rate.systematic``: IV - LS, or the fall-back LS's noise bias);
+  (``nc_rate.systematic``: IV - LS, or LS's noise bias, LS asked for or standing in for IV);
 * ``second lag``: the current follows the voltage through two time constants of comparable size (a sensor's
   low-pass on the current): L/R is one of them and the data cannot tell which (identifiability.py): L refused,
   kept in the fit as a lumped term, R and K given. The lag biases the rest too: each equation in that current
