@@ -20,7 +20,7 @@ from feeddrive.cosim.monitor_checks import _drift_reference, _residue_dict, inte
 from feeddrive.cosim.monitor_config import MonitorConfig
 from feeddrive.estimator.adequacy import check_adequacy
 from feeddrive.estimator.diagnosis import TABLES, DiagnosisOptions, diagnose, make_baseline
-from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.errors import FAILURES, EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.estimate import EstimationOptions, MotionData
 from feeddrive.estimator.history import History
 from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
@@ -233,8 +233,8 @@ class MonitorPipeline:
             est = estimate_parameters(  # one parameter at a time: the refused ones named with their reason
                 MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
                 replace(self.estimation_options, offset=offset), dict(cfg.bounds))
-        except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
-            # this motion cannot be used (the next may); ValueError: a non-finite simulation of the instruments
+        except FAILURES as exc:  # the estimator's own refusals and failures only (a coding error is raised)
+            # this motion cannot be used (the next may); a NumericalFailure: a non-finite simulation of the instruments
             result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
                 f"estimation failed on this motion's data ({exc})"
             if adequacy is not None and adequacy.mismatch:

@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from feeddrive.estimator.errors import FAILURES
 from feeddrive.estimator.estimate import split_halves
 from feeddrive.estimator.lagged_iv import LAGGED
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData
@@ -41,7 +42,7 @@ def _halves_ls(data: MotionData, options: EstimationOptions, fixed: dict, fit_ls
     for half in split_halves(data):
         try:
             res = fit_ls(half, replace(options, known={**options.known, **fixed}))[1]
-        except (ValueError, np.linalg.LinAlgError, ArithmeticError):  # too short, or failed: no extrapolation
+        except FAILURES:  # too short, or failed: no extrapolation (a coding error is raised)
             res = None
         out.append(res)
     return out

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from feeddrive.cosim.campaign.schema import PHYSICAL, CampaignError, RunSpec
+from feeddrive.estimator.errors import FAILURES
 from feeddrive.estimator.estimate import METHODS
 from feeddrive.models import feed_drive
 
@@ -192,7 +193,7 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
         try:  # a PMSM: the DC estimates on its q axis would be biased, the monitor's dq estimate only
             entry["methods"] = {} if config.drive != "dc" else _estimates(
                 res.signals, rows, scenario.step, set(injected["sensors"]), methods, config)
-        except ValueError as exc:  # not enough excitation in this motion: no numbers, the reason kept
+        except FAILURES as exc:  # not enough excitation in this motion: no numbers, the reason kept (not a bug's)
             entry["methods"], entry["estimation_error"] = {}, " ".join(str(exc).split())
         entry |= {key: monitor[k][key] for key in MONITOR_KEYS if key in monitor.get(k, {})}
         motions.append(entry)

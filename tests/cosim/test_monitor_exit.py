@@ -117,3 +117,13 @@ def test_cosim_estimate_on_a_recording_at_rest_says_why_in_one_line(tmp_path, ca
     assert code == 2 and err == ("cosim estimate: error: --segment nc: the NC state is not mapped; expected --map "
                                  "state=COLUMN (1 = rapid), or --segment auto (the speed profile) or none (the whole "
                                  "recording)")
+
+
+def test_cosim_estimate_with_every_parameter_refused_exits_3_saying_so(tmp_path, capsys):
+    """The whole record at rest as one motion (--segment none): each parameter refused with its reason, then the
+    last line; it exited 0 like a result."""
+    data = at_rest_csv(tmp_path / "rest.csv")
+    code = cosim(["estimate", str(data), "--map", "time=t", "voltage=u", "current=i", "speed=w", "--segment", "none"])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert code == 3 and "  Jt  refused: " in "\n".join(out)
+    assert out[-1] == "nothing estimated: every parameter of the motion refused, each with its reason (above)"
