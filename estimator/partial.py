@@ -71,6 +71,8 @@ MIN_TAU_SAMPLES = 1.0
 #: Largest variance inflation of a friction parameter by the other, refused (its variance over its variance given
 #: that estimate; 10 is the usual collinearity threshold): above it, it is refused too (``_rule``).
 MAX_INFLATION = 10.0
+#: Variance inflation by the refused parameters beyond which a parameter's conditional interval is no interval.
+DEGENERATE = 1e12
 #: The friction pair that one motion tells apart only through its speed range.
 FRICTION = {"ft": "Cd", "Cd": "ft"}
 #: Fewest usable samples of the minority direction for Cd to be told from an offset.
@@ -398,6 +400,16 @@ def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed
                                  f"({result.method_used.upper()}: {values[j]:.4g})")
             fixed[names[j]] = float(values[j])
         out += [j for j, _ in tied]
+        # an interval of no width given the refused ones: the parameter is all theirs (a record at rest gave ft
+        # 0.2003 N.m.s/rad with [0.2003, 0.2003] given K = -0.158, R, L, Jt at their refused estimates)
+        void = [j for j in keep if names[j] not in refused and j not in out
+                and not cov[j, j] * DEGENERATE > result.covariance[j, j]]  # (a rounding may leave it negative)
+        for j in void:
+            refused[names[j]] = (f"determined only by the refused {', '.join(names[k] for k in out)}: its interval "
+                                 f"given them has no width (its variance {cov[j, j]:.3g}, {result.covariance[j, j]:.3g} "
+                                 f"without them) ({result.method_used.upper()}: {values[j]:.4g})")
+            fixed[names[j]] = float(values[j])
+        out += void
     return replace(result, covariance=cov) if out else result
 
 
