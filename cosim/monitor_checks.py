@@ -11,7 +11,10 @@ a torque signal. Then:
 * the estimator uses what is there (``torque``: only the mechanical equation, Jt, ft, Cd and an offset
   T0; no voltage: the mechanical equation with a known K), with the known parameters fixed;
 * the paper's model check (output-error residues, estimator/mismatch.py) needs the redundancy for its
-  noise levels and instruments; without it the recording's own residue decides (estimator/adequacy.py).
+  noise levels and instruments; without it the recording's own residue decides (estimator/adequacy.py);
+* a torque measurement and the drive's torque command (``torque_ref``, ``TORQUE_PAIR``) are a redundant pair
+  like ``u`` and ``u_ref``: their residue test (eq. 10) finds a gain or offset between them (not isolated: no
+  third torque to tell which), and a healthy pair's mean is the torque the estimator uses.
 
 ``motion_verdict`` gives the one-word verdict of a motion, in the precedence ``sensor fault``,
 ``model mismatch``, ``not estimated: <reason>``, ``not validated: <reason>``, ``diagnosed``,
@@ -29,7 +32,10 @@ from feeddrive.estimator.validation import PAIRS, ValidationOptions, residue_tes
 #: what each sensor is, for the "not checked" lines
 SENSOR_NAMES = {"Im1": "current sensor 1 (Im1)", "Im2": "second current sensor (Im2)",
                 "u": "terminal voltage (u)", "u_ref": "voltage reference (u_ref)",
-                "w_tach": "tachometer (w_tach)", "w_enc": "encoder speed (w_enc)"}
+                "w_tach": "tachometer (w_tach)", "w_enc": "encoder speed (w_enc)",
+                "torque": "torque measurement (torque)", "torque_ref": "torque command (torque_ref)"}
+#: the redundant torque pair of a recording with a torque signal: the measurement and the drive's command
+TORQUE_PAIR = ("torque", "torque_ref")
 
 
 def present(signals: Mapping[str, np.ndarray | None]) -> set[str]:
@@ -46,6 +52,8 @@ def not_checked(have: set[str], torque: bool) -> dict[str, str]:
             out[quantity] = "not checked: a torque signal replaces the current sensors"
         elif missing:
             out[quantity] = "not checked: no " + " and no ".join(SENSOR_NAMES[s] for s in missing)
+    if torque and TORQUE_PAIR[1] not in have:
+        out["torque"] = f"not checked: no {SENSOR_NAMES[TORQUE_PAIR[1]]}"
     return out
 
 
@@ -82,15 +90,46 @@ def detect_subset(signals: Mapping[str, np.ndarray | None], h: float, options: V
         faults.append(unisolated_fault(s1, s2, res))
         notes.append(f"{quantity}: {s1} and {s2} disagree ({res.kind}); not isolated: the isolation (Fig. 6) needs "
                      "the current, the voltage and the speed")
+    torque_pair(signals, h, options, have, residues, faults, best, notes)
     return residues, faults, best, notes
+
+
+def torque_pair(signals: Mapping[str, np.ndarray | None], h: float, options: ValidationOptions, have: set[str],
+                residues: dict, faults: list, best: dict, notes: list) -> None:
+    """The torque measurement against the drive's torque command (``TORQUE_PAIR``), added to ``detect_subset``'s
+    outputs: the residue test (eq. 10), the pair's mean as ``best["torque"]`` when they agree, else the measurement;
+    a disagreement is a sensor fault of the pair, not isolated (the model gives no third torque without the
+    current and K)."""
+    s1, s2 = TORQUE_PAIR
+    if s1 not in have:
+        return
+    x1 = np.asarray(signals[s1], dtype=float)
+    best["torque"] = x1
+    if s2 not in have:
+        return
+    res = residue_test(x1, np.asarray(signals[s2], dtype=float), h, options)
+    residues["torque"] = {"kind": res.kind, "gain_diff": res.gain_diff, "gain_diff_ci95": list(res.gain_diff_ci95),
+                          "p_gain": res.p_gain, "offset": res.offset, "offset_ci95": list(res.offset_ci95),
+                          "p_offset": res.p_offset, "noise_std": res.noise_std, "trusted": None,
+                          "valid": res.kind == "none"}
+    if res.kind == "none":
+        best["torque"] = 0.5 * (x1 + np.asarray(signals[s2], dtype=float))
+        return
+    faults.append(unisolated_fault(s1, s2, res))
+    notes.append(f"torque: the measurement and the command disagree ({res.kind}: gain {1 + res.gain_diff:.4g}, "
+                 f"offset {res.offset:.3g} N.m); not isolated: the measured torque is used")
 
 
 def unisolated_fault(s1: str, s2: str, res) -> dict:  # noqa: ANN001 - estimator.validation.ResidueTest
     """A disagreeing pair's sensor-fault dict when the faulty one cannot be told: ``"Im1 or Im2"``, the
     pair's relative gain and offset (residue test, eq. 10)."""
+    # the residue's slope c is on the pair's mean level (a1 + a2) / 2, not on x2: a1 / a2 = (2 + c) / (2 - c)
+    # (1 + c was 1.0488 for a 5 % torque-sensor gain, its interval [1.0487, 1.0489] excluding it); monotonic in c,
+    # so the interval maps through it
     lo, hi = res.gain_diff_ci95
-    return {"sensor": f"{s1} or {s2}", "kind": res.kind, "gain": 1.0 + res.gain_diff, "gain_ci95": [1.0 + lo, 1.0 + hi],
-            "offset": res.offset, "offset_ci95": list(res.offset_ci95)}
+    return {"sensor": f"{s1} or {s2}", "kind": res.kind, "gain": res.gain_ratio_of(res.gain_diff),
+            "gain_ci95": [res.gain_ratio_of(lo), res.gain_ratio_of(hi)], "offset": res.offset,
+            "offset_ci95": list(res.offset_ci95)}
 
 
 def motion_verdict(result: Mapping, mismatch: bool) -> str:
@@ -128,6 +167,21 @@ def parameter_entry(p, joint, unit: str) -> dict:  # noqa: ANN001 - estimator Pa
         half = joint.ci95[1] - joint.value
         return {"value": p.value, "std": joint.std, "ci95": [p.value - half, p.value + half], "unit": unit}
     return {"value": p.value, "std": p.std, "ci95": list(p.ci95), "unit": unit}
+
+
+def wide_intervals(entries: Mapping[str, dict], max_relative_std: float, conditioned: Sequence[str]) -> dict[str, str]:
+    """The given parameters whose shown 95 % interval (``parameter_entry``: the wider of the estimator's and the one
+    not conditional on ``conditioned``, refused parameters fixed at their estimates) is wider than the estimator's
+    rule allows (``+-1.96 max_relative_std`` of the value, ``partial._rule``): name -> the refusal's reason."""
+    limit = 1.959963984540054 * max_relative_std
+    out = {}
+    for name, e in entries.items():
+        rel = (e["ci95"][1] - e["value"]) / abs(e["value"]) if e["value"] else float("inf")
+        if not rel <= limit:
+            given = f" (its interval given {', '.join(conditioned)} at their estimates passed)" if conditioned else ""
+            out[name] = (f"95 % interval +-{rel:.0%} of the value when the refused parameters are not taken as known, "
+                         f"more than +-{limit:.0%}{given}: {e['value']:.4g}")
+    return out
 
 
 def known_parameters(known: Mapping[str, float], units: Mapping[str, str]) -> dict[str, dict]:

@@ -20,11 +20,12 @@ from feeddrive.cosim.monitor_checks import _drift_reference, _residue_dict, inte
 from feeddrive.cosim.monitor_config import MonitorConfig
 from feeddrive.estimator.adequacy import check_adequacy
 from feeddrive.estimator.diagnosis import TABLES, DiagnosisOptions, diagnose, make_baseline
-from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.errors import FAILURES, EstimatorInputError, NotEnoughExcitation
 from feeddrive.estimator.estimate import EstimationOptions, MotionData
 from feeddrive.estimator.history import History
 from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
 from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.segmentation import at_rest
 from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
 
@@ -144,6 +145,8 @@ class MonitorPipeline:
             result["error"] = (f"motion of {(n - 1) * h:.3g} s is shorter than "
                                f"min_motion_s = {self.config.min_motion_s} s (a scenario's monitor.min_motion_s, "
                                "cosim monitor's --min-motion)")
+        elif (rest := self._at_rest(signals)) is not None:  # no motion: its sensor noise is nothing to estimate from
+            result["error"] = rest
         else:
             try:
                 mismatch = self._identify(signals, h, start, trace)
@@ -158,6 +161,13 @@ class MonitorPipeline:
         result["within_budget"] = result["processing_cpu_s"] <= self.config.budget_s
         self.history.record(self.axis, result, scenario=scenario, time=time)
         return trace
+
+    def _at_rest(self, signals: Mapping[str, np.ndarray]) -> str | None:
+        """``segmentation.at_rest`` of the motion's speed (the tachometer's, else the encoder's): an axis that did
+        not move (a plant held still, a recording at rest) is said so with its threshold, not refused parameter by
+        parameter."""
+        w = signals.get("w_tach", signals.get("w_enc"))
+        return None if w is None else at_rest(w, "rad/s", self.config.speed_threshold)
 
     def _identify(self, signals: Mapping[str, Any], h: float, start: float, trace: MotionTrace) -> bool:
         """Validation, estimation, model check and diagnosis of one motion; True when the model check that
@@ -197,7 +207,14 @@ class MonitorPipeline:
             result |= {"measurements_valid": not faults, "sensor_faults": faults, "residues": residues}
             result["notes"] += notes
             valid, u, i, w = not faults, best.get("u"), best.get("i"), best["w"]
-        torque = signals.get("torque")
+        # the torque pair (measurement, command) is checked like u and u_ref (monitor_checks.torque_pair)
+        if full and "torque" in have:  # (detect_subset checks it otherwise)
+            best = {}
+            checks.torque_pair(signals, h, self.validation_options, have, result["residues"], result["sensor_faults"],
+                               best, result["notes"])
+            valid = bool(valid and result["residues"].get("torque", {}).get("valid", True))
+            result["measurements_valid"] = bool(result["measurements_valid"] and valid)
+        torque = best.get("torque") if "torque" in have else None
         # a torque's offset T0 needs both directions: in one, sign(w) is a constant and Cd absorbs it
         peak = float(np.max(np.abs(w))) if np.size(w) else 0.0
         both = bool(np.max(w) > cfg.speed_fraction * peak and np.min(w) < -cfg.speed_fraction * peak)
@@ -216,8 +233,8 @@ class MonitorPipeline:
             est = estimate_parameters(  # one parameter at a time: the refused ones named with their reason
                 MotionData(h, u=u, i=i, w=w, torque=torque, t0=start, delays=cfg.delays(h)),
                 replace(self.estimation_options, offset=offset), dict(cfg.bounds))
-        except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
-            # this motion cannot be used (the next may); ValueError: a non-finite simulation of the instruments
+        except FAILURES as exc:  # the estimator's own refusals and failures only (a coding error is raised)
+            # this motion cannot be used (the next may); a NumericalFailure: a non-finite simulation of the instruments
             result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
                 f"estimation failed on this motion's data ({exc})"
             if adequacy is not None and adequacy.mismatch:
@@ -230,16 +247,24 @@ class MonitorPipeline:
         # fixed at its own estimate, as several files are compared (cosim estimate A B C); the conditional ones were
         # 5 times narrower on an HSM150 repeat and made the same machine "drifting"
         joint = est.joint.parameters if est.joint is not None else {}
-        result["parameters"] = {k: checks.parameter_entry(p, joint.get(k), units.get(k, "")) for k, p in params.items()}
+        entries = {k: checks.parameter_entry(p, joint.get(k), units.get(k, "")) for k, p in params.items()}
+        # the interval shown is that wider one: judged by the estimator's rule too, or a parameter passed on its
+        # interval given a refused one would be shown with one the rule refuses (REGBOT: K +-170 %, from -0.0085)
+        wide = checks.wide_intervals(entries, self.estimation_options.max_relative_std,
+                                     [n for n in est.refused if est.fixed.get(n, 0.0) != 0.0])
+        params = {k: p for k, p in params.items() if k not in wide}
+        result["parameters"] = {k: e for k, e in entries.items() if k not in wide}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error),
                    "estimation_rate_hz": est.rate_hz}  # the record's rate, or its decimated one
-        result["refused"] = dict(est.refused)
+        refused = dict(est.refused) | wide
+        result["refused"] = {n: refused[n] for n in sorted(refused, key=lambda n: (n not in self.names,
+                                                                                   self.names.index(n) if n in self.names else 0))}
         if est.result.message:  # a fallback (IV -> LS) is stated with its reason
             result["notes"].append(est.result.message)
         if est.method_used != result["method"]:  # which method gave the numbers: iv-lag or ls standing in for iv
             result["method_used"] = est.method_used
         if not params:  # every parameter refused: nothing to validate, to diagnose or to add to the baseline
-            result["error"] = (f"every parameter refused ({', '.join(est.refused) or 'none given'}), each with its "
+            result["error"] = (f"every parameter refused ({', '.join(result['refused']) or 'none given'}), each with its "
                                "reason: nothing to validate")
             return adequacy is not None and adequacy.mismatch
         flags = dict(est.flags)
@@ -247,7 +272,7 @@ class MonitorPipeline:
             result["flags"] = flags
         # the model checks simulate the model as fitted: a refused parameter at the value the fit held it at
         # (its own estimate, 0, or the lumped term); only the given parameters are validated and stored
-        fitted = {k: float(v) for k, v in {**est.fixed, **est.lumped}.items()}
+        fitted = {k: float(v) for k, v in {**est.fixed, **est.lumped}.items()} | {k: entries[k]["value"] for k in wide}
         if fitted:
             result["fitted"] = fitted
         values = {k: p.value for k, p in params.items()} | fitted | known

@@ -268,14 +268,14 @@ def to_motor_side(rec: Recording, args: argparse.Namespace) -> Recording:
     if declared == {"motor"} and "x_lin" not in rec.signals:  # a linear scale: the pitch puts the encoder by it
         raise InputError(f"{rec.path}: --pitch converts table-side columns (m, m/s, N), but the columns are on the "
                          f"motor side ({rec.units})")
-    mechanical = ("position", "speed", "torque")
+    mechanical = MECHANICAL
     for r in mechanical:
         if r in rec.signals and r not in sided and declared == {"table", "motor"}:
             raise InputError(f"{rec.path}: column {rec.columns[r]!r} (role {r}) states no unit, and the others are "
                              "on both sides; give its unit in the header or a scale (--map ROLE=COLUMN*SCALE)")
     k = 2 * np.pi * args.ratio / pitch  # motor rad per m of table travel
-    factors = {"position": k, "speed": k, "torque": 1 / k}
-    units = {"position": "rad", "speed": "rad/s", "torque": "N*m"}
+    factors = {"position": k, "speed": k, "torque": 1 / k, "torque_ref": 1 / k}
+    units = {"position": "rad", "speed": "rad/s", "torque": "N*m", "torque_ref": "N*m"}
     convert = [r for r in mechanical if r in rec.signals and sided.get(r, "table") == "table"]
     signals = {r: v * factors[r] if r in convert else v for r, v in rec.signals.items()}
     return replace(rec, signals=signals, units=rec.units | {r: units[r] for r in convert if r in rec.units})
@@ -327,15 +327,35 @@ def assumed_units(rec: Recording) -> tuple[str, ...]:
 
 def motions(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None,
             state: np.ndarray | None) -> list:
-    """``--segment``'s motions of each record (a split recording's motions never cross a gap)."""
-    from feeddrive.estimator.segmentation import Segment, segment
+    """``--segment``'s motions of each record (a split recording's motions never cross a gap); none from the speed
+    profile of a recording at rest (``segmentation.at_rest``: its noise would be cut into motions)."""
+    from feeddrive.estimator.segmentation import Segment, at_rest, segment
 
+    if args.segment == "nc" and state is None:
+        raise InputError("--segment nc: the NC state is not mapped; expected --map state=COLUMN (1 = rapid), or "
+                         "--segment auto (the speed profile) or none (the whole recording)")
+    if args.segment == "auto" and state is None and speed is not None and at_rest(speed) is not None:
+        return []
     out = []
     for a, b in rec.bounds():
         part = segment(args.segment, b - a, rec.h, None if speed is None else speed[a:b],
                        None if state is None else state[a:b])
         out += [Segment(s.start + a, s.stop + a) for s in part]
     return out
+
+
+def no_motion(args: argparse.Namespace, rec: Recording, speed: np.ndarray | None, state: np.ndarray | None) -> str:
+    """Why ``motions`` found no motion, in one line with its numbers: the recording at rest (the threshold it used),
+    an NC state never 1, or no run of the speed long enough."""
+    from feeddrive.estimator.segmentation import at_rest
+
+    unit = "m/s" if rec.side == "table" else "rad/s"
+    if state is not None:
+        return (f"no high-speed motion: nothing to judge (the NC state is never 1 (rapid) in {rec.n} samples; values "
+                f"{', '.join(f'{v:g}' for v in np.unique(state)[:5])}; --segment none takes the whole recording)")
+    rest = None if speed is None else at_rest(speed, unit)
+    return rest or (f"no high-speed motion found (--segment {args.segment}: no run of |speed| above 10 % of its largest "
+                    f"value lasts 0.3 s; --segment none takes the whole recording)")
 
 
 def start_clock(rec: Recording, start_time: str | None = None) -> tuple[float, str]:

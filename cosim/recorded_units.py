@@ -16,13 +16,13 @@ from feeddrive.cosim.errors import DataError, InputError
 #: position / speed / torque puts the data on the table side of a linear axis.
 SI_UNITS = {"time": ("s",), "voltage": ("V",), "voltage_ref": ("V",), "current": ("A",), "current1": ("A",),
             "current2": ("A",), "speed": ("rad/s", "m/s"), "position": ("rad", "m"), "torque": ("N*m", "N"),
-            "state": (), "i_d": ("A",), "i_q": ("A",), "u_d": ("V",), "u_q": ("V",),  # PMSM dq (cosim estimate --drive)
+            "torque_ref": ("N*m", "N"), "state": (), "i_d": ("A",), "i_q": ("A",), "u_d": ("V",), "u_q": ("V",),  # PMSM dq (cosim estimate --drive)
             # a PMSM drive's trace (cosim monitor --drive pmsm, cosim/recorded_servo.py): phase currents, a second
             # sensor on one phase, voltage references, electrical angle, linear-scale position
             "I_U": ("A",), "I_V": ("A",), "I_W": ("A",), "I_U2": ("A",), "I_V2": ("A",), "I_W2": ("A",),
             "u_d_ref": ("V",), "u_q_ref": ("V",), "phi_el": ("rad",), "x_lin": ("m",)}
 #: roles whose unit says which side of the drive chain the data are on (``Recording.side``, ``to_motor_side``)
-MECHANICAL = ("position", "speed", "torque")
+MECHANICAL = ("position", "speed", "torque", "torque_ref")
 #: roles whose values may be rms values (``[A rms]``): a PMSM's dq currents, whose amplitude-invariant value is
 #: the phase peak, sqrt(2) x the rms value of the sinusoidal phase current (a phase current's sample is never rms)
 RMS_ROLES = ("i_d", "i_q")

@@ -5,6 +5,7 @@ scenario's sections are validated; every problem is a ScenarioError naming the f
 from __future__ import annotations
 
 import math
+import shlex
 from pathlib import Path
 from typing import Any, Literal
 
@@ -82,6 +83,8 @@ class PlantConfig(Strict):
     """The plant FMU. After loading, ``fmu`` is an absolute path, ``sha256`` its hash, ``map`` complete."""
 
     fmu: str = "builtin"
+    build: str | None = Field(None, description="the command that builds plant.fmu, run in the scenario file's "
+                              "folder: quoted, runnable, when the file is not found (an FMU that is not committed)")
     sha256: str | None = None
     interface: Literal["cs", "me"] = "cs"
     oversample: int = Field(1, ge=1, description="plant and sensor steps per recording step: the plant's "
@@ -142,8 +145,10 @@ def resolve_plant(s: Scenario) -> tuple[PlantConfig, Any]:
         path = (s.base_dir / Path(p.fmu).expanduser()).resolve()
         role_map = dict(p.map)
         if not path.is_file():
-            raise s.error(("plant", "fmu"), f"FMU file not found: {path} (expected {', '.join(map(repr, BUILTIN_PLANTS))} or the path of an "
-                                            ".fmu, relative to the scenario file)")
+            how = (f"; build it first: (cd {shlex.quote(str(s.base_dir.resolve()))} && {p.build}) (plant.build)" if p.build else
+                   f" (expected {', '.join(map(repr, BUILTIN_PLANTS))} or the path of an .fmu, relative to the scenario "
+                   "file; plant.build states the command that builds it)")
+            raise s.error(("plant", "fmu"), f"FMU file not found: {path}{how}")
     try:
         version = fmi_version(path)
     except ValueError as exc:
@@ -272,5 +277,8 @@ def check_range(s: Scenario, key: KeyPath, variable: Any, value: float, fmu: str
     """Refuse a value outside the [min, max] the FMU declares for the variable (bad input, not a run failure)."""
     for bound, outside in ((variable.min, lambda b: value < b), (variable.max, lambda b: value > b)):
         if bound not in (None, "") and outside(float(bound)):
-            raise s.error(key, f"{variable.name} = {value:g} is outside the range [{variable.min or '-inf'}, "
-                               f"{variable.max or 'inf'}] that {fmu} declares")
+            low, strict = f"[{variable.min or '-inf'}", ""
+            if variable.min not in (None, "") and float(variable.min) == math.nextafter(0.0, 1.0):  # a strict bound
+                low, strict = "(0", f" (min {variable.min}, the smallest double above 0: {variable.name} > 0)"
+            raise s.error(key, f"{variable.name} = {value:g} is outside the range {low}, "
+                               f"{variable.max or 'inf'}] that {fmu} declares{strict}")

@@ -14,7 +14,7 @@ _WHERE = {
     "zero_forcing_derivative": "derivative",
     "EstimatorInputError": "errors", "NotEnoughExcitation": "errors",
     "EstimationOptions": "estimate", "MethodResult": "estimate", "MotionData": "estimate",
-    "MotionEstimate": "estimate", "ParameterEstimate": "estimate", "estimate_motion": "estimate",
+    "MotionEstimate": "estimate", "ParameterEstimate": "estimate", "estimate_motion": "all_or_none",
     "FilterSpec": "filtering", "lowpass": "filtering",
     "simulate_current": "simulation", "simulate_motor": "simulation", "simulate_speed": "simulation",
 }

@@ -1,4 +1,7 @@
 """Errors of the estimator. Bad input subclasses ValueError."""
+from __future__ import annotations
+
+import numpy as np
 
 
 class EstimatorInputError(ValueError):
@@ -28,6 +31,14 @@ class NotEnoughExcitation(ValueError):
 class NumericalFailure(EstimatorInputError):
     """A computation on valid input cannot give a finite answer (an unstable or non-finite simulation of the
     instruments, a singular system): the caller falls back to a simpler method or refuses, with this reason."""
+
+
+#: What a method raises on purpose when it cannot give an estimate from valid input: a refusal with its reason
+#: (``NotEnoughExcitation``), unusable signals or a failed computation (``EstimatorInputError``, ``NumericalFailure``)
+#: and numpy's singular matrix (``LinAlgError``). A caller that falls back to a simpler method catches these only:
+#: a bare ValueError (a numpy shape mismatch) or an ArithmeticError is a coding error and must not become
+#: "fell back to LS" (``partial._iv``, ``lagged_iv.fallback``).
+FAILURES: tuple[type[Exception], ...] = (NotEnoughExcitation, EstimatorInputError, np.linalg.LinAlgError)
 
 
 class HistoryError(EstimatorInputError):

@@ -61,7 +61,7 @@ _signals_for = signals_for  # its former private name, still imported by partial
 
 # the data types live in .motion; they are re-exported here, where users have always found them
 __all__ = ["METHODS", "PHYSICAL", "EstimationOptions", "MethodResult", "MotionData", "MotionEstimate",
-           "ParameterEstimate", "Prepared", "constant_sensitivities", "derived_estimates", "estimate_motion",
+           "ParameterEstimate", "Prepared", "constant_sensitivities", "derived_estimates",
            "instrumental_variables", "least_squares", "owners", "prepare", "too_short", "update_constants"]
 
 
@@ -420,41 +420,3 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
 def fell_back(result: MethodResult, method: str, reason: str) -> MethodResult:
     """``result`` standing in for ``method``, which could not run: labelled ``method``, ``ran`` says what ran."""
     return replace(result, method=method, message=reason, ran=result.method_used)
-
-
-def estimate_motion(data: MotionData, options: EstimationOptions = EstimationOptions()) -> MotionEstimate:
-    """Estimate the physical parameters of one high-speed motion.
-
-    Parameters
-    ----------
-    data : MotionData
-        Voltage, current and speed (or position, or torque) of one motion, sampled every ``data.h``.
-    options : EstimationOptions
-
-    Returns
-    -------
-    MotionEstimate
-        LS always; IV for methods ``iv`` and ``oe``; OE for ``oe`` (falls back to IV with a message).
-
-    Raises
-    ------
-    NotEnoughExcitation
-        The data cannot determine some parameters (they are named); no numbers are returned.
-    EstimatorInputError
-        Unusable signals or options.
-    """
-    p = prepare(data, options)
-    ls = least_squares(p, options)
-    iv = oe = None
-    if options.method in ("iv", "oe"):
-        try:
-            iv = instrumental_variables(data, ls, options)
-        except (NumericalFailure, np.linalg.LinAlgError) as exc:  # e.g. L/R far below the instruments' step
-            iv = fell_back(ls, "iv", f"IV fell back to LS: {exc}")
-    if options.method == "oe":
-        from feeddrive.estimator.oe import output_error
-
-        oe = output_error(p, iv, options)
-    out = MotionEstimate(options.method, float(data.t0), float(data.t0 + (data.n - 1) * data.h), ls, iv, oe,
-                         rate_hz=1.0 / p.h)
-    return replace(out, derived=derived_estimates(out.result, options.model))

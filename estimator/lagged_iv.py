@@ -26,12 +26,14 @@ error 0.90 of its spread over 100 noise draws with blocks of 5 / fc, 1.00 with 4
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
 
+import casadi as ca
 import numpy as np
 
-from feeddrive.estimator.errors import NotEnoughExcitation, NumericalFailure
-from feeddrive.estimator.estimate import _combine, _signals_for, fell_back, prepare
+from feeddrive.estimator.errors import FAILURES, NotEnoughExcitation, NumericalFailure
+from feeddrive.estimator.estimate import _combine, _signals_for, fell_back, instrumental_variables, prepare
 from feeddrive.estimator.linear_fit import _column_reference, _solve
 from feeddrive.estimator.model_terms import constant_sensitivities, ls_parts, update_constants
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, Prepared
@@ -134,6 +136,58 @@ def fallback(data: MotionData, ls: MethodResult, options: EstimationOptions, equ
         res = lagged_iv(data, options, equations)
         if not (np.all(np.isfinite(res.values)) and np.all(np.isfinite(res.covariance))):
             raise NumericalFailure("non-finite estimate")
-    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:  # NotEnoughExcitation, NumericalFailure
+    except FAILURES as exc:  # NotEnoughExcitation, NumericalFailure, a singular matrix; never a coding error
         return fell_back(ls, "iv", f"IV fell back to LS: {why}; the {LABEL} failed too: {exc}")
     return replace(res, message=f"{LABEL}: the split-sample IV {failed}")
+
+
+def iv_with_fallbacks(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float],
+                      equations: set[str]) -> MethodResult:
+    """IV from ``ls`` as every caller runs it (``partial.estimate_parameters``: the monitor, ``cosim estimate``;
+    ``estimate.estimate_motion``: a campaign's per-method table), so the same motion gets the same method and label:
+    the split-sample IV (``estimate.instrumental_variables``), else the lagged IV (:func:`fallback`), else ``ls``
+    labelled ``iv`` with the reasons. Only the estimator's own failures (``errors.FAILURES``) fall back.
+
+    Parameters
+    ----------
+    data : MotionData
+    ls : MethodResult
+        The LS estimate of the regressions of ``equations`` (the start of the iteration).
+    options : EstimationOptions
+        ``known`` holding what the LS re-fits fixed.
+    fixed : mapping of str to float
+        Parameters fixed in the re-fit of the others: a derivative coefficient (L, L_q, Jt) fixed at 0 leaves its
+        equation without simulated instruments (its measured state is its own instrument).
+    equations : set of str
+        The equations ``ls`` holds.
+
+    Returns
+    -------
+    MethodResult
+        Labelled ``iv``; ``ran`` says which ran (``iv``, ``LAGGED`` or ``ls``), ``message`` why.
+    """
+    # an equation whose derivative coefficient is fixed at 0 cannot be simulated: its measured state is its own
+    # instrument (IV = LS for it), the other equation still gets simulated instruments
+    model = options.model
+    dynamic = {}
+    for eq in model.equations.values():  # the parameter that multiplies the equation's derivative (L, L_q, Jt)
+        slope = ca.jacobian(eq.residual, model.derivative[eq.solves_for])
+        n = next((v.name for v in model.of_kind("physical") if ca.depends_on(slope, v.sym)), None)
+        if n is not None and fixed.get(n) == 0.0:
+            dynamic[eq.name] = n
+    if equations <= set(dynamic):
+        return fell_back(ls, "iv", f"IV fell back to LS: {', '.join(dynamic.values())} fixed at 0, the instruments "
+                                   f"cannot be simulated")
+    try:
+        res = instrumental_variables(data, ls, options, check=False, skip=tuple(dynamic))
+        if dynamic:
+            res = replace(res, message=f"IV without simulated instruments for the {', '.join(dynamic)} equation "
+                                       f"({', '.join(n + ' fixed at 0' for n in dynamic.values())})")
+    except FAILURES as exc:  # its own refusals and failures only: a coding error is not "IV failed"
+        return fallback(data, ls, options, equations, str(exc))  # the lagged-regressor IV, or LS when it fails too
+    missing = [n for n in ls.names if n not in res.names]  # a half short of fast samples for an equation
+    if missing:  # the parameters would vanish from the result without a reason
+        return fallback(data, ls, options, equations, f"the split-sample IV's halves (every second sample) cannot "
+                                                      f"identify {', '.join(missing)}")
+    finite = np.all(np.isfinite(res.values)) and np.all(np.isfinite(res.covariance))
+    return res if finite else fallback(data, ls, options, equations, "non-finite IV estimate")

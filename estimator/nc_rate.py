@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from feeddrive.estimator.errors import FAILURES
 from feeddrive.estimator.estimate import split_halves
 from feeddrive.estimator.lagged_iv import LAGGED
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData
@@ -41,7 +42,7 @@ def _halves_ls(data: MotionData, options: EstimationOptions, fixed: dict, fit_ls
     for half in split_halves(data):
         try:
             res = fit_ls(half, replace(options, known={**options.known, **fixed}))[1]
-        except (ValueError, np.linalg.LinAlgError, ArithmeticError):  # too short, or failed: no extrapolation
+        except FAILURES:  # too short, or failed: no extrapolation (a coding error is raised)
             res = None
         out.append(res)
     return out
@@ -57,8 +58,8 @@ def systematic(data: MotionData, ls: MethodResult, result: MethodResult, options
     ls : MethodResult
         LS of the whole record.
     result : MethodResult
-        IV, or LS labelled ``iv`` when IV fell back (``result.ran == "ls"``); the lagged IV
-        (``lagged_iv.LAGGED``) is returned unchanged.
+        IV, LS asked for (method ``ls``), or LS labelled ``iv`` when IV fell back (``result.ran == "ls"``); the lagged
+        IV (``lagged_iv.LAGGED``) is returned unchanged.
     options : EstimationOptions
     fixed : dict
         Parameters fixed in the re-fit (they stay fixed in the halves' LS).
@@ -73,7 +74,7 @@ def systematic(data: MotionData, ls: MethodResult, result: MethodResult, options
         ``d = mean(LS_halves) - LS`` (LS's noise bias, IV fell back), and a note in ``message``. At 2 ms noise-free IV's L_d was -6.3 % +-6.1 % (LS -3.5 %); at 2 ms, 30 dB,
         the fall-back LS gave Jt -18 % +-17 % (the halves' LS -35 %: the bias of noisy Dw doubles).
     """
-    if _phase(data, options) <= MAX_HALF_PHASE or result.method != "iv" or result.method_used == LAGGED:
+    if _phase(data, options) <= MAX_HALF_PHASE or result.method not in ("iv", "ls") or result.method_used == LAGGED:
         return result  # the lagged IV reads the whole record (no halves to alias), its instruments not the noise
     names = [n for n in result.names if n in ls.names]
     if result.method_used == "iv":

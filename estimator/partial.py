@@ -14,7 +14,7 @@ and names the others with the rule that refuses them and its numbers:
   equation (DC: ``u = R i + K w``). And at an NC's rate (``nc_rate.MAX_HALF_PHASE``) a parameter on which IV (its
   halves sampled every 2 h alias the signals) and LS disagree beyond what LS's noise bias explains
   (``nc_rate.rate_rule``); below that, every interval there holds the method's systematic error
-  (``nc_rate.systematic``: IV - LS, or the fall-back LS's noise bias);
+  (``nc_rate.systematic``: IV - LS, or LS's noise bias, LS asked for or standing in for IV);
 * ``second lag``: the current follows the voltage through two time constants of comparable size (a sensor's
   low-pass on the current): L/R is one of them and the data cannot tell which (identifiability.py): L refused,
   kept in the fit as a lumped term, R and K given. The lag biases the rest too: each equation in that current
@@ -51,14 +51,12 @@ from feeddrive.estimator.estimate import (
     _solve,
     constant_sensitivities,
     derived_estimates,
-    fell_back,
-    instrumental_variables,
     ls_parts,
     prepare,
     update_constants,
 )
 from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_lag
-from feeddrive.estimator.lagged_iv import fallback
+from feeddrive.estimator.lagged_iv import iv_with_fallbacks
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.nc_rate import rate_rule, systematic
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
@@ -73,6 +71,8 @@ MIN_TAU_SAMPLES = 1.0
 #: Largest variance inflation of a friction parameter by the other, refused (its variance over its variance given
 #: that estimate; 10 is the usual collinearity threshold): above it, it is refused too (``_rule``).
 MAX_INFLATION = 10.0
+#: Variance inflation by the refused parameters beyond which a parameter's conditional interval is no interval.
+DEGENERATE = 1e12
 #: The friction pair that one motion tells apart only through its speed range.
 FRICTION = {"ft": "Cd", "Cd": "ft"}
 #: Fewest usable samples of the minority direction for Cd to be told from an offset.
@@ -400,6 +400,16 @@ def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed
                                  f"({result.method_used.upper()}: {values[j]:.4g})")
             fixed[names[j]] = float(values[j])
         out += [j for j, _ in tied]
+        # an interval of no width given the refused ones: the parameter is all theirs (a record at rest gave ft
+        # 0.2003 N.m.s/rad with [0.2003, 0.2003] given K = -0.158, R, L, Jt at their refused estimates)
+        void = [j for j in keep if names[j] not in refused and j not in out
+                and not cov[j, j] * DEGENERATE > result.covariance[j, j]]  # (a rounding may leave it negative)
+        for j in void:
+            refused[names[j]] = (f"determined only by the refused {', '.join(names[k] for k in out)}: its interval "
+                                 f"given them has no width (its variance {cov[j, j]:.3g}, {result.covariance[j, j]:.3g} "
+                                 f"without them) ({result.method_used.upper()}: {values[j]:.4g})")
+            fixed[names[j]] = float(values[j])
+        out += void
     return replace(result, covariance=cov) if out else result
 
 
@@ -448,15 +458,17 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
                                       lead="cannot identify" if missing else "not enough excitation to identify")
         final = ls
         iv = oe = None
+        if options.method == "ls":  # LS asked for: its noise bias in its intervals at an NC's rate, as when it stands in
+            final = systematic(data, ls, ls, options, fixed, _fit_ls)
         if options.method in ("iv", "oe"):
-            iv = _iv(data, ls, replace(options, known={**options.known, **fixed}), fixed,
-                     {r.equation for r in p.regressions})
-            final = iv
+            iv = iv_with_fallbacks(data, ls, replace(options, known={**options.known, **fixed}), fixed,
+                                   {r.equation for r in p.regressions})
+            # at an NC's rate, IV's aliasing or LS's noise bias in the interval; for oe too, whose fall-back is this
+            # IV (without it, oe on Quanser's 2 ms record gave Jt +-6 % where iv refused it at +-415 %)
+            iv = final = systematic(data, ls, iv, options, fixed, _fit_ls)
         if options.method == "oe":
             oe = _oe(p, iv, options, fixed)
             final = oe
-        if options.method == "iv":  # at an NC's rate, IV's aliasing or LS's noise bias in the interval
-            iv = final = systematic(data, ls, iv, options, fixed, _fit_ls)
         unconditional = final
         final = _rule(final, options, refused, fixed)
         _lag_check(final, lagfree, refused, lumped)
@@ -467,6 +479,7 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
             rate_rule(data, ls, iv, options, fixed, refused, _fit_ls)
         else:
             oe = final
+            rate_rule(data, ls, oe, options, fixed, refused, _fit_ls)  # only where OE fell back to IV (ran iv)
         given = [n for n in final.names if n not in refused and n not in lumped]
         subsets = {m: None if r is None else _subset(r, [n for n in given if n in r.names])
                    for m, r in (("ls", ls), ("iv", iv), ("oe", oe))}
@@ -483,32 +496,6 @@ def estimate_parameters(data: MotionData, options: EstimationOptions = Estimatio
                           lumped={n: float(final.values[final.names.index(n)]) for n in lumped if n in final.names},
                           joint=_subset(unconditional, list(shown.names)),
                           derived=derived_estimates(shown, options.model), rate_hz=1.0 / p.h)
-
-
-def _iv(data: MotionData, ls: MethodResult, options: EstimationOptions, fixed: Mapping[str, float],
-        equations: set[str]) -> MethodResult:
-    """IV from ``ls``, or ``ls`` labelled ``iv`` with the reason it could not run."""
-    # an equation whose derivative coefficient is fixed at 0 cannot be simulated: its measured state is its own
-    # instrument (IV = LS for it), the other equation still gets simulated instruments
-    model = options.model
-    dynamic = {}
-    for eq in model.equations.values():  # the parameter that multiplies the equation's derivative (L, L_q, Jt)
-        slope = ca.jacobian(eq.residual, model.derivative[eq.solves_for])
-        n = next((v.name for v in model.of_kind("physical") if ca.depends_on(slope, v.sym)), None)
-        if n is not None and fixed.get(n) == 0.0:
-            dynamic[eq.name] = n
-    if equations <= set(dynamic):
-        return fell_back(ls, "iv", f"IV fell back to LS: {', '.join(dynamic.values())} fixed at 0, the instruments "
-                                   f"cannot be simulated")
-    try:
-        res = instrumental_variables(data, ls, options, check=False, skip=tuple(dynamic))
-        if dynamic:
-            res = replace(res, message=f"IV without simulated instruments for the {', '.join(dynamic)} equation "
-                                       f"({', '.join(n + ' fixed at 0' for n in dynamic.values())})")
-    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:  # NotEnoughExcitation, NumericalFailure
-        return fallback(data, ls, options, equations, str(exc))  # the lagged-regressor IV, or LS when it fails too
-    finite = np.all(np.isfinite(res.values)) and np.all(np.isfinite(res.covariance))
-    return res if finite else fallback(data, ls, options, equations, "non-finite IV estimate")
 
 
 def _oe(p, iv: MethodResult, options: EstimationOptions, fixed: Mapping[str, float]) -> MethodResult:

@@ -120,6 +120,9 @@ class ResidueTest:
         p-value of the chi-square lack-of-fit test (small: structure beyond gain and offset).
     centers, means, levels : ndarray, shape (n_windows,)
         Window centre sample indices, window means of ``r`` and window levels.
+    anti : bool
+        The level is ``x2`` (the sensors read opposite signs), not the pair's mean: ``a1 / a2`` is then
+        ``1 + gain_diff``, else ``(2 + gain_diff) / (2 - gain_diff)`` (``gain_ratio_of``).
     """
 
     kind: str
@@ -135,6 +138,13 @@ class ResidueTest:
     centers: np.ndarray = field(repr=False)
     means: np.ndarray = field(repr=False)
     levels: np.ndarray = field(repr=False)
+    anti: bool = False
+
+    def gain_ratio_of(self, c: float) -> float:
+        """``a1 / a2`` for a slope ``c`` of the residue on this test's level (``gain_diff`` or a bound of its CI)."""
+        if self.anti:
+            return 1.0 + c
+        return (2.0 + c) / (2.0 - c) if c < 2.0 else float("inf")
 
 
 @dataclass(frozen=True)
@@ -283,7 +293,7 @@ def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,
     kind = KINDS[int(offset) + 2 * int(gain)]
     ci = [(float(c - tq * s), float(c + tq * s)) for c, s in zip(coef, se)]
     return ResidueTest(kind, sigma, m, float(coef[0]), ci[0], float(p[0]), float(coef[1]), ci[1], float(p[1]),
-                       p_structure, centers, means, levels)
+                       p_structure, centers, means, levels, anti)
 
 
 def gain_ratio(x1f: np.ndarray, x2f: np.ndarray, step: int = 1) -> float:

@@ -192,7 +192,10 @@ def _attributes(v: FMUVariable) -> dict[str, str]:
 def _values(v: FMUVariable) -> dict[str, str]:
     real = {"unit": v.unit}
     if v.lower is not None:
-        real["min"] = repr(float(v.lower))
+        # FMI's min is inclusive: a strict bound (R > 0) is declared as the next double above it (5e-324 for 0), so
+        # that the declared range is the one fmu_core's check_value enforces (R = 0 was declared valid, then refused
+        # by fmi2SetReal at t = 0: a run failure for a scenario value the reader could have refused)
+        real["min"] = repr(math.nextafter(float(v.lower), math.inf) if v.lower_strict else float(v.lower))
     if v.upper is not None:
         real["max"] = repr(float(v.upper))
     if v.start is not None:

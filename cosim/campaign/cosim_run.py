@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from feeddrive.cosim.campaign.schema import PHYSICAL, CampaignError, RunSpec
+from feeddrive.estimator.errors import FAILURES
 from feeddrive.estimator.estimate import METHODS
 from feeddrive.models import feed_drive
 
@@ -57,7 +58,8 @@ def _estimates(signals: Mapping[str, np.ndarray], rows: slice, h: float, faulty:
     (``cosim.monitor.MonitorConfig``), so that the table scores the estimator the monitor validates.
     """
     from feeddrive.cosim.monitor import centred_speed, interval_mean_speed
-    from feeddrive.estimator.estimate import EstimationOptions, MotionData, estimate_motion
+    from feeddrive.estimator.all_or_none import estimate_motion
+    from feeddrive.estimator.estimate import EstimationOptions, MotionData
 
     sampling = getattr(config, "sampling", {})  # interval means (plant.oversample > 1): as the monitor aligns them
 
@@ -191,7 +193,7 @@ def run_cosim(spec: RunSpec) -> dict[str, Any]:
         try:  # a PMSM: the DC estimates on its q axis would be biased, the monitor's dq estimate only
             entry["methods"] = {} if config.drive != "dc" else _estimates(
                 res.signals, rows, scenario.step, set(injected["sensors"]), methods, config)
-        except ValueError as exc:  # not enough excitation in this motion: no numbers, the reason kept
+        except FAILURES as exc:  # not enough excitation in this motion: no numbers, the reason kept (not a bug's)
             entry["methods"], entry["estimation_error"] = {}, " ".join(str(exc).split())
         entry |= {key: monitor[k][key] for key in MONITOR_KEYS if key in monitor.get(k, {})}
         motions.append(entry)
@@ -269,6 +271,7 @@ def _prepare() -> None:
 
 #: modules every co-simulation run with a monitor imports (some lazily, in the run): imported by ``prepare``
 RUN_IMPORTS = ("feeddrive.cosim.monitor", "feeddrive.cosim.run", "feeddrive.estimator.estimate",
+               "feeddrive.estimator.all_or_none", "feeddrive.estimator.lagged_iv",
                "feeddrive.cosim.fmu_factory", "feeddrive.cosim.fmu_adapter",
                "feeddrive.cosim.fmu_me", "feeddrive.cosim.fmi3_adapter", "feeddrive.estimator.compiled",
                "feeddrive.estimator.spline_c", "feeddrive.estimator.toeplitz", "feeddrive.cosim.held_inputs",

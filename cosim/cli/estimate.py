@@ -21,7 +21,9 @@ range or the ``--bounds`` is listed in ``"flags"`` (never to be validated), with
 (``"bounded"``). ``"method"`` is the method that ran; ``"method_requested"`` and ``"fallback"`` appear when
 it is not the one asked for; ``"rate_hz"`` is the rate the fits ran at (the signals low-passed, then every
 D-th sample kept: ``EstimationOptions.decimation``). When there are several motions, one of which nothing can be estimated is
-reported on stderr and left out; if no motion is left, the exit status is 2.
+reported on stderr and left out; if no motion is left, the exit status is 2. When every parameter of every motion
+is refused (each with its reason in the table), the last line says so and the exit status is 3 (``NOTHING_GIVEN``,
+as ``cosim monitor``'s nothing judged).
 
 Several recordings (``cosim estimate A.csv B.csv`` or a quoted glob ``'run*.csv'``) of one machine: a row
 per file (its motions pooled), a test of whether the files agree within their intervals and the pooled
@@ -46,6 +48,7 @@ from feeddrive.cosim.recorded import (
     filter_cutoff,
     mapped_roles,
     motions,
+    no_motion,
     pairs,
     read_recording,
     recording_json,
@@ -72,6 +75,10 @@ DRIVE_ROLES = {"dc": ("voltage", "current", "torque"), "pmsm": ("i_q", "i_d", "u
                "pmsm-spm": ("i_q", "i_d", "u_q", "u_d", "torque")}
 
 
+#: exit status when every parameter of every motion was refused (each with its reason): not a result
+NOTHING_GIVEN = 3
+
+
 class NothingEstimated(InputError):
     """No motion of a recording could be estimated (each was reported on stderr)."""
 
@@ -92,6 +99,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="bounds on a parameter beyond its physical range, either side may be empty, e.g. "
                              "Jt=4e-6: (the rotor's own inertia) ft=0:1; an estimate outside is flagged and a "
                              "bounded estimate offered")
+    parser.epilog = (f"exit status: 0 a parameter given; {NOTHING_GIVEN} every parameter of every motion refused (the "
+                     "last line says so, each reason above); 2 bad input or no motion to estimate (one line)")
 
 
 def data_files(patterns: list[str]) -> list[str]:
@@ -132,7 +141,7 @@ def estimate_file(path: str, args: argparse.Namespace, known: dict, bounds: dict
         speed = rec.gradient(sig["position"])
     segments = motions(args, rec, speed, rec.signals.get("state"))
     if not segments:
-        raise NothingEstimated(f"{path}: no high-speed motion found (--segment {args.segment})")
+        raise NothingEstimated(f"{path}: {no_motion(args, rec, speed, rec.signals.get('state'))}")
     results, datas = [], []
     for seg in segments:
         part = {k: v[seg.start:seg.stop] for k, v in sig.items()}
@@ -202,7 +211,7 @@ def main(args: argparse.Namespace) -> int:
         else:
             print(table(results, units))
             print("\n".join(f"motion {k}: {c.line()}" for k, c in enumerate(checks, 1)))
-        return 0
+        return nothing_given([r for _, _, rs, _, _ in per_file for r in rs], args.json)
     # pooled and compared with the intervals not conditional on a refused parameter (MotionEstimate.joint)
     all_checks = [checks for *_, checks in per_file]
     rows = [(path, results, pool([r.joint or r.result for r in results])) for path, _, results, _, _ in per_file]
@@ -222,7 +231,19 @@ def main(args: argparse.Namespace) -> int:
         # -- model check on each recording's own residue (estimator/adequacy.py) --
         print("\n".join(f"{path} motion {k}: {c.line()}" for (path, *_), checks in zip(rows, all_checks)
                         for k, c in enumerate(checks, 1)))
-    return 0
+    return nothing_given([r for _, _, rs, _, _ in per_file for r in rs], args.json)
+
+
+def nothing_given(results: list, json_out: bool) -> int:
+    """0 when some motion gives a parameter; else ``NOTHING_GIVEN`` with a last line saying so (stderr with
+    ``--json``): every parameter of every motion refused, each with its reason in the table or the JSON. (A motion
+    that never reached the estimator, or none found, is exit 2 with one line.)"""
+    if any(r.parameters for r in results):
+        return 0
+    what = "the motion" if len(results) == 1 else f"each of the {len(results)} motions"
+    print(f"nothing estimated: every parameter of {what} refused, each with its reason "
+          f"({'refused in the JSON' if json_out else 'above'})", file=sys.stderr if json_out else sys.stdout)
+    return NOTHING_GIVEN
 
 
 def model_units(drive: str) -> dict[str, str]:

@@ -2,7 +2,8 @@
 
 Roles: ``time``, ``voltage`` (terminal) and ``voltage_ref`` (regulator reference) [V], ``current1`` and
 ``current2`` [A], ``torque`` [N.m] (instead of current and voltage: only the mechanical equation, Jt, ft,
-Cd and an offset T0), ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
+Cd and an offset T0) and ``torque_ref`` [N.m] (the drive's torque command: checked against ``torque`` as a
+redundant pair, like ``voltage_ref``), ``speed`` (tachometer) [rad/s], ``position`` (encoder motor angle) [rad; a table
 position in m with ``--pitch``/``--ratio``], ``state`` (NC state, 1 = rapid). Required: a current or a
 torque, and ``speed`` or ``position``; everything else is optional (cosim/monitor_checks.py): each check
 that cannot run says "not checked" with the missing sensor. The encoder angle is differentiated
@@ -21,6 +22,11 @@ end of the recording (``recorded.start_clock``; said in the console's ``time:`` 
 ``plots/`` (the figures of the last ``keep_traces`` = 5 motions, as in a run, and the trends) and
 ``report.html`` (cosim.report) into DIR; with ``--no-plots`` no figure (the same report.json and page without
 figures).
+
+Exit status: 0 when at least one motion was judged (any verdict but ``not estimated``); 3 (``NOTHING_JUDGED``)
+when none was: no high-speed motion found (a recording at rest: ``segmentation.at_rest``, the threshold said) or
+every motion not estimated; the last line (stderr with ``--json``) and report.json's ``nothing_judged`` say why;
+2 bad input (one line on stderr).
 """
 from __future__ import annotations
 
@@ -28,6 +34,7 @@ import argparse
 import datetime as _dt
 import json
 import os
+import sys
 from pathlib import Path
 
 from feeddrive.cosim.axis import parameter_units
@@ -39,6 +46,7 @@ from feeddrive.cosim.recorded import (
     add_recording_arguments,
     filter_cutoff,
     mapped_roles,
+    no_motion,
     read_recording,
     recording_json,
     sampling_modes,
@@ -55,9 +63,12 @@ from feeddrive.estimator.pvalue_text import p_text
 UNITS = parameter_units("motor")
 #: role -> monitor signal (the DC drive's; a PMSM's: ``recorded_servo.PMSM_ROLES``)
 ROLES = {"time": None, "voltage": "u", "voltage_ref": "u_ref", "current1": "Im1", "current2": "Im2",
-         "speed": "w_tach", "position": None, "torque": "torque", "state": None} | PMSM_ROLES
+         "speed": "w_tach", "position": None, "torque": "torque", "torque_ref": "torque_ref", "state": None} | PMSM_ROLES
 #: roles of both drives
 COMMON = ("time", "speed", "position", "state")
+#: exit status when no motion was judged: none found, or every one not estimated (each says why); 0 when at
+#: least one motion has a verdict, 2 bad input (one line)
+NOTHING_JUDGED = 3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -76,6 +87,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--angle-offset", type=float, default=None, metavar="RAD",
                         help="a PMSM's electrical angle at the encoder's zero: phi_el = p * position + RAD (default 0)")
     add_config_arguments(parser, MonitorConfig)
+    parser.epilog = (f"exit status: 0 at least one motion judged; {NOTHING_JUDGED} nothing judged (no high-speed motion "
+                     "found, or every motion not estimated: the last line says why); 2 bad input (one line)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -118,8 +131,8 @@ def main(args: argparse.Namespace) -> int:
         w_enc = rec.gradient(rec.signals["position"])  # within each record of a split recording
         sig["w_enc" if "w_tach" in sig else "w_tach"] = w_enc
     segments = record_motions(args, rec, sig["w_tach"], rec.signals.get("state"))
-    if not segments:
-        raise InputError(f"{args.data}: no high-speed motion found (--segment {args.segment})")
+    # none found: the report and the exit status say so (NOTHING_JUDGED), as when every motion is refused
+    found = "" if segments else no_motion(args, rec, sig["w_tach"], rec.signals.get("state"))
     plots = _plot_folder(args.plots, args.overwrite) if args.plots else None
     out = _out_folder(args.out, args.overwrite) if args.out else None
     clock0, clock_source = start_clock(rec, args.start_time)  # machine time of sample 0, and where it came from
@@ -145,6 +158,7 @@ def main(args: argparse.Namespace) -> int:
         motions = history.motions(args.axis)
         thresholds = pipeline.thresholds()
     results = [t.result for t in traces]
+    nothing = nothing_judged(results, found)
     # the conversions a reader must know (an rms current) and the units assumed (no unit in the header or the map)
     units = unit_notes(rec.columns, rec.units) + list(rec.notes)
     if plots is not None:
@@ -156,12 +170,12 @@ def main(args: argparse.Namespace) -> int:
         report = {"kind": "monitor", "source": str(rec.path), "axis": args.axis, "db": args.db, "started": started,
                   "status": "ok", "versions": _versions(), "method": args.method, **recording_json(rec, clock_source),
                   "components": {"monitor": {"budget_s": config.budget_s}}, "diagnosis_thresholds": thresholds,
-                  "unit_notes": units, "motions": results}
+                  "unit_notes": units, "motions": results} | ({"nothing_judged": nothing} if nothing else {})
         kept = traces[-config.keep_traces:] if config.keep_traces else []  # as the co-simulation monitor keeps
         print(f"wrote {write_monitor_report(out, report, kept, motions, thresholds, plots=not args.no_plots)}")
     if args.json:
         print(json.dumps({"axis": args.axis, "db": args.db, **recording_json(rec, clock_source), "unit_notes": units,
-                          "motions": results}, default=_jsonable))
+                          "motions": results} | ({"nothing_judged": nothing} if nothing else {}), default=_jsonable))
     else:
         from feeddrive.cosim.cli.run import history_line
 
@@ -170,10 +184,33 @@ def main(args: argparse.Namespace) -> int:
             print(f"units: {note}")
         from feeddrive.cosim.cli.estimate import model_units
 
-        print(table(results, UNITS | model_units(drive)))
+        if results:
+            print(table(results, UNITS | model_units(drive)))
         print(history_line({"axis": args.axis, "db": args.db if args.db == ":memory:" else str(Path(args.db).resolve()),
                             "diagnosis_thresholds": thresholds}).strip())
+    if nothing:  # the last line, and a status a script cannot take for success
+        print(nothing, file=sys.stderr if args.json else sys.stdout)
+        return NOTHING_JUDGED
     return 0
+
+
+def nothing_judged(results: list[dict], found: str = "") -> str:
+    """The line saying that no motion was judged and why ('' when one was): a motion is judged when its verdict is
+    not ``not estimated`` (a sensor fault found without parameters is a verdict). ``found``: why no motion was found
+    (``recorded.no_motion``), when none was."""
+    from feeddrive.cosim.report.verdict import motion_verdict
+
+    if not results:
+        return f"nothing judged: {found or 'no high-speed motion found'}"
+    if any(motion_verdict(r)["kind"] != "not estimated" for r in results):
+        return ""
+    reasons: dict[str, list[int]] = {}  # the same reason once, with the motions it holds for
+    for r in results:
+        reasons.setdefault(str(r.get("error") or "no parameters"), []).append(int(r["motion"]))
+    why = "; ".join(f"motion{'s' * (len(ks) > 1)} {', '.join(map(str, ks))}: {text}" for text, ks in reasons.items())
+    if len(results) == 1:
+        return f"nothing judged: {why}"
+    return f"nothing judged: none of the {len(results)} motions could be estimated ({why})"
 
 
 def _plot_folder(name: str, overwrite: bool) -> Path:

@@ -63,13 +63,15 @@ def load_scenario_plant(fmu):
 
 
 def test_fmi2_error_mid_run_names_function_time_and_log(tmp_path, feeddrive_fmu, caplog):
-    extra = "events:\n  - {time: 0.05, target: plant.R, value: 0.0}\n"
+    # an L in the FMU's declared range (L > 0) so small that the current overflows in the next step (L = 0, which
+    # fmi2SetReal refused, is now refused when the scenario is read: the declared min is the next double above 0)
+    extra = "events:\n  - {time: 0.05, target: plant.L, value: 1.0e-300}\n"
     with caplog.at_level(logging.ERROR, logger="cosim.fmu.plant"), pytest.raises(FMIError) as info:
         signals(tmp_path, extra=extra, signals_path=tmp_path / "signals.csv")
     err = info.value
-    assert (err.component, err.function, err.status) == ("plant", "fmi2SetReal", "fmi2Error")
-    assert err.time == pytest.approx(0.05) and "R" in err.last_log
-    assert str(err).startswith("plant: fmi2SetReal returned fmi2Error at t=0.05 s: ")
+    assert (err.component, err.function, err.status) == ("plant", "fmi2DoStep", "fmi2Error")
+    assert err.time == pytest.approx(0.05) and "non-finite" in err.last_log
+    assert str(err).startswith("plant: fmi2DoStep returned fmi2Error at t=0.05 s: ")
     assert any(r.name == "cosim.fmu.plant" and r.getMessage() == err.last_log for r in caplog.records)
     data = np.loadtxt(tmp_path / "signals.csv", delimiter=",", skiprows=1)
     assert data[-1, 0] == pytest.approx(0.05) and data.shape[0] == 501  # t_0 .. t_500, then the failure

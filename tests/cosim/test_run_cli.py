@@ -91,12 +91,13 @@ def test_db_memory_is_no_file(tmp_path, monkeypatch):
 
 def test_fmu_error_mid_run_exits_1_with_one_line_and_partial_signals(tmp_path, feeddrive_fmu, capsys):
     path = tmp_path / "broken.yaml"
-    path.write_text(SHORT.format(extra="events:\n  - {time: 0.05, target: plant.R, value: 0}\n"))
+    # an L in its declared range that overflows the current (R = 0 is refused when the scenario is read)
+    path.write_text(SHORT.format(extra="events:\n  - {time: 0.05, target: plant.L, value: 1.0e-300}\n"))
     out = tmp_path / "out"
     assert main(["run", str(path), "--out", str(out), "--no-progress"]) == 1
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0, err
-    assert err.startswith("cosim run: failed: plant: fmi2SetReal returned fmi2Error at t=0.05 s: ")
+    assert err.startswith("cosim run: failed: plant: fmi2DoStep returned fmi2Error at t=0.05 s: ")
     s = read_csv(out / "signals.csv")
     assert s["time [s]"][-1] == pytest.approx(0.05) and np.abs(s["plant.speed [rad/s]"]).max() > 0
     report = json.loads((out / "report.json").read_text())

@@ -65,7 +65,7 @@ def test_changed_fmu_is_refused_by_its_recorded_hash(tmp_path, feeddrive_fmu):
 
 @pytest.mark.parametrize("snippet, line, pattern", [
     ("plant:\n  fmu: builtin\n  fmuu: x\n", 3,
-     r"plant\.fmuu: unknown key 'fmuu'; expected one of: call_timeout, fmu, input_hold, interface, map, oversample, parameters, sha256, start, tolerance"),
+     r"plant\.fmuu: unknown key 'fmuu'; expected one of: build, call_timeout, fmu, input_hold, interface, map, oversample, parameters, sha256, start, tolerance"),
     ("step: fast\n", 1, r"step: Input should be a valid number.*got 'fast'"),
     ("step: -1.0e-4\n", 1, r"step: Input should be greater than 0, got -0.0001"),
     ("plant:\n  fmu: missing/plant.fmu\n", 2, r"plant\.fmu: FMU file not found: .*missing/plant\.fmu \(expected"),
@@ -80,9 +80,14 @@ def test_changed_fmu_is_refused_by_its_recorded_hash(tmp_path, feeddrive_fmu):
      r"events\[0\]\.target: unknown component 'spindle'"),
     ("record: 3\n", 1, r"record: Input should be 'all' or a valid list, got 3"),
     ("plant:\n  fmu: builtin\n  parameters: {R: -0.5}\n", 3,
-     r"plant\.parameters\.R: R = -0\.5 is outside the range \[0\.0, inf\] that FeedDrive\.fmu declares"),
+     r"plant\.parameters\.R: R = -0\.5 is outside the range \(0, inf\] that FeedDrive\.fmu declares"),
+    # R > 0: the FMU declared min 0 and refused R = 0 at run time (fmi2SetReal at t = 0, exit 1); the declared
+    # min is now the next double above 0, so the reader refuses it with the range (found by audit4)
+    ("plant:\n  fmu: builtin\n  parameters: {R: 0}\n", 3,
+     r"plant\.parameters\.R: R = 0 is outside the range \(0, inf\] that FeedDrive\.fmu declares \(min 5e-324, "
+     r"the smallest double above 0: R > 0\)"),
     ("events:\n  - {time: 1.0, target: plant.Jt, value: -1}\n", 2,
-     r"events\[0\]\.value: Jt = -1 is outside the range \[0\.0, inf\]"),
+     r"events\[0\]\.value: Jt = -1 is outside the range \(0, inf\]"),
     ("nc:\n  program:\n    - rapid: {to: 0.1, accel: -1}\n", 3, r"nc\.program\[0\]\.rapid\.accel: .*greater than 0"),
     # a YAML `true` was seed 1, "2.0" seed 2 (pydantic's lax integers; found by audit3)
     ("sensors:\n  seed: true\n", 2, r"sensors\.seed: Input should be a valid integer, got True"),
@@ -95,6 +100,17 @@ def test_each_mistake_gets_its_own_message_with_file_and_line(tmp_path, feeddriv
     message = error_of(path)
     assert message.startswith(f"{path}:{line}: "), message
     assert re.search(pattern, message), message
+
+
+def test_the_declared_range_is_the_one_the_fmu_enforces(tmp_path, feeddrive_fmu):
+    """What the reader accepts, the FMU accepts when the run sets it: the smallest positive R, and Cd = 0 (Cd >= 0)."""
+    from fmpy import read_model_description
+
+    md = {v.name: v for v in read_model_description(str(feeddrive_fmu)).modelVariables}
+    assert float(md["R"].min) == 5e-324 and float(md["Cd"].min) == 0.0  # R > 0 strict, Cd >= 0 not
+    base = {k: v for k, v in yaml.safe_load(BASE).items() if k != "plant"}
+    s = load_scenario(write(tmp_path, yaml.safe_dump(base | {"plant": {"parameters": {"R": 5e-324, "Cd": 0.0}}})))
+    assert s.plant.parameters["R"] == 5e-324 and s.plant.parameters["Cd"] == 0.0
 
 
 def test_fmi1_fmu_is_refused(tmp_path):

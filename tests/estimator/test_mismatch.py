@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from feeddrive.estimator.all_or_none import estimate_motion
 from feeddrive.estimator.errors import EstimatorInputError
-from feeddrive.estimator.estimate import MotionData, estimate_motion
+from feeddrive.estimator.estimate import MotionData
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.isolation import model_reference
 from feeddrive.estimator.mismatch import (

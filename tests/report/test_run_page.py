@@ -114,15 +114,17 @@ def test_worn_axis_diagnosis_is_shown_with_its_evidence(runs):
 
 def test_failed_run_still_gets_its_page(tmp_path, feeddrive_fmu, capsys):
     scenario = tmp_path / "broken.yaml"
+    # L = 0 is refused when the scenario is read (outside the FMU's declared range, exit 2): an L in its range but
+    # so small that the current's state overflows in the next step fails the run
     scenario.write_text("name: broken\nstep: 1.0e-4\nstop_time: 0.01\nplant: {fmu: builtin}\n"
-                        "nc:\n  program:\n    - dwell: {time: 0.2}\n"
-                        "events:\n  - {time: 0.005, target: plant.L, value: 0.0}\nmonitor: {db: ':memory:'}\n")
+                        "nc:\n  program:\n    - rapid: {to: 0.05}\n"
+                        "events:\n  - {time: 0.005, target: plant.L, value: 1.0e-300}\nmonitor: {db: ':memory:'}\n")
     assert main(["run", str(scenario), "--no-progress", "--out", str(tmp_path / "out")]) == 1
     report, root = load(tmp_path / "out")
     checks.assert_self_contained(tmp_path / "out" / "report.html", root)
     assert report["status"] == "failed" and root.find(".//span[@id='status']").text == "failed"
     assert "".join(root.find(".//p[@id='error']").itertext()) == report["error"]
-    assert "L = 0 is out of range" in report["error"]
+    assert "the state became non-finite in [0.005, 0.0051] s" in report["error"]
     # the statuses of a supervised run (a crashed or hung child process) render the same way
     for status in ("crashed", "hung"):
         write_run_page(tmp_path / "out", report | {"status": status, "error": f"child process {status}"})
