@@ -84,7 +84,8 @@ class PlantConfig(Strict):
 
     fmu: str = "builtin"
     build: str | None = Field(None, description="the command that builds plant.fmu, run in the scenario file's "
-                              "folder: quoted, runnable, when the file is not found (an FMU that is not committed)")
+                              "folder: quoted, runnable, when the file is not found (an FMU that is not committed); never run by "
+                              "cosim")
     sha256: str | None = None
     interface: Literal["cs", "me"] = "cs"
     oversample: int = Field(1, ge=1, description="plant and sensor steps per recording step: the plant's "
