@@ -100,6 +100,10 @@ def motion_figure(trace: Any) -> MotionFigure:
     im1, im2 = trace.signals.get("Im1"), trace.signals.get("Im2")
     if im1 is not None and im2 is not None:
         lines["r"] = envelope(t, np.asarray(im1) - np.asarray(im2))
+    elif im1 is not None or im2 is not None:  # one current sensor: its signal drawn where the pair's residue is
+        lines["current"] = envelope(t, np.asarray(im1 if im1 is not None else im2))
+    elif trace.signals.get("torque") is not None:  # a torque signal instead of a current
+        lines["torque"] = envelope(t, np.asarray(trace.signals["torque"]))
     v, res, windows = trace.validation, None, None
     if v is not None and v.pairs["current"].residue is not None:
         r = v.pairs["current"].residue

@@ -59,16 +59,23 @@ def plot_motion(trace, path: Path) -> Path:
     args, kwargs = motion_layout(panels)
     fig, axes = subplots(*args, **kwargs)
     axes = axes[:, 0]
+    ylabel = "residue [A]"
     if "r" in lines:
         axes[0].plot(*lines["r"], lw=0.3, color="0.6", label="r = Im1 - Im2")
-    else:  # one current sensor or a torque signal: the pair is not checked, and the panel says so
+    else:  # one current sensor or a torque signal: the pair is not checked, and the panel says so over the signal
         why = shown.result.get("not_checked", {}).get("current", "not checked")
-        axes[0].text(0.5, 0.5, f"current residue: {why}", transform=axes[0].transAxes, ha="center", va="center")
+        single = next((n for n in ("current", "torque") if n in lines), None)
+        if single is None:
+            axes[0].text(0.5, 0.5, f"current residue: {why}", transform=axes[0].transAxes, ha="center", va="center")
+        else:  # the motion's one signal (the panel was an empty 0-1 axes with this sentence)
+            ylabel = f"{single} [{'A' if single == 'current' else 'N.m'}]"
+            axes[0].plot(*lines[single], lw=0.5, color="C0", label=f"{single}, one sensor")
+            wrapped(axes[0].set_title(f"current residue: {why}", fontsize=8, wrap=True))
     if shown.residue is not None:
         res, tw = shown.residue, shown.windows
         axes[0].step(tw, res.means, where="mid", color="C0", label=f"window means ({res.kind})")
         axes[0].plot(tw, res.offset + res.gain_diff * res.levels, "C3--", lw=1, label="offset + gain diff x level")
-    axes[0].set_ylabel("residue [A]")
+    axes[0].set_ylabel(ylabel)
     if axes[0].get_legend_handles_labels()[0]:
         _legend_outside(axes[0])
     if generic:

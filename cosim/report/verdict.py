@@ -29,7 +29,8 @@ KINDS = {"sensor fault": "bad", "not estimated": "not-judged", "model mismatch":
          "drifting": "drifting", "healthy": "healthy", "not validated": "not-judged"}
 #: sensor -> (redundant pair, unit of its offset)
 SENSORS = {"Im1": ("current", "A"), "Im2": ("current", "A"), "u": ("voltage", "V"), "u_ref": ("voltage", "V"),
-           "w_tach": ("speed", "rad/s"), "w_enc": ("speed", "rad/s")}
+           "w_tach": ("speed", "rad/s"), "w_enc": ("speed", "rad/s"), "torque": ("torque", "N.m"),
+           "torque_ref": ("torque", "N.m")}
 
 
 def finite(x: Any) -> bool:
@@ -119,6 +120,13 @@ def _derive(m: Mapping, statuses: Mapping[str, str]) -> tuple[str, str]:
             finite(mm.get("alpha")) else ""
         return "model mismatch", f"model mismatch: the {mm.get('test', 'model check')} test rejects{p}; " \
                                  "parameters not validated"
+    a = m.get("adequacy")
+    if isinstance(a, Mapping) and a.get("verdict") == "model mismatch" and not m.get("validated"):
+        # the motion's own residue check decided (no redundant pair for the paper's): its p-value and reason too
+        p = f", adjusted {p_text(a['p_value'])} < alpha = {a['alpha']:g}" if finite(a.get("p_value")) and \
+            finite(a.get("alpha")) else ""
+        why = f": {a['reason']}" if a.get("reason") else ""
+        return "model mismatch", f"model mismatch: the residue check rejects{p}{why}; parameters not validated"
     if not m.get("validated"):
         reasons = [n.removeprefix("not validated: ") for n in m.get("notes") or () if n.startswith("not validated")]
         return "not validated", "not validated: " + ("; ".join(reasons) or "no model check")

@@ -15,7 +15,7 @@ TESTS = {
     "size": ("no larger than its noise σ", "F = mean(e²) / σ²"),
     "peak": ("no block far outside the others", "max |z| (MAD units)"),
 }
-SIGNAL_UNITS = {"current": "A", "speed": "rad/s", "voltage": "V"}
+SIGNAL_UNITS = {"current": "A", "speed": "rad/s", "voltage": "V", "torque": "N.m"}
 
 
 def _n(x: Any, digits: int = 4) -> str:

@@ -60,6 +60,11 @@ def test_a_recording_at_rest_is_nothing_judged_with_the_threshold_exit_3(tmp_pat
     assert "x the speed's noise" in last and "Traceback" not in out
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["motions"] == [] and report["nothing_judged"] == last
+    # the page says it at the top, where "No high-speed motion was processed" gave no reason
+    import html
+
+    page = html.unescape((tmp_path / "out" / "report.html").read_text())
+    assert f'<p class="error" id="nothing-judged">{last}</p>' in page and "No high-speed motion was processed" not in page
     # the whole record taken as one motion (--segment none): the motion says it, with --json on stdout
     code, out, err = monitor(capsys, data, "--map", "time=t", "voltage=u", "current1=i", "speed=w", "--segment",
                              "none", "--json")

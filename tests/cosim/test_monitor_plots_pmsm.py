@@ -40,3 +40,21 @@ def test_the_motion_figure_draws_each_pmsm_residue_against_its_noise(tmp_path, m
         bands = sorted(line.get_ydata()[0] for line in ax.get_lines() if line.get_linestyle() == ":")
         assert bands == [-noise[name], noise[name]]
     assert len(figures[1].axes) == 3  # one correlation panel per residue
+
+
+def test_one_current_sensor_draws_its_current_where_the_pairs_residue_is(tmp_path, monkeypatch):
+    """A recording with one current sensor (REGBOT): the first panel was an empty 0-1 axes holding the sentence
+    "current residue: not checked"; it draws the motion's current, with that sentence as its title."""
+    t = np.arange(500) * 1e-3
+    current = 0.9 * np.exp(-((t - 0.19) / 0.02) ** 2) + 0.01 * np.sin(300 * t)
+    why = "not checked: no second current sensor (Im2)"
+    trace = MotionTrace(1, t, {"Im1": current}, None, None,
+                        {"verdict": "not estimated: motion too short", "not_checked": {"current": why}})
+    figures = []
+    monkeypatch.setattr(mp.plt, "close", figures.append)
+    mp.plot_motion(trace, tmp_path / "m.png")
+    ax = figures[0].axes[0]
+    (line,) = ax.get_lines()
+    assert ax.get_ylabel() == "current [A]" and ax.get_title() == f"current residue: {why}"
+    assert np.max(line.get_ydata()) == np.max(current) and np.min(line.get_ydata()) == np.min(current)
+    assert ax.get_ylim()[1] > 0.9 and not ax.texts

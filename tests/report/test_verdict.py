@@ -169,3 +169,24 @@ def test_the_monitors_words_give_the_pages_kind(changes, kind, text):
     assert (v["kind"], v["text"]) == (kind, text)
     assert v["css"] == {"diagnosis": "diagnosed", "drifting": "drifting", "healthy": "healthy",
                         "sensor fault": "bad", "not validated": "not-judged"}[kind]
+
+
+def test_a_mismatch_the_residue_check_decided_says_its_p_value_and_reason():
+    """Without a redundant pair the motion's own residue check decides (estimator/adequacy.py); its mismatch was
+    shown as a bare "model mismatch", with neither p-value nor the equation that failed."""
+    adequacy = {"verdict": "model mismatch", "p_value": 2.1e-7, "alpha": 0.01,
+                "reason": "the mechanical equation lacks a term: position-dependent torque (gravity) P1"}
+    m = motion(mismatch=None, adequacy=adequacy, validated=False, verdict="model mismatch")
+    assert motion_verdict(m) == {
+        "kind": "model mismatch", "css": "bad",
+        "text": "model mismatch: the residue check rejects, adjusted p = 2.1e-07 < alpha = 0.01: the mechanical "
+                "equation lacks a term: position-dependent torque (gravity) P1; parameters not validated"}
+    # an adequate residue check does not make a mismatch
+    assert motion_verdict(motion(mismatch=None, adequacy=adequacy | {"verdict": "adequate"}))["kind"] == "healthy"
+
+
+def test_a_torque_pairs_fault_has_its_unit():
+    """The torque / torque_ref pair (cosim monitor --map torque_ref=...): its offset was printed without a unit."""
+    fault = {"sensor": "torque or torque_ref", "kind": "gain", "gain": 0.8226, "offset": 0.00836}
+    assert motion_verdict(motion(sensor_faults=[fault]))["text"].startswith(
+        "sensor fault: torque or torque_ref gain 0.8226, offset 0.00836 N.m")
