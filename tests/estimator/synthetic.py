@@ -5,16 +5,30 @@ mechanical equation ``K i = Jt dw/dt + ft w + Cd sgn(w) + T0`` and the voltage f
 ``u = R i + L di/dt + K w``, both evaluated on a grid 20 times finer than the record (derivatives by
 ``np.gradient``, sgn smoothed as the model's over 0.1 rad/s), then sampled every ``h``. Exact to the
 model, cheap (no ODE), so a test can choose L/R against h, one direction, a narrow speed range, ...
+
+The smoothing is ``scipy.ndimage.gaussian_filter1d``'s (its kernel, truncated at 4 sigma, ``mode="nearest"``)
+formed by FFT: at h = 1e-4 s the kernel has 32 001 taps over 840 000 fine samples, and the direct sum took
+~6 s of CPU per record (the fuzz and the partial-estimate tests build ~40); the FFT's sums differ from the
+direct ones by rounding only (5e-13 rad/s on 70 rad/s).
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.signal import oaconvolve
 
 from feeddrive.models import feed_drive
 
 TRUTH = feed_drive().nominal(("physical",))
 FINE = 20
+
+
+def gaussian_smoothed(x: np.ndarray, sigma: float) -> np.ndarray:
+    """``gaussian_filter1d(x, sigma, mode="nearest")`` by overlap-add FFT: the same normalised kernel of
+    ``2 int(4 sigma + 0.5) + 1`` taps over ``x`` extended by its end values; shape of ``x``."""
+    radius = int(4.0 * sigma + 0.5)
+    k = np.arange(-radius, radius + 1)
+    kernel = np.exp(-0.5 / sigma**2 * k**2)
+    return oaconvolve(np.pad(x, radius, mode="edge"), kernel / kernel.sum(), mode="valid")
 
 
 def record(corners: list[tuple[float, float]], h: float, params: dict | None = None, snr_db: float | None = None,
@@ -28,7 +42,7 @@ def record(corners: list[tuple[float, float]], h: float, params: dict | None = N
     tc, wc = np.array(corners, dtype=float).T
     hf = h / FINE
     tf = np.arange(0.0, tc[-1] + hf / 2, hf)
-    wf = gaussian_filter1d(np.interp(tf, tc, wc), smooth / hf, mode="nearest")
+    wf = gaussian_smoothed(np.interp(tf, tc, wc), smooth / hf)
     dw = np.gradient(wf, hf)
     i = (par["Jt"] * dw + par["ft"] * wf + par["Cd"] * np.tanh(wf / 0.1) + par.get("T0", 0.0)) / par["K"]
     u = par["R"] * i + par["L"] * np.gradient(i, hf) + par["K"] * wf

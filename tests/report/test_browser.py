@@ -4,7 +4,7 @@ green, no ``nan`` in the rendered text.
 
 Pages: ``cosim run`` of examples/tool_change.yaml (healthy) and examples/current_sensor_fault.yaml (Im1 3 %
 gain and 0.2 A offset fault on its second motion) on one history, and that history's page.
-Set ``FEEDDRIVE_SCREENS=<folder>`` to keep the screenshots.
+Set ``FEEDDRIVE_SCREENS=<folder>`` to keep the screenshots (of the whole page then; else of the viewport only).
 """
 from __future__ import annotations
 
@@ -67,7 +67,8 @@ def loaded(chromium, pages) -> dict[tuple[str, int], dict]:
     keep = os.environ.get("FEEDDRIVE_SCREENS")
     for name, path in pages.items():
         for width in WIDTHS:
-            page = out[name, width] = chromium.page(path, width)
+            # the whole page only when it is kept to be looked at: the checks read the rendered page itself
+            page = out[name, width] = chromium.page(path, width, full=bool(keep))
             shot = path.with_name(f"{name}_{width}.png")
             shot.write_bytes(page["png"])
             if keep:
