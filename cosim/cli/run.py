@@ -197,6 +197,9 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
     if isinstance(unfinished, (int, float)):  # the run stopped inside it: never judged (it said nothing before)
         lines.append(f"  motion {int(unfinished)}: not judged: the run stopped inside it at {r['stop_time_s']:.4g} s "
                      "(stop_time)")
+    elif "motions" in ((r.get("components") or {}).get("monitor") or {}) and not r.get("motions"):
+        # a monitored run whose axis never made a high-speed motion: it said nothing of its motions
+        lines.append("  monitor: nothing judged: no high-speed motion (NC state 1) in this run")
     if r.get("held_inputs"):  # a rejection the set-up's sampling explains (cosim/held_inputs.py)
         lines.append(f"  set-up: {r['held_inputs']}")
     if r.get("sampling_bias"):  # L's discretisation error the set-up's sampling leaves (cosim/held_inputs.py)
@@ -204,7 +207,8 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
     line = history_line((r.get("components") or {}).get("monitor"))
     if line:
         lines.append(line)
-    lines.append(f"  files: signals.csv, scenario.resolved.yaml, report.json, report.html, {len(result.paths['plots'])} plots")
+    n = len(result.paths["plots"])
+    lines.append(f"  files: signals.csv, scenario.resolved.yaml, report.json, report.html, {n} plot{'s' * (n != 1)}")
     return "\n".join(lines)
 
 

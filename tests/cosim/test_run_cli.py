@@ -153,3 +153,15 @@ def test_a_diverged_position_is_printed_in_significant_digits():
 
     assert _metres(0.27) == "0.270000" and _metres(-1e-6) == "-0.000001"
     assert _metres(-8.2884587084383809e28) == "-8.288e+28"
+
+
+def test_a_monitored_run_without_a_motion_says_nothing_was_judged(tmp_path, feeddrive_fmu, capsys):
+    """A monitored axis that never moved (a dwell only): the summary said nothing of motions at all."""
+    path = tmp_path / "still.yaml"
+    path.write_text("name: still\nstep: 1.0e-4\nplant: {fmu: builtin}\nnc:\n  program:\n    - dwell: {time: 0.3}\n"
+                    "monitor: {}\n")
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--no-progress", "--no-plots",
+                 "--db", ":memory:"]) == 0
+    out = capsys.readouterr().out
+    assert "  monitor: nothing judged: no high-speed motion (NC state 1) in this run\n" in out
+    assert out.rstrip().endswith("report.html, 0 plots")
