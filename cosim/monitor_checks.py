@@ -116,8 +116,10 @@ def torque_pair(signals: Mapping[str, np.ndarray | None], h: float, options: Val
         best["torque"] = 0.5 * (x1 + np.asarray(signals[s2], dtype=float))
         return
     faults.append(unisolated_fault(s1, s2, res))
-    notes.append(f"torque: the measurement and the command disagree ({res.kind}: gain {1 + res.gain_diff:.4g}, "
-                 f"offset {res.offset:.3g} N.m); not isolated: the measured torque is used")
+    # the sensor fault's own gain (gain_ratio_of), not 1 + gain_diff: the note said 0.8053 beside the fault's 0.8226
+    notes.append(f"torque: the measurement and the command disagree ({res.kind} fault: gain "
+                 f"{res.gain_ratio_of(res.gain_diff):.4g}, offset {res.offset:.3g} N.m); not isolated: the measured "
+                 "torque is used")
 
 
 def unisolated_fault(s1: str, s2: str, res) -> dict:  # noqa: ANN001 - estimator.validation.ResidueTest

@@ -50,6 +50,9 @@ def test_an_injected_torque_sensor_gain_is_recovered_and_an_agreeing_pair_is_no_
     (f,) = m["sensor_faults"]
     assert f["sensor"] == "torque or torque_ref" and f["kind"].startswith("gain")
     assert f["gain"] == pytest.approx(1.05, abs=0.005) and f["gain_ci95"][0] <= 1.05 <= f["gain_ci95"][1]
+    # the note gives the fault's gain, not 1 + the residue's slope (it said 0.8053 beside HSM150's fault 0.8226)
+    (note,) = [n for n in m["notes"] if n.startswith("torque: the measurement and the command disagree")]
+    assert f"gain {f['gain']:.4g}, " in note
     assert m["measurements_valid"] is False and not m["validated"]
     code, m = monitor(capsys, torque_csv(tmp_path / "ok.csv", 1.0), *maps)
     assert code == 0 and m["sensor_faults"] == [] and m["residues"]["torque"]["kind"] == "none"
