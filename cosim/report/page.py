@@ -108,6 +108,7 @@ def merged_evidence(diagnosis: Sequence[Mapping]) -> list[dict]:
 
 _ENV.filters["num"] = num
 _ENV.filters["evidence"] = merged_evidence
+_ENV.filters["sensor_unit"] = views.sensor_unit
 _ENV.filters["pct"] = lambda x, d=3: "-" if x is None else f"{100 * x:+.{d}g} %"
 _ENV.filters["percent"] = lambda x, d=3: "-" if x is None else f"{100 * x:.{d}g} %"
 _ENV.filters["utc"] = lambda t: "-" if t is None else _dt.datetime.fromtimestamp(

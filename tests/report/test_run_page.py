@@ -225,3 +225,13 @@ def test_a_nominal_baseline_is_said_on_the_run_page_and_the_history_page(example
         table = page.find(".//*[@id='baseline']")
         rows = {c[0]: c for c in map(checks.cells, table.iter("tr")) if c}
         assert checks.numbers(rows["Cd"][2]) == [1.2] and checks.numbers(rows["ft"][2]) == [0.02]
+
+
+def test_a_faulty_sensors_offset_has_its_unit(example_runs):
+    """current_sensor_fault.yaml (Im1: gain 1.03, offset 0.2 A): the faulty-sensor table gave the offset and its
+    interval without a unit."""
+    _, root = load(example_runs["out"]["current_sensor_fault"])
+    (table,) = [t for t in root.iter("table") if t.get("class") == "sensor-faults"]
+    (row,) = [c for c in map(checks.cells, table.iter("tr")) if c]
+    assert row[0] == "Im1" and row[3].endswith(" A"), row
+    assert checks.numbers(row[3])[0] == pytest.approx(0.2, abs=0.01)
