@@ -102,6 +102,8 @@ def motion_figure(trace: Any) -> MotionFigure:
         lines["r"] = envelope(t, np.asarray(im1) - np.asarray(im2))
     elif im1 is not None or im2 is not None:  # one current sensor: its signal drawn where the pair's residue is
         lines["current"] = envelope(t, np.asarray(im1 if im1 is not None else im2))
+    elif trace.signals.get("torque") is not None and trace.signals.get("torque_ref") is not None:  # the torque pair
+        lines["r torque"] = envelope(t, np.asarray(trace.signals["torque"]) - np.asarray(trace.signals["torque_ref"]))
     elif trace.signals.get("torque") is not None:  # a torque signal instead of a current
         lines["torque"] = envelope(t, np.asarray(trace.signals["torque"]))
     v, res, windows = trace.validation, None, None

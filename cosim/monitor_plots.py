@@ -62,6 +62,13 @@ def plot_motion(trace, path: Path) -> Path:
     ylabel = "residue [A]"
     if "r" in lines:
         axes[0].plot(*lines["r"], lw=0.3, color="0.6", label="r = Im1 - Im2")
+    elif "r torque" in lines:  # a torque measurement and the drive's command (cosim monitor --map torque_ref=...)
+        ylabel = "residue [N.m]"
+        axes[0].plot(*lines["r torque"], lw=0.3, color="0.6", label="r = torque - torque_ref")
+        fault = next((f for f in shown.result.get("sensor_faults") or () if str(f.get("sensor")).startswith("torque")),
+                     None)
+        wrapped(axes[0].set_title("torque pair: " + (f"sensor fault, {fault['kind']} (not isolated)" if fault else
+                                                     "agree"), fontsize=8, wrap=True))
     else:  # one current sensor or a torque signal: the pair is not checked, and the panel says so over the signal
         why = shown.result.get("not_checked", {}).get("current", "not checked")
         single = next((n for n in ("current", "torque") if n in lines), None)

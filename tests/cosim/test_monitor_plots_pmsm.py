@@ -3,6 +3,7 @@ measured, simulated and residue traces of the output-error check (estimator/mode
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import feeddrive.cosim.monitor_plots as mp
 from feeddrive.cosim.monitor_pipeline import MotionTrace
@@ -58,3 +59,24 @@ def test_one_current_sensor_draws_its_current_where_the_pairs_residue_is(tmp_pat
     assert ax.get_ylabel() == "current [A]" and ax.get_title() == f"current residue: {why}"
     assert np.max(line.get_ydata()) == np.max(current) and np.min(line.get_ydata()) == np.min(current)
     assert ax.get_ylim()[1] > 0.9 and not ax.texts
+
+
+def test_the_torque_pair_draws_its_residue(tmp_path, monkeypatch):
+    """A torque measurement and its command (``torque_ref``, HSM150): the first panel said "current residue: not
+    checked: a torque signal replaces the current sensors" above the measured torque, while the pair it did check
+    disagreed; it draws the pair's residue, titled with the pair's decision."""
+    t = np.arange(2000) * 1e-3
+    command = 0.05 * np.sign(np.sin(3 * t))
+    measured = 0.82 * command + 0.008
+    fault = {"sensor": "torque or torque_ref", "kind": "gain+offset", "gain": 0.82, "offset": 0.008}
+    trace = MotionTrace(1, t, {"torque": measured, "torque_ref": command}, None, None,
+                        {"verdict": "sensor fault", "sensor_faults": [fault],
+                         "not_checked": {"current": "not checked: a torque signal replaces the current sensors"}})
+    figures = []
+    monkeypatch.setattr(mp.plt, "close", figures.append)
+    mp.plot_motion(trace, tmp_path / "m.png")
+    ax = figures[0].axes[0]
+    (line,) = ax.get_lines()
+    assert line.get_label() == "r = torque - torque_ref" and ax.get_ylabel() == "residue [N.m]"
+    assert np.max(line.get_ydata()) == pytest.approx(np.max(measured - command))
+    assert ax.get_title() == "torque pair: sensor fault, gain+offset (not isolated)"
