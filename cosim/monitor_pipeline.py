@@ -24,7 +24,7 @@ from feeddrive.estimator.errors import FAILURES, EstimatorInputError, NotEnoughE
 from feeddrive.estimator.estimate import EstimationOptions, MotionData
 from feeddrive.estimator.history import History
 from feeddrive.estimator.mismatch import MismatchResult, check_model, check_signals
-from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.partial import NOT_ASSUMED, estimate_parameters
 from feeddrive.estimator.segmentation import at_rest
 from feeddrive.estimator.validation import MeasurementValidation, ValidationOptions, validate_measurements
 
@@ -251,7 +251,8 @@ class MonitorPipeline:
         # the interval shown is that wider one: judged by the estimator's rule too, or a parameter passed on its
         # interval given a refused one would be shown with one the rule refuses (REGBOT: K +-170 %, from -0.0085)
         wide = checks.wide_intervals(entries, self.estimation_options.max_relative_std,
-                                     [n for n in est.refused if est.fixed.get(n, 0.0) != 0.0])
+                                     [n for n, why in est.refused.items() if est.fixed.get(n, 0.0) != 0.0
+                                      and NOT_ASSUMED not in why])  # not an impossible one (R < 0)
         params = {k: p for k, p in params.items() if k not in wide}
         result["parameters"] = {k: e for k, e in entries.items() if k not in wide}
         result |= {"condition_number": float(est.condition_number), "fit_error": float(est.fit_error),
@@ -295,7 +296,7 @@ class MonitorPipeline:
                                                   speed_fraction=cfg.speed_fraction,
                                                   decimation=self.estimation_options.decimation,
                                                   undetermined=est.undetermined)
-            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # NumericalFailure: it diverged
+            except FAILURES as exc:  # NumericalFailure: it diverged (a coding error, a bare ValueError, is raised)
                 # the check could not be run; the estimates stand, the residue check decides
                 result["not_checked"]["model (paper, output error)"] = (
                     f"not checked: the model check could not be run: {exc}")

@@ -309,7 +309,8 @@ def instruments(source: Prepared, params: Mapping[str, float], options: Estimati
             continue
         syms = residual_symbols(model, eq.name)
         names = [x for x in meas if x != eq.solves_for and model.variables[x].sym.name() in syms]
-        if all(x in s for x in names):
+        # an equation whose parameters were refused is not simulated: its measured state is its own instrument
+        if all(x in s for x in names) and all(v.name in par for v in options.physical if v.sym.name() in syms):
             out[eq.solves_for] = simulate((eq.name,), {x: s[x] for x in names}, par, h,
                                           {eq.solves_for: s[eq.solves_for][0]}, step, at=at, model=model)[eq.solves_for]
     for k in list(out):
@@ -357,7 +358,10 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     every = decimation_factor(options.filter.cutoff_hz, data.h, data.n, options.decimation)
     half_options = replace(options, decimation=every)
     # the halves are new views of the record, filtered here only: not kept for reuse (no copy of their samples)
-    halves = tuple(prepare(half, half_options, strict=check, remember=False) for half in (odd, even))
+    # only the equations of ``start`` (LS's): a half may derive one that LS refused (UMich's mechanical equation, 22
+    # usable samples), whose instruments need the refused parameters ("simulation needs parameter 'Jt'")
+    halves = tuple(replace(h, regressions=[r for r in h.regressions if set(r.names) <= set(start.names)])
+                   for h in (prepare(half, half_options, strict=check, remember=False) for half in (odd, even)))
     if [r.equation for r in halves[0].regressions] != [r.equation for r in halves[1].regressions]:
         raise NotEnoughExcitation(sorted(set(halves[0].refused) | set(halves[1].refused)),
                                   "the odd and even samples do not allow the same equations")
@@ -384,8 +388,11 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
                 parts[reg.equation] += [part for half, zh in zip(halves, z) for part in ls_parts(half, reg, zh)[1:]]
             if reg.constants:  # its output follows the other equations' estimates: its column scale too
                 reference[reg.equation] = _column_reference(reg, _signals_for(halves[0], reg), halves[0].h)
-            fits[reg.equation] = _solve(reg, parts[reg.equation], halves[0].block, options, reference[reg.equation],
-                                        covariance=False, memo=memo[reg.equation])
+            try:
+                fits[reg.equation] = _solve(reg, parts[reg.equation], halves[0].block, options,
+                                            reference[reg.equation], covariance=False, memo=memo[reg.equation])
+            except np.linalg.LinAlgError:  # numpy's "Singular matrix" says nothing to a user: what was singular
+                raise NumericalFailure(_singular(reg, params, halves[0], z[0], options)) from None
         new = _combine("iv", halves[0], fits, it, constant_sensitivities(halves[0].regressions, list(halves), fits))
         step = np.abs(new.values - cur.values)
         change = np.max(step / np.maximum(np.abs(cur.values), 1e-12))
@@ -415,6 +422,18 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
     if check:
         check_result(cur, options)
     return cur
+
+
+def _singular(reg, params: Mapping[str, float], half: Prepared, z: Mapping[str, np.ndarray],
+              options: EstimationOptions) -> str:
+    """Why IV's system of ``reg`` is singular, in the user's words: its simulated instruments, with the parameters
+    they were simulated at, and the state that diverged (peak over the measured one's) if one did."""
+    at = ", ".join(f"{n} = {params[n]:.4g}" for n in reg.names if n in params)
+    grown = [f"{x} [{options.model.variables[x].unit}] peaks at {np.max(np.abs(z[x])):.3g} (measured "
+             f"{np.max(np.abs(half.signals[x])):.3g}): an unstable simulation" for x in z if x in half.signals and
+             x in options.model.variables and not np.max(np.abs(z[x])) <= 1e6 * np.max(np.abs(half.signals[x]))]
+    return (f"the {reg.equation} equation's instruments simulated at {at} leave its parameters undetermined (a "
+            f"singular system{': the simulated ' + ', '.join(grown) if grown else ''})")
 
 
 def fell_back(result: MethodResult, method: str, reason: str) -> MethodResult:

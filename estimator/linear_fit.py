@@ -198,3 +198,12 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     if not covariance:  # an IV iteration: its values, and the covariance on demand (for the last: 2/3 of IV)
         return _Fit(theta_s / scale, np.zeros((p, p)), 1, float(cond), float("nan"), np.ones(p), complete=complete)
     return complete()
+
+
+def conditional_covariance(cov: np.ndarray, keep: list[int], given: list[int]) -> np.ndarray:
+    """The covariance of the parameters ``keep`` given the values of ``given`` (the Schur complement: what a re-fit
+    with them known gives for least squares), zero in every other row and column; ``cov`` is (p, p)."""
+    C, kk, kr, rr = np.zeros_like(cov), np.ix_(keep, keep), np.ix_(keep, given), np.ix_(given, given)
+    if keep:
+        C[kk] = cov[kk] - cov[kr] @ np.linalg.pinv(cov[rr], hermitian=True) @ cov[kr].T if given else cov[kk]
+    return C

@@ -26,6 +26,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from feeddrive.estimator.errors import EstimatorInputError
+
 # the compiled loops: called through this module's names (the tests replace _library here for the numpy path)
 from feeddrive.estimator.lti_c import ROWS_PER_CALL, _c_sosfilt, _library, _ptr, available  # noqa: F401
 
@@ -52,10 +54,10 @@ def butter_sos(order: int, cutoff_hz: float, fs: float) -> np.ndarray:
     """
     order = int(order)
     if order < 1:
-        raise ValueError(f"butter_sos: order must be >= 1, got {order}")
+        raise EstimatorInputError(f"butter_sos: order must be >= 1, got {order}")
     wn = 2.0 * float(cutoff_hz) / float(fs)  # normalised to Nyquist
     if not 0.0 < wn < 1.0:
-        raise ValueError(f"butter_sos: cut-off {cutoff_hz} Hz must be in (0, {fs / 2:g}) Hz")
+        raise EstimatorInputError(f"butter_sos: cut-off {cutoff_hz} Hz must be in (0, {fs / 2:g}) Hz")
     # analog prototype (unit cut-off), then pre-warped to the cut-off at the design rate fs = 2
     m = np.arange(-order + 1, order, 2)
     poles = -np.exp(1j * np.pi * m / (2 * order))
@@ -182,7 +184,7 @@ def sosfiltfilt(sos: np.ndarray, x: np.ndarray | list[np.ndarray], keep_input: b
     edge = 3 * ntaps
     n = x.shape[-1]
     if n <= edge:
-        raise ValueError(f"sosfiltfilt: the signal has {n} samples; the extension needs more than {edge}")
+        raise EstimatorInputError(f"sosfiltfilt: the signal has {n} samples; the extension needs more than {edge}")
     ext = np.empty((len(rows), n + 2 * edge))
     for r, row in zip(ext, rows):  # the odd extension at both ends around the row: np.concatenate's values
         np.subtract(2 * row[:1], row[edge:0:-1], out=r[:edge])

@@ -19,7 +19,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from feeddrive.estimator.errors import NotEnoughExcitation
+from feeddrive.estimator.errors import FAILURES, NotEnoughExcitation
 from feeddrive.estimator.motion import (
     EstimationOptions,
     MethodResult,
@@ -78,8 +78,8 @@ def output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -
     try:
         with np.errstate(all="ignore"):  # non-finite values are tested for and become a fallback
             return _output_error(p, start, options)
-    except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
-        return _fallback(start, f"{type(exc).__name__}: {exc}")
+    except FAILURES as exc:  # the estimator's own failures only: a coding error (a shape mismatch) is raised
+        return _fallback(start, f"a singular system ({exc})" if isinstance(exc, np.linalg.LinAlgError) else str(exc))
 
 
 def _output_error(p: Prepared, start: MethodResult, options: EstimationOptions) -> MethodResult:

@@ -57,9 +57,10 @@ from feeddrive.estimator.estimate import (
 )
 from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_lag
 from feeddrive.estimator.lagged_iv import iv_with_fallbacks
+from feeddrive.estimator.linear_fit import conditional_covariance
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.nc_rate import rate_rule, systematic
-from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
+from feeddrive.estimator.physical import Bounds, bounded_fit, impossible, physical_flags
 from feeddrive.estimator.pvalue_text import p_text
 from feeddrive.estimator.sign_convention import sign_hint
 from feeddrive.models.drives import differentiated
@@ -73,6 +74,8 @@ MIN_TAU_SAMPLES = 1.0
 MAX_INFLATION = 10.0
 #: Variance inflation by the refused parameters beyond which a parameter's conditional interval is no interval.
 DEGENERATE = 1e12
+#: What a refusal at a physically impossible estimate says: the others are not given conditional on it (``_rule``).
+NOT_ASSUMED = "the others' intervals do not assume it"
 #: The friction pair that one motion tells apart only through its speed range.
 FRICTION = {"ft": "Cd", "Cd": "ft"}
 #: Fewest usable samples of the minority direction for Cd to be told from an offset.
@@ -350,7 +353,8 @@ def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed
     A parameter refused by it is fixed at its own estimate (stated in ``fixed``) for the others: their
     covariance becomes the one given that value (the Schur complement, what a re-fit with it known gives
     for least squares), so its uncertainty and collinearity do not spoil them. Repeated until no more is
-    refused. A friction parameter (ft, Cd) whose variance that conditioning on the other, refused, cuts by more
+    refused. Not given a physically impossible estimate (R < 0), marginalised over instead: the others' intervals
+    hold whatever its value. A friction parameter (ft, Cd) whose variance that conditioning on the other, refused, cuts by more
     than ``MAX_INFLATION`` is refused too, with that ratio and the correlation.
     Returns ``result`` with that covariance.
     """
@@ -361,27 +365,35 @@ def _rule(result: MethodResult, options: EstimationOptions, refused: dict, fixed
     # with many degrees of freedom (a t quantile with few dof widens both alike)
     widen = t_ppf(0.975, np.maximum(dof, 1.0)) / norm_ppf(0.975)
     out: list[int] = []
+    bad: list[int] = []  # refused at a physically impossible estimate: marginalised over, never conditioned on
+    full = cov  # given every refused one, impossible or not: named when that is all that passed the rule
     while True:
-        std = np.sqrt(np.clip(np.diag(cov), 0, None)) * widen
         with np.errstate(divide="ignore", invalid="ignore"):
-            rel = np.where(values != 0, std / np.abs(values), np.inf)
+            rel, rel_full = (np.where(values != 0, np.sqrt(np.clip(np.diag(c), 0, None)) * widen / np.abs(values),
+                                      np.inf) for c in (cov, full))
         over = [j for j, n in enumerate(names) if j not in out and n not in refused
                 and not rel[j] <= options.max_relative_std]
         if not over:
             break
         new = [max(over, key=lambda j: rel[j])]  # the worst first: fixing it may bring the others within the rule
         for j in new:
+            why = impossible(names[j], values[j], values[j] + rel[j] * norm_ppf(0.975) * abs(values[j]))
+            at = ", ".join(f"{names[k]} = {values[k]:.4g}" for k in bad)
+            given = (f"; +-{rel_full[j] * norm_ppf(0.975):.0%} given the physically impossible {at}" if bad and
+                     rel_full[j] <= options.max_relative_std else
+                     f"; {why}: physically impossible, {NOT_ASSUMED}" if why else "")
             refused[names[j]] = (f"95 % interval +-{rel[j] * norm_ppf(0.975):.0%} of the value, more than "
                                  f"+-{options.max_relative_std * norm_ppf(0.975):.0%} (a relative standard error "
-                                 f"above {options.max_relative_std:.0%}; {result.method_used.upper()}: {values[j]:.4g})")
+                                 f"above {options.max_relative_std:.0%}; {result.method_used.upper()}: {values[j]:.4g}"
+                                 f"{given})")
             fixed[names[j]] = float(values[j])
+            bad += [j] if why else []
         out += new
         keep = [j for j in range(len(names)) if j not in out]
-        C = np.zeros_like(cov)
-        if keep:
-            kk, kr, rr = np.ix_(keep, keep), np.ix_(keep, out), np.ix_(out, out)
-            C[kk] = cov[kk] - cov[kr] @ np.linalg.pinv(cov[rr], hermitian=True) @ cov[kr].T
-        cov = C
+        # the others' covariance given the refused ones' estimates (the Schur complement), except an impossible one:
+        # UMich's K was given as 718 [481, 954] N/A given R = -0.618 Ohm, an interval that held only if R were that
+        cov, full = conditional_covariance(cov, keep, [j for j in out if j not in bad]), conditional_covariance(
+            full, keep, out)
         # viscous and dry friction are told apart only by the motion's speed range (``speed range``): when one is
         # refused, the other's interval given the refused one's estimate holds only if that estimate were the
         # truth (at an NC's 2 ms, 40 dB: ft refused at +-132 %, Cd then +26 % with an interval of +-12 %

@@ -70,6 +70,16 @@ def impossible_values(values: Mapping[str, float], where: str) -> None:
             raise EstimatorInputError(f"{where} {name}={v:g}: expected a value >= 0 (a friction)".strip())
 
 
+def impossible(name: str, value: float, upper: float | None = None) -> str | None:
+    """Why an estimate cannot be ``name``'s, as ``physical_flags`` judges it, or None: R, L, K, Jt not positive; ft,
+    Cd with the upper end of its 95 % interval ``upper`` below 0 (a friction's estimate near 0 may fall below it)."""
+    if name in STRICT and not value > 0:
+        return "not positive"
+    if name in NON_NEGATIVE and upper is not None and upper < 0:
+        return "its 95 % interval wholly below 0"
+    return None
+
+
 def physical_flags(result: MethodResult | None, bounds: Bounds) -> dict[str, str]:
     """Given parameters outside their physical range or the user's bounds -> the reason, with the numbers."""
     flags: dict[str, str] = {}

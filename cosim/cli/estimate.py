@@ -63,7 +63,7 @@ from feeddrive.estimator import (
 )
 from feeddrive.estimator.adequacy import check_motion
 from feeddrive.estimator.motion import FIELDS, SAMPLING_DELAY
-from feeddrive.estimator.partial import estimate_parameters
+from feeddrive.estimator.partial import NOT_ASSUMED, estimate_parameters
 from feeddrive.estimator.physical import impossible_values, parse_bounds
 from feeddrive.estimator.pooling import pool
 from feeddrive.estimator.pvalue_text import p_text
@@ -321,8 +321,9 @@ def table(results, units: dict[str, str]) -> str:  # noqa: ANN001 - list of esti
             lines.append(f"  {name:{w}} {p.value:12.6g} {units[name]:10} 95 % CI [{p.ci95[0]:.6g}, {p.ci95[1]:.6g}] "
                          f"(derived)")
         for name, why in r.refused.items():
+            # an impossible estimate (R < 0) is the fit's, not a condition of the others' intervals (partial._rule)
             fixed = (f" (fixed at {r.fixed[name]:.4g} in the re-fit of the others: their intervals hold given this "
-                     f"value)" if name in r.fixed else "")
+                     f"value)" if name in r.fixed and NOT_ASSUMED not in why else "")
             lines.append(f"  {name:3} refused: {why}{fixed}")
         for name, why in r.flags.items():
             lines.append(f"  {name:3} FLAGGED, not to be validated: {why}")

@@ -7,6 +7,8 @@ undone here, so that both versions give the same shapes.
 """
 from __future__ import annotations
 
+import re
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -49,8 +51,8 @@ class MatSource(Source):
         except NotImplementedError:  # a v7.3 file h5py did not recognise
             raise DataError(f"{path}: a MATLAB v7.3 file that is not valid HDF5; expected a readable .mat") from None
         except Exception as exc:  # noqa: BLE001 - scipy raises ValueError, TypeError, OSError ... on bad files
-            raise DataError(f"{path}: not a readable MATLAB file ({type(exc).__name__}: "
-                            f"{' '.join(str(exc).split()) or 'unreadable'}); expected a .mat of version 4 to 7.3") from None
+            raise DataError(f"{path}: not a readable MATLAB file: {_why_unreadable(path, exc)}; expected a .mat of "
+                            f"version 4 to 7.3") from None
         header = raw.get("__header__", b"")
         version = "v4" if not header else ("v5-v7" if b"MATLAB 5.0" in header else "v5-v7")
         tree = {}
@@ -88,7 +90,10 @@ class MatSource(Source):
             with h5py.File(path, "r") as f:
                 return {k: self._h5(f, v, k) for k, v in f.items() if not k.startswith("#")}
         except OSError as exc:
-            raise DataError(f"{path}: not a readable MATLAB v7.3 file ({exc})") from None
+            cut = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", str(exc))
+            why = (f"truncated: {cut[1]} bytes of the {cut[2]} its HDF5 header declares" if cut else
+                   " ".join(str(exc).replace("Unable to synchronously open file", "HDF5").split()))
+            raise DataError(f"{path}: not a readable MATLAB v7.3 file: {why}") from None
 
     def _h5(self, f, node, name: str) -> object:  # noqa: ANN001 - h5py File, Group or Dataset
         import h5py
@@ -130,3 +135,38 @@ class MatSource(Source):
     def resolve(self, expr: str, role: str) -> Signal:
         value, label = resolve_tree(self.tree, expr, role, self.path, self.names())
         return Signal(label, as_signal(value, label, f"{self.path}: role {role}"))
+
+
+def _why_unreadable(path: Path, exc: Exception) -> str:
+    """What is wrong with a .mat scipy cannot read, from its bytes (scipy's messages name its internals: "index out
+    of range", "could not read bytes"): empty, truncated (the variable whose declared size runs past the end), a
+    damaged MATLAB 5.0 file, or neither a v5 header nor a v4 matrix."""
+    size = path.stat().st_size
+    if size == 0:
+        return "the file is empty (0 bytes)"
+    with open(path, "rb") as f:
+        head = f.read(128)
+        if not head.startswith(b"MATLAB 5.0"):
+            cut = re.search(r"Not enough bytes to read matrix '([^']*)'", str(exc))
+            return (f"truncated: matrix {cut[1]!r} ends past the end of the file ({size} bytes; read as MATLAB v4)"
+                    if cut else "neither a MATLAB 5.0 header ('MATLAB 5.0 MAT-file' at its start) nor a MATLAB v4 "
+                                "matrix")
+        if size < 128:
+            return f"truncated: {size} bytes, shorter than the 128-byte MATLAB 5.0 header"
+        order = {b"IM": "<", b"MI": ">"}.get(head[126:128])
+        if order is None:
+            return "damaged: the MATLAB 5.0 header's byte-order mark (bytes 127-128) is neither 'IM' nor 'MI'"
+        pos, k = 128, 1
+        while pos < size:  # each variable: an 8-byte tag (type, byte count), its data padded to 8 bytes
+            f.seek(pos)
+            tag = f.read(8)
+            if len(tag) < 8:
+                return f"truncated: variable {k}'s 8-byte tag at byte {pos} is cut by the end of the file ({size} bytes)"
+            kind, nbytes = struct.unpack(order + "II", tag)
+            if kind >> 16:  # a small element: its data inside the tag
+                nbytes = 0
+            elif pos + 8 + nbytes > size:
+                return (f"truncated: variable {k} at byte {pos} declares {nbytes} bytes, {pos + 8 + nbytes - size} more "
+                        f"than the file holds ({size} bytes)")
+            pos, k = pos + 8 + nbytes + (0 if kind == 15 else -nbytes % 8), k + 1  # 15: compressed, not padded
+    return f"damaged: a MATLAB 5.0 file of {k - 1} variable(s) whose content cannot be decoded"
