@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.medians import mad_in_place
 
 MODES = ("auto", "nc", "none")
 #: A speed whose largest |value| is not above this many times its noise (``speed_noise``) holds no motion
@@ -46,7 +47,9 @@ def speed_noise(w: np.ndarray) -> float:
     if w.size < 3:
         return 0.0
     d2 = w[2:] - 2.0 * w[1:-1] + w[:-2]
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    if not np.isfinite(d2).all():  # an overflow: numpy's median and its NaN rule
+        return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    return float(1.4826 * mad_in_place(d2) / np.sqrt(6.0))  # d2 is ours: np.median's value without its copies
 
 
 def at_rest(w: np.ndarray, unit: str = "rad/s", threshold: float | None = None) -> str | None:

@@ -271,6 +271,33 @@ def test_noise_std_is_scipy_mad() -> None:
     assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
 
 
+def test_the_speed_noise_and_the_peak_test_keep_numpys_medians() -> None:
+    """speed_noise and peak_test select their medians in place (estimator/medians.py): np.median's bits."""
+    from feeddrive.estimator.medians import mad_in_place, median_in_place
+    from feeddrive.estimator.residue_tests import peak_test
+    from feeddrive.estimator.segmentation import speed_noise
+
+    rng = np.random.default_rng(12)
+    for n in (2, 3, 10, 1001, 34879):
+        for x in (rng.standard_normal(n), np.round(rng.standard_normal(n), 1)):  # ties at the middle ranks or not
+            assert median_in_place(x.copy()) == np.median(x)
+            assert mad_in_place(x.copy()) == np.median(np.abs(x - np.median(x)))
+            w = np.cumsum(x)
+            d2 = w[2:] - 2.0 * w[1:-1] + w[:-2]
+            if d2.size:
+                assert speed_noise(w) == float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    y = rng.standard_normal(500)
+    y[7] += 8.0  # a peak: d.max() read from the reordered deviations
+    kept = y.copy()
+    z = peak_test(y, np.empty((500, 0)), [500]).statistic
+    assert np.array_equal(y, kept)  # the caller's residue is not reordered
+    assert z == float(np.abs(y - np.median(y)).max() / (1.4826 * float(np.median(np.abs(y - np.median(y))))))
+    w = np.array([0.0, 1e308, -1e308, 1e308, 0.0, 1.0])  # second differences overflow: numpy's median and NaN rule
+    with np.errstate(over="ignore", invalid="ignore"):
+        d2 = w[2:] - 2.0 * w[1:-1] + w[:-2]
+        np.testing.assert_equal(speed_noise(w), float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)))
+
+
 @pytest.mark.parametrize("step", [1, 2, 3])
 def test_model_check_upsampling_is_np_interp(step: int) -> None:
     from feeddrive.estimator.mismatch import _upsample
