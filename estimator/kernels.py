@@ -248,7 +248,12 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
     nfft = next_fast_len(n + m + 1, real=True)
     # e and the columns of W in one call: pocketfft takes the rows two at a time in the lanes of a vector (the same
     # bits per row as transformed alone), so the four rows of p = 3 are two passes instead of three
-    F = rfft(np.vstack([e, W.T]), nfft, axis=-1)
+    # written into their zero-padded rows once: rfft's own padding copied a stacked copy into zeros (its values)
+    X = np.empty((1 + W.shape[1], nfft))
+    X[0, :n] = e
+    X[1:, :n] = W.T
+    X[:, n:] = 0.0
+    F = rfft(X, axis=-1)
     fe, FW = F[0], F[1:]
     num = irfft(fe * np.conj(fe), nfft)[:m + 1]
     used = e != 0
