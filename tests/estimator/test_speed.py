@@ -298,6 +298,25 @@ def test_the_speed_noise_and_the_peak_test_keep_numpys_medians() -> None:
         np.testing.assert_equal(speed_noise(w), float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)))
 
 
+def test_free_responses_are_the_powers_of_the_pole_per_segment() -> None:
+    """mismatch.free_responses writes pole ** k (float exponents) into its columns: np.column_stack of the
+    columns pole ** np.arange(length) (int exponents) zero outside each segment, bit for bit."""
+    from feeddrive.estimator.kernels import bilinear_first_order
+    from feeddrive.estimator.mismatch import free_responses
+
+    labels = np.zeros(3000, dtype=int)
+    labels[10:1200], labels[1500:2999] = 1, 2
+    params, h = {"Jt": 1.2e-4, "ft": 2e-3}, 1e-3
+    pole = -float(np.ravel(bilinear_first_order(params["Jt"], params["ft"], h)[1])[1])
+    cols = []
+    for a, b in ((10, 1200), (1500, 2999)):
+        col = np.zeros(labels.size)
+        col[a:b] = pole ** np.arange(b - a)
+        cols.append(col)
+    np.testing.assert_array_equal(free_responses(labels, params, h), np.column_stack(cols))
+    assert free_responses(np.zeros(5, dtype=int), params, h).shape == (5, 0)
+
+
 @pytest.mark.parametrize("step", [1, 2, 3])
 def test_model_check_upsampling_is_np_interp(step: int) -> None:
     from feeddrive.estimator.mismatch import _upsample
