@@ -43,6 +43,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.polynomial import legendre
 
+from feeddrive.estimator.columnwise import divide_columns
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.distributions import f_sf
 from feeddrive.estimator.errors import EstimatorInputError
@@ -163,7 +164,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     module docstring. Returns ``(p, F, df, undetermined, strongest, terms tested, reason)``."""
     n = y.size
     k = min(blocks, n // 8)
-    Xs, Zs = X / nonzero_norms(X), Z / nonzero_norms(Z)
+    Xs, Zs = divide_columns(X, nonzero_norms(X)), divide_columns(Z, nonzero_norms(Z))
 
     def iv(W: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return block_iv(y, [W], [V], k)

@@ -10,6 +10,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from feeddrive.estimator.columnwise import multiply_rows
+
 
 def erode(mask: np.ndarray, radius: int, border: bool) -> np.ndarray:
     """1-D binary erosion: True where every sample within ``radius`` of it is True.
@@ -425,7 +427,7 @@ def block_iv(y: np.ndarray, W: list[np.ndarray], V: list[np.ndarray], k: int) ->
     beta = M @ np.concatenate([v.T @ y for v in V])
     edges = np.cumsum([0] + [w.shape[1] for w in W])
     r = y - sum(w @ beta[a:b] for w, a, b in zip(W, edges[:-1], edges[1:]))
-    G = np.hstack([block_sums(v * r[:, None], k) for v in V])
+    G = np.hstack([block_sums(multiply_rows(v, r), k) for v in V])
     return beta, M @ (G.T @ G) @ M.T
 
 
