@@ -23,6 +23,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from feeddrive.estimator.columnwise import multiply_rows
 from feeddrive.estimator.distributions import chi2_sf, norm_ppf
 from feeddrive.estimator.kernels import columns, ls_theta
 
@@ -154,7 +155,7 @@ def _newey_west_cov(X: np.ndarray, e: np.ndarray, lags: int, gram: np.ndarray | 
     """The coefficients' Newey-West (Bartlett) covariance over ``lags`` lags, shape (p, p) (see _newey_west_t);
     ``gram``: ``X.T @ X`` when the caller has it."""
     n, p = X.shape
-    S = X * e[:, None]
+    S = multiply_rows(X, e)
     m = lags + 1
     C = np.zeros((n + 2 * m, p))
     np.cumsum(S, axis=0, out=C[m + 1:n + m + 1])
