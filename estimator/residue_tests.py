@@ -107,11 +107,15 @@ def _whiten_segments(arrays: Sequence[np.ndarray], sizes: Sequence[int], covaria
     # rows of each segment times the inverse Cholesky factor of its blocks' covariance (the first
     # ``skip`` blocks, the lags' warm-up, are not in the arrays); each factor formed once for all the arrays
     factors = [np.linalg.cholesky(covariance(n + skip)[skip:, skip:]) for n in sizes]
+    # solve_triangular's finiteness check (a pass over the (n, n) factor per array and segment) made once per
+    # factor and per array, with its error: the same solves
+    if not all(np.isfinite(x).all() for x in (*factors, *arrays)):
+        raise ValueError("array must not contain infs or NaNs")
     out = []
     for a in arrays:
         parts, start = [], 0
         for n, c in zip(sizes, factors):
-            parts.append(linalg.solve_triangular(c, a[start:start + n], lower=True))
+            parts.append(linalg.solve_triangular(c, a[start:start + n], lower=True, check_finite=False))
             start += n
         out.append(np.concatenate(parts))
     return out
