@@ -191,7 +191,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
             Zs[:, j] = Xs[:, j]
     # nuisance: what the model's regressors cannot represent, orthonormal; orthogonal to the instruments,
     # not to the regressors, whose noise (the derivative's) would pass into the directions and bias them
-    Nn = N / nonzero_norms(N)
+    Nn = divide_columns(N, nonzero_norms(N))
     Q = thin_q(Zs) if Zs.shape[1] else np.zeros((n, 0))
     R_ = Nn - Q @ (Q.T @ Nn)
     s, Vt = right_singular(R_)  # the left singular vectors (n x q) are not needed

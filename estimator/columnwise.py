@@ -12,11 +12,13 @@ import numpy as np
 
 #: widest array taken column by column (a wide one has long rows: numpy's loop is then fast)
 MAX_COLUMNS = 16
+#: fewest rows taken column by column: a short array costs numpy's call overhead, one call per column
+MIN_ROWS = 512
 
 
 def _columnwise(X: np.ndarray, other: np.ndarray) -> bool:
     return (X.ndim == 2 and X.dtype == np.float64 and X.flags.c_contiguous and 1 < X.shape[1] <= MAX_COLUMNS
-            and other.dtype == np.float64)
+            and X.shape[0] >= MIN_ROWS and other.dtype == np.float64)
 
 
 def divide_columns(X: np.ndarray, s: np.ndarray) -> np.ndarray:

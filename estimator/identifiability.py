@@ -23,7 +23,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from feeddrive.estimator.columnwise import multiply_rows
+from feeddrive.estimator.columnwise import divide_columns, multiply_rows
 from feeddrive.estimator.distributions import chi2_sf, norm_ppf
 from feeddrive.estimator.kernels import columns, ls_theta
 
@@ -142,7 +142,7 @@ def _augmented(y: np.ndarray, X: np.ndarray, block: int) -> tuple[np.ndarray, np
         return None
     scale = np.linalg.norm(X, axis=0)
     scale[scale == 0] = 1.0
-    Xs = X / scale
+    Xs = divide_columns(X, scale)
     gram = Xs.T @ Xs
     eig, V = np.linalg.eigh(gram)
     cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf

@@ -10,7 +10,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from feeddrive.estimator.columnwise import multiply_rows
+from feeddrive.estimator.columnwise import divide_columns, multiply_rows
 
 
 def erode(mask: np.ndarray, radius: int, border: bool) -> np.ndarray:
@@ -211,7 +211,7 @@ def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     norms = np.sqrt(np.einsum("ij,ij->j", A, A))
     if not np.all(norms > 0) or not np.all(np.isfinite(norms)):
         return np.linalg.lstsq(A, b, rcond=None)[0]
-    As = A / norms
+    As = divide_columns(A, norms)
     eig, V = np.linalg.eigh(As.T @ As)
     cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
     if cond > NORMAL_MAX_CONDITION:
