@@ -89,7 +89,7 @@ def _apriori(p, options: EstimationOptions, fixed: dict, refused: dict, lumped: 
         return False
     w, changed = p.signals["w"][p.rows["mechanical"]], False
     if "Cd" in mech.names and "T0" in mech.names and "Cd" not in refused:
-        pos, neg = int((w > 0).sum()), int((w < 0).sum())
+        pos, neg = np.count_nonzero(w > 0), np.count_nonzero(w < 0)  # the boolean sums' integers
         if min(pos, neg) < MIN_REVERSED:
             why = (f"one direction only: {pos} usable samples at w > 0, {neg} at w < 0 (need {MIN_REVERSED} of "
                    f"each): Cd and the torque offset T0 are confounded (only Cd + T0 is determined)")
