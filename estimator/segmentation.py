@@ -42,8 +42,18 @@ def speed_noise(w: np.ndarray) -> float:
     sqrt(6) times the noise's), robustly (1.4826 times their median absolute deviation): a motion adds to them only
     where its acceleration changes, so a ramp or a cruise leaves the estimate unchanged. Same unit as ``w``; 0 for
     fewer than 3 samples (and for a speed quantised so finely that most second differences are 0)."""
-    w = np.asarray(w, dtype=float)
-    w = w[np.isfinite(w)]
+    return _speed_noise(_finite(w))
+
+
+def _finite(w: np.ndarray) -> np.ndarray:
+    """The finite samples of ``w`` as a 1-D float array (``w`` itself when all are: no gathered copy)."""
+    w = np.asarray(w, dtype=float).ravel()  # a boolean mask's order: a view of a 1-D array
+    finite = np.isfinite(w)
+    return w if finite.all() else w[finite]
+
+
+def _speed_noise(w: np.ndarray) -> float:
+    """:func:`speed_noise` of finite samples."""
     if w.size < 3:
         return 0.0
     d2 = w[2:] - 2.0 * w[1:-1] + w[:-2]
@@ -70,11 +80,10 @@ def at_rest(w: np.ndarray, unit: str = "rad/s", threshold: float | None = None) 
     str or None
         ``no high-speed motion: nothing to judge (largest |speed| ..., not above ...: how the threshold was set)``.
     """
-    w = np.asarray(w, dtype=float)
-    w = w[np.isfinite(w)]
+    w = _finite(w)
     peak = float(np.max(np.abs(w))) if w.size else 0.0
     if threshold is None:
-        noise = speed_noise(w)
+        noise = _speed_noise(w)
         limit, how = REST_SNR * noise, (f"{REST_SNR:g} x the speed's noise, {noise:.3g} {unit} rms from its second "
                                         f"differences")
     else:

@@ -292,6 +292,9 @@ def test_the_speed_noise_and_the_peak_test_keep_numpys_medians() -> None:
     z = peak_test(y, np.empty((500, 0)), [500]).statistic
     assert np.array_equal(y, kept)  # the caller's residue is not reordered
     assert z == float(np.abs(y - np.median(y)).max() / (1.4826 * float(np.median(np.abs(y - np.median(y))))))
+    w = np.cumsum(rng.standard_normal(1000))
+    w[[3, 500]] = np.nan, np.inf  # non-finite samples left out (a gathered copy only then)
+    assert speed_noise(w) == speed_noise(w[np.isfinite(w)]) > 0
     w = np.array([0.0, 1e308, -1e308, 1e308, 0.0, 1.0])  # second differences overflow: numpy's median and NaN rule
     with np.errstate(over="ignore", invalid="ignore"):
         d2 = w[2:] - 2.0 * w[1:-1] + w[:-2]
