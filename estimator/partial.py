@@ -231,9 +231,11 @@ def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped
     (identifiability.py): the equation of ``reg`` whose state is a current [A], with its time constant slope /
     resistance read from the model (``time_constants``: L/R; the PMSM's L_q/R in the q-axis regression).
     Returns the lagging current's name when the rule fired (``_lag_bias`` then checks the other equations)."""
-    rows = p.rows[reg.equation]
-    if not rows.any() or not rows[np.argmax(rows):len(rows) - np.argmax(rows[::-1])].all():
+    mask = p.rows[reg.equation]
+    start, stop = int(np.argmax(mask)), len(mask) - int(np.argmax(mask[::-1]))
+    if not mask.any() or not mask[start:stop].all():
         return None  # the d2i/dt2 column needs contiguous samples
+    rows = slice(start, stop)  # the mask's samples read as views, not gathered (the same values)
     fired = None
     for eq, state, a, r in time_constants(model):
         if eq != reg.equation or model.variables[state].unit != "A" or a in refused or not {a, r} <= set(reg.names):
