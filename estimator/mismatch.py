@@ -470,9 +470,11 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         base = simulated if fi is f else simulate(params, fi)
         D = sensitivity_directions(lambda p, s=simulate, k=sel: s(p, fi)[k], params, names, covariance, USES[name],
                                    base[sel], undetermined)
+        # (n, k) blocks gathered a column at a time (a 2-D gather by a mask copies each row of a few values alone):
+        # the same C-ordered rows as np.column_stack(...)[sel]
         if name == "speed":
-            D = columns([D, free_responses(labels, params, h)[sel]])
-        X = np.column_stack([fi[s] for s in INPUTS[name]])[sel]
+            D = columns([D, *(c[sel] for c in free_responses(labels, params, h).T)])
+        X = columns([fi[s][sel] for s in INPUTS[name]])
         tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[sel], D, X, h, alpha, rate_hz, lags,
                                                ar_order, noise.get(name), noise_dof,
                                                labels[sel] if name == "speed" else None, constant=name == "current",
