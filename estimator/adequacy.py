@@ -328,11 +328,13 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     def fitted(X: np.ndarray, Xr: np.ndarray, Zr: np.ndarray, y: np.ndarray) -> np.ndarray:
         return X @ np.linalg.lstsq(Zr.T @ Xr, Zr.T @ y.take(take), rcond=None)[0]
 
+    earlier, later = take - lag, take + lag  # the indices LAG samples either side, formed once
+
     def before(x: np.ndarray) -> np.ndarray:
-        return x.take(take - lag)  # x LAG samples earlier, on the rows
+        return x.take(earlier)  # x LAG samples earlier, on the rows
 
     def around(x: np.ndarray) -> np.ndarray:
-        return 0.5 * (before(x) + x.take(take + lag))
+        return 0.5 * (before(x) + x.take(later))
 
     def instruments(X: np.ndarray) -> np.ndarray:  # noqa: N803
         # the regressors read LAG samples either side: their noise (the derivative's above all) is not
