@@ -40,17 +40,21 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
     n = len(signals["w"])
     duration = n * h
 
-    def rms(x: np.ndarray) -> float:
-        return float(np.sqrt(np.mean(np.square(x)))) or 1.0
+    levels: dict[str, float] = {}
+
+    def rms(name: str) -> float:  # once per signal: a derivative and its signal's own column read the same one
+        if name not in levels:
+            levels[name] = float(np.sqrt(np.mean(np.square(signals[name])))) or 1.0
+        return levels[name]
 
     proxy = {}
     for name in reg.signals:
         if name == "sgn_w":
             proxy[name] = 1.0
         elif name.startswith("D") and signals.get(name[1:]) is not None:
-            proxy[name] = rms(signals[name[1:]]) / duration
+            proxy[name] = rms(name[1:]) / duration
         else:
-            proxy[name] = rms(signals[name])
+            proxy[name] = rms(name)
     # every sample is the same: the regression (elementwise) evaluated once; the norm of n equal values is
     # |value| sqrt(n) (the sum of the n squares rounded aside: within ~1e-15, tests/estimator/test_linear_fit_runs.py)
     y1, Phi1 = reg.evaluate({k: np.full(1, v) for k, v in proxy.items()})
