@@ -378,7 +378,7 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
              instruments(halves[0], params, options, -0.5 / every, len(halves[1].signals["w"]), skip))
         fits, parts = {}, {}
         for reg in halves[0].regressions:
-            parts[reg.equation] = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
+            parts[reg.equation] = [(*measured[reg.equation, k], reg.regressors(_signals_for(half, reg, zh)),
                                     half.rows[reg.equation]) for k, (half, zh) in enumerate(zip(halves, z))]
             if reg.equation in halves[0].partners:  # the partner's sample sets, instruments from the other half too
                 parts[reg.equation] += [part for half, zh in zip(halves, z) for part in ls_parts(half, reg, zh)[1:]]

@@ -252,7 +252,7 @@ def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped
                   and "D" + x in sig and x in reg.signals]
         extra = None
         if others:
-            Phi_d = reg.evaluate({**sig, **{x: sig["D" + x] for x in others}})[1]
+            Phi_d = reg.regressors({**sig, **{x: sig["D" + x] for x in others}})
             moved = [j for j in range(Phi.shape[1]) if not np.array_equal(Phi_d[:, j], Phi[:, j])]
             extra = Phi_d[rows][:, moved] if moved else None
         try:
