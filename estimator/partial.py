@@ -57,6 +57,7 @@ from feeddrive.estimator.estimate import (
 )
 from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_lag
 from feeddrive.estimator.lagged_iv import iv_with_fallbacks
+from feeddrive.estimator.medians import percentiles_in_place
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.nc_rate import rate_rule, systematic
 from feeddrive.estimator.physical import Bounds, bounded_fit, physical_flags
@@ -97,7 +98,9 @@ def _apriori(p, options: EstimationOptions, fixed: dict, refused: dict, lumped: 
             lumped.add("Cd")
             fixed["T0"], changed = 0.0, True
     if "ft" in mech.names and "Cd" in mech.names and "ft" not in refused:
-        lo, hi = np.percentile(np.abs(w), [5, 95]) if w.size else (0.0, 0.0)
+        a = np.abs(w)  # ours: its percentiles selected in place (np.percentile's values), numpy's if not finite
+        lo, hi = (percentiles_in_place(a, (5, 95)) if a.size >= 2 and np.isfinite(a).all() else
+                  np.percentile(a, [5, 95]) if a.size else (0.0, 0.0))
         spread = (hi - lo) / hi if hi > 0 else 0.0
         if spread < MIN_SPEED_SPREAD:
             why = (f"too narrow a speed range: |w| within [{lo:.4g}, {hi:.4g}] {options.speed_unit} on 90 % of the "

@@ -301,6 +301,18 @@ def test_the_speed_noise_and_the_peak_test_keep_numpys_medians() -> None:
         np.testing.assert_equal(speed_noise(w), float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)))
 
 
+def test_percentiles_selected_in_place_are_numpys() -> None:
+    """medians.percentiles_in_place (partial's speed spread): np.percentile's bits (method "linear") for two
+    percentiles, sizes 2 to thousands, ties, equal percentiles and the ends."""
+    from feeddrive.estimator.medians import percentiles_in_place
+
+    rng = np.random.default_rng(13)
+    for n in (2, 3, 4, 7, 20, 101, 1000, 11426):
+        for x in (np.abs(rng.standard_normal(n)) * 1e3, np.round(np.abs(rng.standard_normal(n)), 1)):
+            for q in ((5, 95), (0, 100), (50, 50), (25, 75), (99.9, 100)):
+                np.testing.assert_array_equal(percentiles_in_place(x.copy(), q), np.percentile(x, q))
+
+
 def test_free_responses_are_the_powers_of_the_pole_per_segment() -> None:
     """mismatch.free_responses writes pole ** k (float exponents) into its columns: np.column_stack of the
     columns pole ** np.arange(length) (int exponents) zero outside each segment, bit for bit."""
