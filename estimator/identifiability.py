@@ -157,7 +157,8 @@ def _newey_west_cov(X: np.ndarray, e: np.ndarray, lags: int, gram: np.ndarray | 
     n, p = X.shape
     S = multiply_rows(X, e)
     m = lags + 1
-    C = np.zeros((n + 2 * m, p))
+    C = np.empty((n + 2 * m, p))  # each row written once: the zeros before the sums, the sums, the last repeated
+    C[:m + 1] = 0.0
     np.cumsum(S, axis=0, out=C[m + 1:n + m + 1])
     C[n + m + 1:] = C[n + m]
     B = C[m:] - C[:-m]
