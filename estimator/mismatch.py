@@ -229,8 +229,19 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     K, Jt, ft, Cd = (float(params[k]) for k in ("K", "Jt", "ft", "Cd"))
     T0 = float(params.get("T0", 0.0))
     b, a = bilinear_first_order(Jt, ft, h)
-    out = np.full(w.size, np.nan)
-    for sl in label_slices(labels):
+    slices = label_slices(labels)
+    spans = [(sl[0].start, sl[0].stop) if sl is not None else (-1, -1) for sl in slices]
+    out = np.empty(w.size)
+    last = 0
+    for first, stop in spans:  # NaN between the segments only (each sample written once), when they are in order
+        if first < last or first < 0:
+            out.fill(np.nan)
+            break
+        out[last:first] = np.nan
+        last = stop
+    else:
+        out[last:] = np.nan
+    for sl in slices:
         drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
         # transposed direct form: y[0] = b0 x[0] + z[0], so z[0] = w0 - b0 x[0] starts the output at w0
         out[sl] = lti.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]

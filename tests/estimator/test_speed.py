@@ -313,6 +313,29 @@ def test_percentiles_selected_in_place_are_numpys() -> None:
                 np.testing.assert_array_equal(percentiles_in_place(x.copy(), q), np.percentile(x, q))
 
 
+def test_simulated_segments_are_nan_exactly_between_them() -> None:
+    """mismatch.simulate_segments writes NaN between its segments only: np.full(n, nan) with the segments' Tustin
+    responses written over it, bit for bit (segments at the ends and in the middle)."""
+    from feeddrive.estimator import lti
+    from feeddrive.estimator.kernels import bilinear_first_order
+    from feeddrive.estimator.mismatch import simulate_segments
+
+    rng = np.random.default_rng(17)
+    n, h = 900, 1e-3
+    i, w = rng.standard_normal(n), np.abs(rng.standard_normal(n)) + 1.0
+    p = {"K": 0.2, "Jt": 1e-3, "ft": 2e-3, "Cd": 0.01}
+    for runs in (((0, 200), (350, 600)), ((10, 300), (300, 500), (700, 900))):
+        labels = np.zeros(n, dtype=int)
+        for k, (a, b) in enumerate(runs, 1):
+            labels[a:b] = k
+        ref = np.full(n, np.nan)
+        bb, aa = bilinear_first_order(p["Jt"], p["ft"], h)
+        for a, b in runs:
+            drive = p["K"] * i[a:b] - p["Cd"] * np.sign(w[a]) - 0.0
+            ref[a:b] = lti.lfilter(bb, aa, drive, zi=[w[a] - bb[0] * drive[0]])[0]
+        np.testing.assert_array_equal(simulate_segments(i, w, labels, p, h), ref)
+
+
 def test_free_responses_are_the_powers_of_the_pole_per_segment() -> None:
     """mismatch.free_responses writes pole ** k (float exponents) into its columns: np.column_stack of the
     columns pole ** np.arange(length) (int exponents) zero outside each segment, bit for bit."""
