@@ -177,9 +177,10 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True, r
             guard = int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h)))
             r &= erode(fast, guard, border=True)
             slow = fast.size - np.count_nonzero(fast)  # counts of the masks: r.sum()'s integers, in a third of its time
+            used = np.count_nonzero(r)  # r is within the eroded fast samples: fast & ~r counts fast.size - slow - used
             notes[reg.equation] = (
-                f"{np.count_nonzero(r)} of {r.size} samples usable: {slow} have |speed| < {threshold:.3g} "
-                f"{options.speed_unit}, {np.count_nonzero(fast & ~r)} more are within the sign guard of {guard} samples "
+                f"{used} of {r.size} samples usable: {slow} have |speed| < {threshold:.3g} "
+                f"{options.speed_unit}, {fast.size - slow - used} more are within the sign guard of {guard} samples "
                 f"({guard * h:.3g} s = sign_guard {options.sign_guard:g} / filter cut-off "
                 f"{options.filter.cutoff_hz:.3g} Hz) around them")
         rows[reg.equation] = r

@@ -336,6 +336,19 @@ def test_simulated_segments_are_nan_exactly_between_them() -> None:
         np.testing.assert_array_equal(simulate_segments(i, w, labels, p, h), ref)
 
 
+def test_an_eroded_mask_is_within_the_mask() -> None:
+    """estimate.prepare counts the sign guard's samples as fast - used (no fast & ~r array): r is within
+    erode(fast), which is within fast, for any radius and border."""
+    from feeddrive.estimator.kernels import erode
+
+    rng = np.random.default_rng(19)
+    for radius in (0, 1, 5, 40):
+        for border in (False, True):
+            fast = rng.random(3000) < 0.8
+            r = (rng.random(3000) < 0.9) & erode(fast, radius, border=border)
+            assert np.count_nonzero(fast & ~r) == fast.size - (fast.size - np.count_nonzero(fast)) - np.count_nonzero(r)
+
+
 def test_free_responses_are_the_powers_of_the_pole_per_segment() -> None:
     """mismatch.free_responses writes pole ** k (float exponents) into its columns: np.column_stack of the
     columns pole ** np.arange(length) (int exponents) zero outside each segment, bit for bit."""
