@@ -60,6 +60,16 @@ def numpy_function(f: ca.Function):
                 work[o[0]] = _BINARY[op](work[i[0]], work[i[1]])
         return out
 
+    # the input whose value is the output's first row itself (y = u, y = i), else None: evaluate reads it there
+    source: dict[int, int | None] = {}
+    for op, i, o, _ in ops:
+        if op == ca.OP_INPUT:
+            source[o[0]] = i[1]
+        elif op == ca.OP_OUTPUT:
+            if o[1] == 0:
+                run.direct = source.get(i[0])
+        else:
+            source[o[0]] = None
     return run
 
 
@@ -135,6 +145,12 @@ class Regression:
         if missing:
             raise EstimatorInputError(f"{self.equation} regression needs signals {missing}")
         rows = [np.asarray(values[s], dtype=float) for s in self.signals]
+        direct = getattr(self.vectorised, "direct", None) if not first else None
+        if direct is not None and rows[direct].ndim == 1 and rows[direct].flags.c_contiguous:
+            # y is an input itself: a read-only view of it, not a copy (its values; contiguous as the copy was)
+            y = rows[direct].view()
+            y.setflags(write=False)
+            return y, self.vectorised(rows, 1).T
         if self.vectorised is not None:  # the signals' rows as they are: a stacked copy of them was read only
             out = self.vectorised(rows, first)
         else:  # an operation numpy_function does not know: CasADi's own (slower) map

@@ -267,6 +267,11 @@ def test_noise_std_is_scipy_mad() -> None:
         x = np.cumsum(rng.standard_normal(n)) * 1e-3 + rng.standard_normal(n)
         assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
     assert np.isnan(noise_std(np.array([0.0, np.nan, 1.0, 2.0])))
+    for n in (4, 5, 1001):  # one NaN or many, anywhere: NaN (numpy's median), read from the selection's upper part
+        for k in (1, 3, n // 2 + 1):
+            x = rng.standard_normal(n)
+            x[rng.choice(n, k, replace=False)] = np.nan
+            assert np.isnan(noise_std(x))
     x = np.round(rng.standard_normal(2000), 1)  # many equal differences: the two middle ranks tied or not
     assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
 
