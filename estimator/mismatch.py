@@ -188,16 +188,16 @@ def sensitivity_directions(simulate: Callable[[dict[str, float]], np.ndarray], p
                  for lam, ax in zip(variances[positive], axes.T[positive])]
     steps += [{k: 1e-3 * (abs(parameters[k]) or 1.0)} for k in undetermined if k in uses and k not in names]
     cols = []
-    for step in steps:
-        p = dict(parameters)
-        for k, d in step.items():
-            p[k] += d
-        with np.errstate(all="ignore"):  # a diverging perturbed simulation is a refusal below, not a warning
+    with np.errstate(all="ignore"):  # a diverging perturbed simulation is a refusal below, not a warning
+        for step in steps:  # (one floating-point state for all the steps: numpy's context set once)
+            p = dict(parameters)
+            for k, d in step.items():
+                p[k] += d
             col = simulate(p) - base
-        if not np.all(np.isfinite(col)):
-            raise NumericalFailure(f"the model check's simulation diverges when {', '.join(step)} moves by one "
-                                   "standard deviation: the estimate is too uncertain to check")
-        cols.append(col)
+            if not np.all(np.isfinite(col)):
+                raise NumericalFailure(f"the model check's simulation diverges when {', '.join(step)} moves by one "
+                                       "standard deviation: the estimate is too uncertain to check")
+            cols.append(col)
     return np.column_stack(cols) if cols else np.zeros((base.size, 0))
 
 
@@ -242,7 +242,9 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     else:
         out[last:] = np.nan
     for sl in slices:
-        drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
+        drive = K * i[sl]  # (K i - Cd sign(w0)) - T0, in place: the same two subtractions, no temporaries
+        drive -= Cd * np.sign(w[sl][0])
+        drive -= T0
         # transposed direct form: y[0] = b0 x[0] + z[0], so z[0] = w0 - b0 x[0] starts the output at w0
         out[sl] = lti.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
     return out
