@@ -423,7 +423,7 @@ def block_iv(y: np.ndarray, W: list[np.ndarray], V: list[np.ndarray], k: int) ->
     beta : ndarray, shape (p,)
     cov : ndarray, shape (p, p)
     """
-    M = np.linalg.pinv(np.block([[v.T @ w for w in W] for v in V]))
+    M = np.linalg.pinv(np.vstack([np.hstack([v.T @ w for w in W]) for v in V]))  # np.block's matrix, its copies
     beta = M @ np.concatenate([v.T @ y for v in V])
     edges = np.cumsum([0] + [w.shape[1] for w in W])
     r = y - sum(w @ beta[a:b] for w, a, b in zip(W, edges[:-1], edges[1:]))
