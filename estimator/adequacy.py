@@ -43,6 +43,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.polynomial import legendre
 
+from feeddrive.estimator.columnwise import divide_columns
 from feeddrive.estimator.derivative import FUTURE, PAST, matched_average, zero_forcing_derivative
 from feeddrive.estimator.distributions import f_sf
 from feeddrive.estimator.errors import EstimatorInputError
@@ -163,7 +164,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
     module docstring. Returns ``(p, F, df, undetermined, strongest, terms tested, reason)``."""
     n = y.size
     k = min(blocks, n // 8)
-    Xs, Zs = X / nonzero_norms(X), Z / nonzero_norms(Z)
+    Xs, Zs = divide_columns(X, nonzero_norms(X)), divide_columns(Z, nonzero_norms(Z))
 
     def iv(W: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return block_iv(y, [W], [V], k)
@@ -190,7 +191,7 @@ def _lack_of_fit(y: np.ndarray, X: np.ndarray, Z: np.ndarray, names: list[str], 
             Zs[:, j] = Xs[:, j]
     # nuisance: what the model's regressors cannot represent, orthonormal; orthogonal to the instruments,
     # not to the regressors, whose noise (the derivative's) would pass into the directions and bias them
-    Nn = N / nonzero_norms(N)
+    Nn = divide_columns(N, nonzero_norms(N))
     Q = thin_q(Zs) if Zs.shape[1] else np.zeros((n, 0))
     R_ = Nn - Q @ (Q.T @ Nn)
     s, Vt = right_singular(R_)  # the left singular vectors (n x q) are not needed
@@ -327,11 +328,13 @@ def check_adequacy(h: float, u: np.ndarray | None = None, i: np.ndarray | None =
     def fitted(X: np.ndarray, Xr: np.ndarray, Zr: np.ndarray, y: np.ndarray) -> np.ndarray:
         return X @ np.linalg.lstsq(Zr.T @ Xr, Zr.T @ y.take(take), rcond=None)[0]
 
+    earlier, later = take - lag, take + lag  # the indices LAG samples either side, formed once
+
     def before(x: np.ndarray) -> np.ndarray:
-        return x.take(take - lag)  # x LAG samples earlier, on the rows
+        return x.take(earlier)  # x LAG samples earlier, on the rows
 
     def around(x: np.ndarray) -> np.ndarray:
-        return 0.5 * (before(x) + x.take(take + lag))
+        return 0.5 * (before(x) + x.take(later))
 
     def instruments(X: np.ndarray) -> np.ndarray:  # noqa: N803
         # the regressors read LAG samples either side: their noise (the derivative's above all) is not

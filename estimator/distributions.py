@@ -46,7 +46,9 @@ _T_PPF_SIZE = 64
 
 def t_ppf(q: float | np.ndarray, df: float | np.ndarray) -> float | np.ndarray:
     """Quantile ``x`` with ``P(T <= x) = q`` of Student's t (``scipy.stats.t.ppf``)."""
-    q, df = np.broadcast_arrays(np.asarray(q, dtype=float), np.asarray(df, dtype=float))
+    q, df = np.asarray(q, dtype=float), np.asarray(df, dtype=float)
+    if q.ndim or df.ndim:  # two scalars (most calls) are their own broadcast
+        q, df = np.broadcast_arrays(q, df)
     key = (q.shape, q.tobytes(), df.tobytes())
     out = _T_PPF.get(key)
     if out is None:

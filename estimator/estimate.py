@@ -177,9 +177,10 @@ def prepare(data: MotionData, options: EstimationOptions, strict: bool = True, r
             guard = int(np.ceil(options.sign_guard / (options.filter.cutoff_hz * h)))
             r &= erode(fast, guard, border=True)
             slow = fast.size - np.count_nonzero(fast)  # counts of the masks: r.sum()'s integers, in a third of its time
+            used = np.count_nonzero(r)  # r is within the eroded fast samples: fast & ~r counts fast.size - slow - used
             notes[reg.equation] = (
-                f"{np.count_nonzero(r)} of {r.size} samples usable: {slow} have |speed| < {threshold:.3g} "
-                f"{options.speed_unit}, {np.count_nonzero(fast & ~r)} more are within the sign guard of {guard} samples "
+                f"{used} of {r.size} samples usable: {slow} have |speed| < {threshold:.3g} "
+                f"{options.speed_unit}, {fast.size - slow - used} more are within the sign guard of {guard} samples "
                 f"({guard * h:.3g} s = sign_guard {options.sign_guard:g} / filter cut-off "
                 f"{options.filter.cutoff_hz:.3g} Hz) around them")
         rows[reg.equation] = r
@@ -382,7 +383,7 @@ def instrumental_variables(data: MotionData, start: MethodResult, options: Estim
              instruments(halves[0], params, options, -0.5 / every, len(halves[1].signals["w"]), skip))
         fits, parts = {}, {}
         for reg in halves[0].regressions:
-            parts[reg.equation] = [(*measured[reg.equation, k], reg.evaluate(_signals_for(half, reg, zh))[1],
+            parts[reg.equation] = [(*measured[reg.equation, k], reg.regressors(_signals_for(half, reg, zh)),
                                     half.rows[reg.equation]) for k, (half, zh) in enumerate(zip(halves, z))]
             if reg.equation in halves[0].partners:  # the partner's sample sets, instruments from the other half too
                 parts[reg.equation] += [part for half, zh in zip(halves, z) for part in ls_parts(half, reg, zh)[1:]]

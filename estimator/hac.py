@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from feeddrive.estimator.columnwise import multiply_rows
 from feeddrive.estimator.distributions import norm_isf
 
 
@@ -34,7 +35,7 @@ def ols_hac(y: np.ndarray, X: np.ndarray, maxlags: int = 16) -> HACFit:
     """OLS fit of ``y`` (n,) on ``X`` (n, k) with Newey-West errors over ``maxlags`` lags; see the module docstring."""
     pinv = np.linalg.pinv(X)
     params = pinv @ y
-    scores = X * (y - X @ params)[:, None]
+    scores = multiply_rows(X, y - X @ params)
     weights = 1 - np.arange(maxlags + 1) / (maxlags + 1.0)
     S = weights[0] * np.dot(scores.T, scores)
     for lag in range(1, maxlags + 1):

@@ -16,14 +16,20 @@ The rule: the electrical regression augmented with ``d2i/dt2`` gives a coefficie
 t statistic exceeds the two-sided 5 % normal quantile, real time constants, and the smaller of them at least
 ``MIN_LAG_RATIO`` of the larger (below it the first-order L is within that fraction of one candidate,
 the lag is negligible). The built-in plant (no sensor lag) gives |t| < 1 at 10 kHz, and so do the synthetic records at 1 kHz.
+
+The other time-constant rule (``tau_rule``): a derivative parameter (L; L_q, L_d) whose equation's time constant
+(``time_constants``, read from the model) is shorter than ``MIN_TAU_SAMPLES`` sample periods cannot be identified.
 """
 from __future__ import annotations
 
 from collections.abc import Mapping
+from functools import lru_cache
 
+import casadi as ca
 import numpy as np
 
-from feeddrive.estimator.distributions import chi2_sf, norm_ppf
+from feeddrive.estimator.columnwise import divide_columns, multiply_rows
+from feeddrive.estimator.distributions import chi2_sf, norm_ppf, t_ppf
 from feeddrive.estimator.kernels import columns, ls_theta
 
 #: Smallest ratio of the two time constants for the second lag to matter to L.
@@ -141,7 +147,7 @@ def _augmented(y: np.ndarray, X: np.ndarray, block: int) -> tuple[np.ndarray, np
         return None
     scale = np.linalg.norm(X, axis=0)
     scale[scale == 0] = 1.0
-    Xs = X / scale
+    Xs = divide_columns(X, scale)
     gram = Xs.T @ Xs
     eig, V = np.linalg.eigh(gram)
     cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
@@ -154,9 +160,10 @@ def _newey_west_cov(X: np.ndarray, e: np.ndarray, lags: int, gram: np.ndarray | 
     """The coefficients' Newey-West (Bartlett) covariance over ``lags`` lags, shape (p, p) (see _newey_west_t);
     ``gram``: ``X.T @ X`` when the caller has it."""
     n, p = X.shape
-    S = X * e[:, None]
+    S = multiply_rows(X, e)
     m = lags + 1
-    C = np.zeros((n + 2 * m, p))
+    C = np.empty((n + 2 * m, p))  # each row written once: the zeros before the sums, the sums, the last repeated
+    C[:m + 1] = 0.0
     np.cumsum(S, axis=0, out=C[m + 1:n + m + 1])
     C[n + m + 1:] = C[n + m]
     B = C[m:] - C[:-m]
@@ -177,3 +184,48 @@ def _newey_west_t(X: np.ndarray, e: np.ndarray, lags: int, theta: np.ndarray) ->
     """
     var = float(_newey_west_cov(X, e, lags)[-1, -1])
     return float(theta[-1] / np.sqrt(var)) if var > 0 else float("nan")
+
+
+#: Fewest sample periods in the electrical time constant L/R for L to be identifiable.
+MIN_TAU_SAMPLES = 1.0
+
+
+@lru_cache(maxsize=16)
+def time_constants(model) -> list[tuple[str, str, str, str]]:
+    """``(equation, state, slope, resistance)`` of each equation with a first-order time constant ``slope /
+    resistance``: the physical parameter multiplying the state's derivative (DC: L; PMSM: L_q, L_d; Jt) and the
+    one multiplying the state itself (R; R; ft), read from the residual's Jacobians, never from the motor."""
+    out = []
+    phys = model.of_kind("physical")
+    for eq in model.equations.values():
+        state = model.variables[eq.solves_for].sym
+        slope = ca.jacobian(eq.residual, model.derivative[eq.solves_for])
+        gain = ca.jacobian(ca.substitute(eq.residual, model.derivative[eq.solves_for], 0), state)
+        a = next((v.name for v in phys if ca.depends_on(slope, v.sym)), None)
+        r = next((v.name for v in phys if v.name != a and ca.depends_on(gain, v.sym)), None)
+        if a and r:
+            out.append((eq.name, eq.solves_for, a, r))
+    return out
+
+
+def tau_rule(fit, reg, h: float, fixed: dict, refused: dict, model) -> bool:
+    """A derivative parameter refused when its equation's time constant (slope / resistance: L/R, L_q/R, L_d/R)
+    is shorter than ``MIN_TAU_SAMPLES`` sample periods (True: it is fixed at 0, the others re-fitted)."""
+    changed = False
+    for eq, state, a, r in time_constants(model):
+        if a in refused or not {a, r} <= set(reg.names):
+            continue
+        ja, jr = reg.names.index(a), reg.names.index(r)
+        R, L = fit.theta[jr], fit.theta[ja]
+        sl = float(np.sqrt(max(fit.cov[ja, ja], 0.0)))
+        q = float(t_ppf(0.975, max(float(fit.theta_dof[ja]), 1.0)))
+        if not R > 0:
+            continue
+        tau, tau_hi = L / R, (L + q * sl) / R
+        if tau_hi < MIN_TAU_SAMPLES * h:
+            refused[a] = (f"sample period {h:.3g} s too long for the {eq} time constant {a}/{r} = {tau:.3g} s (95 % "
+                          f"upper bound {tau_hi:.3g} s): {a} cannot be identified; the others from the quasi-static "
+                          f"{eq} equation (its {a} d{state}/dt term dropped)")
+            fixed[a] = 0.0
+            changed = True
+    return changed

@@ -10,6 +10,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from feeddrive.estimator.columnwise import divide_columns, multiply_rows
+
 
 def erode(mask: np.ndarray, radius: int, border: bool) -> np.ndarray:
     """1-D binary erosion: True where every sample within ``radius`` of it is True.
@@ -209,7 +211,7 @@ def lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     norms = np.sqrt(np.einsum("ij,ij->j", A, A))
     if not np.all(norms > 0) or not np.all(np.isfinite(norms)):
         return np.linalg.lstsq(A, b, rcond=None)[0]
-    As = A / norms
+    As = divide_columns(A, norms)
     eig, V = np.linalg.eigh(As.T @ As)
     cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
     if cond > NORMAL_MAX_CONDITION:
@@ -248,7 +250,12 @@ def toeplitz_score_covariance(W: np.ndarray, e: np.ndarray, lags: int) -> np.nda
     nfft = next_fast_len(n + m + 1, real=True)
     # e and the columns of W in one call: pocketfft takes the rows two at a time in the lanes of a vector (the same
     # bits per row as transformed alone), so the four rows of p = 3 are two passes instead of three
-    F = rfft(np.vstack([e, W.T]), nfft, axis=-1)
+    # written into their zero-padded rows once: rfft's own padding copied a stacked copy into zeros (its values)
+    X = np.empty((1 + W.shape[1], nfft))
+    X[0, :n] = e
+    X[1:, :n] = W.T
+    X[:, n:] = 0.0
+    F = rfft(X, axis=-1)
     fe, FW = F[0], F[1:]
     num = irfft(fe * np.conj(fe), nfft)[:m + 1]
     used = e != 0
@@ -416,11 +423,11 @@ def block_iv(y: np.ndarray, W: list[np.ndarray], V: list[np.ndarray], k: int) ->
     beta : ndarray, shape (p,)
     cov : ndarray, shape (p, p)
     """
-    M = np.linalg.pinv(np.block([[v.T @ w for w in W] for v in V]))
+    M = np.linalg.pinv(np.vstack([np.hstack([v.T @ w for w in W]) for v in V]))  # np.block's matrix, its copies
     beta = M @ np.concatenate([v.T @ y for v in V])
     edges = np.cumsum([0] + [w.shape[1] for w in W])
     r = y - sum(w @ beta[a:b] for w, a, b in zip(W, edges[:-1], edges[1:]))
-    G = np.hstack([block_sums(v * r[:, None], k) for v in V])
+    G = np.hstack([block_sums(multiply_rows(v, r), k) for v in V])
     return beta, M @ (G.T @ G) @ M.T
 
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from feeddrive.estimator.columnwise import divide_columns, multiply_rows
 from feeddrive.estimator.errors import NotEnoughExcitation
 from feeddrive.estimator.kernels import ls_theta
 from feeddrive.estimator.motion import EstimationOptions, parameter_covariance, stationary_score_covariance
@@ -39,17 +40,21 @@ def _column_reference(reg: Regression, signals: Mapping[str, np.ndarray], h: flo
     n = len(signals["w"])
     duration = n * h
 
-    def rms(x: np.ndarray) -> float:
-        return float(np.sqrt(np.mean(np.square(x)))) or 1.0
+    levels: dict[str, float] = {}
+
+    def rms(name: str) -> float:  # once per signal: a derivative and its signal's own column read the same one
+        if name not in levels:
+            levels[name] = float(np.sqrt(np.mean(np.square(signals[name])))) or 1.0
+        return levels[name]
 
     proxy = {}
     for name in reg.signals:
         if name == "sgn_w":
             proxy[name] = 1.0
         elif name.startswith("D") and signals.get(name[1:]) is not None:
-            proxy[name] = rms(signals[name[1:]]) / duration
+            proxy[name] = rms(name[1:]) / duration
         else:
-            proxy[name] = rms(signals[name])
+            proxy[name] = rms(name)
     # every sample is the same: the regression (elementwise) evaluated once; the norm of n equal values is
     # |value| sqrt(n) (the sum of the n squares rounded aside: within ~1e-15, tests/estimator/test_linear_fit_runs.py)
     y1, Phi1 = reg.evaluate({k: np.full(1, v) for k, v in proxy.items()})
@@ -145,7 +150,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
         # column scaling makes it look; judged against the column's own scale (see _column_reference)
         empty = scale <= 1e-9 * reference if reference is not None else np.zeros(p, dtype=bool)
         scale[empty] = 1.0
-        Xs = [X / scale for X in Xr]
+        Xs = [divide_columns(X, scale) for X in Xr]
         # singular values of the scaled regressor from its p x p Gram matrix (cheap; fine up to cond ~1e7)
         gram = sum(X.T @ X for X in Xs)
         eig, V = np.linalg.eigh(gram[np.ix_(~empty, ~empty)])
@@ -165,7 +170,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
     else:
         Zr = [rows(Z, r) for _, _, Z, r in parts]
         zscale = np.sqrt(sum(np.einsum("ij,ij->j", Z, Z) for Z in Zr)).clip(1e-300)
-        Ws = [Z / zscale for Z in Zr]
+        Ws = [divide_columns(Z, zscale) for Z in Zr]
         theta_s = np.linalg.solve(sum(W.T @ X for W, X in zip(Ws, Xs)), sum(W.T @ y for W, y in zip(Ws, ys)))
     def complete() -> _Fit:
         """The fit with its covariance, from this solve's arrays."""
@@ -180,7 +185,7 @@ def _solve(reg: Regression, parts: list[tuple], block: int, options: EstimationO
             res2 += e @ e
             out2 += yr @ yr
             Wf, ef = spread(W, r), spread(e, r)
-            score = (Wf * ef[:, None])[:n]  # the scores, zero on the unused rows: W e on the used ones, bit for bit
+            score = multiply_rows(Wf[:n], ef[:n])  # the scores, zero on the unused rows: W e on the used ones
             if G is None:
                 G = score
             else:

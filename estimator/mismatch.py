@@ -188,16 +188,16 @@ def sensitivity_directions(simulate: Callable[[dict[str, float]], np.ndarray], p
                  for lam, ax in zip(variances[positive], axes.T[positive])]
     steps += [{k: 1e-3 * (abs(parameters[k]) or 1.0)} for k in undetermined if k in uses and k not in names]
     cols = []
-    for step in steps:
-        p = dict(parameters)
-        for k, d in step.items():
-            p[k] += d
-        with np.errstate(all="ignore"):  # a diverging perturbed simulation is a refusal below, not a warning
+    with np.errstate(all="ignore"):  # a diverging perturbed simulation is a refusal below, not a warning
+        for step in steps:  # (one floating-point state for all the steps: numpy's context set once)
+            p = dict(parameters)
+            for k, d in step.items():
+                p[k] += d
             col = simulate(p) - base
-        if not np.all(np.isfinite(col)):
-            raise NumericalFailure(f"the model check's simulation diverges when {', '.join(step)} moves by one "
-                                   "standard deviation: the estimate is too uncertain to check")
-        cols.append(col)
+            if not np.all(np.isfinite(col)):
+                raise NumericalFailure(f"the model check's simulation diverges when {', '.join(step)} moves by one "
+                                       "standard deviation: the estimate is too uncertain to check")
+            cols.append(col)
     return np.column_stack(cols) if cols else np.zeros((base.size, 0))
 
 
@@ -229,9 +229,22 @@ def simulate_segments(i: np.ndarray, w: np.ndarray, labels: np.ndarray, params: 
     K, Jt, ft, Cd = (float(params[k]) for k in ("K", "Jt", "ft", "Cd"))
     T0 = float(params.get("T0", 0.0))
     b, a = bilinear_first_order(Jt, ft, h)
-    out = np.full(w.size, np.nan)
-    for sl in label_slices(labels):
-        drive = K * i[sl] - Cd * np.sign(w[sl][0]) - T0
+    slices = label_slices(labels)
+    spans = [(sl[0].start, sl[0].stop) if sl is not None else (-1, -1) for sl in slices]
+    out = np.empty(w.size)
+    last = 0
+    for first, stop in spans:  # NaN between the segments only (each sample written once), when they are in order
+        if first < last or first < 0:
+            out.fill(np.nan)
+            break
+        out[last:first] = np.nan
+        last = stop
+    else:
+        out[last:] = np.nan
+    for sl in slices:
+        drive = K * i[sl]  # (K i - Cd sign(w0)) - T0, in place: the same two subtractions, no temporaries
+        drive -= Cd * np.sign(w[sl][0])
+        drive -= T0
         # transposed direct form: y[0] = b0 x[0] + z[0], so z[0] = w0 - b0 x[0] starts the output at w0
         out[sl] = lti.lfilter(b, a, drive, zi=[w[sl][0] - b[0] * drive[0]])[0]
     return out
@@ -244,12 +257,12 @@ def free_responses(labels: np.ndarray, params: Mapping[str, float], h: float) ->
     (seconds), so it is not a constant; it is a nuisance of the speed residue's tests."""
     b, a = bilinear_first_order(float(params["Jt"]), float(params["ft"]), h)
     pole = -float(np.ravel(a)[1])
-    cols = []
-    for sl in label_slices(labels):
-        col = np.zeros(labels.size)
-        col[sl] = pole ** np.arange(sl[0].stop - sl[0].start)
-        cols.append(col)
-    return np.column_stack(cols) if cols else np.zeros((labels.size, 0))
+    slices = label_slices(labels)
+    out = np.zeros((labels.size, len(slices)))  # np.column_stack of the columns, written in place
+    for j, sl in enumerate(slices):
+        # float exponents: the int64 ones were cast to float64 through the ufunc's buffers (the same values)
+        np.power(pole, np.arange(sl[0].stop - sl[0].start, dtype=float), out=out[sl[0], j])
+    return out
 
 
 def check_signals(v: MeasurementValidation, signals: Mapping[str, np.ndarray | None]
@@ -470,9 +483,11 @@ def check_model(u: np.ndarray, i: np.ndarray, w: np.ndarray, h: float, parameter
         base = simulated if fi is f else simulate(params, fi)
         D = sensitivity_directions(lambda p, s=simulate, k=sel: s(p, fi)[k], params, names, covariance, USES[name],
                                    base[sel], undetermined)
+        # (n, k) blocks gathered a column at a time (a 2-D gather by a mask copies each row of a few values alone):
+        # the same C-ordered rows as np.column_stack(...)[sel]
         if name == "speed":
-            D = columns([D, free_responses(labels, params, h)[sel]])
-        X = np.column_stack([fi[s] for s in INPUTS[name]])[sel]
+            D = columns([D, *(c[sel] for c in free_responses(labels, params, h).T)])
+        X = columns([fi[s][sel] for s in INPUTS[name]])
         tests, rms, corr, band = residue_tests(name, (f[x] - simulated)[sel], D, X, h, alpha, rate_hz, lags,
                                                ar_order, noise.get(name), noise_dof,
                                                labels[sel] if name == "speed" else None, constant=name == "current",

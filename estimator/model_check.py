@@ -29,6 +29,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from feeddrive.estimator.columnwise import multiply_rows
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.filtering import FilterSpec
 from feeddrive.estimator.kernels import equation_parameters_of, label_slices, residual_symbols
@@ -247,8 +248,8 @@ def check_model_equations(signals: Mapping[str, np.ndarray], h: float, parameter
                                                segment_covariance=null)
         if profile is not None and not segmented:  # the independence test on the residue weighted by its null std
             wt = _weights(profile, noise[state], filter, h, block_samples(rate_hz, h))
-            Dw = np.column_stack([D, np.ones(len(wt))]) * wt[:, None]  # the constant (an offset), weighted too
-            wtests, _, corr, band = residue_tests(state, (f[state] - simulated)[k] * wt, Dw, X * wt[:, None], h,
+            Dw = multiply_rows(np.column_stack([D, np.ones(len(wt))]), wt)  # the constant (an offset), weighted too
+            wtests, _, corr, band = residue_tests(state, (f[state] - simulated)[k] * wt, Dw, multiply_rows(X, wt), h,
                                                   alpha, rate_hz, lags, ar_order, None, noise_dof, None,
                                                   constant=False)
             tests = {**tests, "independence": wtests["independence"]}  # its correlation figure too

@@ -160,7 +160,7 @@ def ls_parts(p: Prepared, reg: Regression, instruments: Mapping[str, np.ndarray]
         if r is None:
             continue
         y, Phi = r.evaluate(signals_for(p, r))
-        Z = None if instruments is None else r.evaluate(signals_for(p, r, instruments))[1]
+        Z = None if instruments is None else r.regressors(signals_for(p, r, instruments))
         if r is not reg:  # the partner's columns where the host has them, zero for the others (psi_f)
             idx = [r.names.index(n) if n in r.names else None for n in reg.names]
             Phi, Z = ([np.zeros(len(y)) if j is None else M[:, j] for j in idx] for M in (Phi, Z if Z is not None else Phi))

@@ -10,7 +10,7 @@ and names the others with the rule that refuses them and its numbers:
   and 95th percentiles) for ``ft w`` to be told from ``Cd sign(w)``: ft and Cd refused;
 * ``sample period``: an equation's time constant, its derivative parameter over its resistance read from the
   model (``time_constants``: L/R; the PMSM's L_q/R and L_d/R), has a 95 % upper bound shorter than
-  ``MIN_TAU_SAMPLES`` sample periods: that parameter refused and fixed at 0, the others from the quasi-static
+  ``identifiability.MIN_TAU_SAMPLES`` sample periods: that parameter refused and fixed at 0, the others from the quasi-static
   equation (DC: ``u = R i + K w``). And at an NC's rate (``nc_rate.MAX_HALF_PHASE``) a parameter on which IV (its
   halves sampled every 2 h alias the signals) and LS disagree beyond what LS's noise bias explains
   (``nc_rate.rate_rule``); below that, every interval there holds the method's systematic error
@@ -37,9 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import replace
-from functools import lru_cache
 
-import casadi as ca
 import numpy as np
 
 from feeddrive.estimator.distributions import norm_ppf, t_ppf
@@ -55,9 +53,10 @@ from feeddrive.estimator.estimate import (
     prepare,
     update_constants,
 )
-from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_lag
+from feeddrive.estimator.identifiability import lag_reason, lag_terms, second_lag, tau_rule, time_constants
 from feeddrive.estimator.lagged_iv import iv_with_fallbacks
 from feeddrive.estimator.linear_fit import conditional_covariance
+from feeddrive.estimator.medians import percentiles_in_place
 from feeddrive.estimator.motion import EstimationOptions, MethodResult, MotionData, MotionEstimate
 from feeddrive.estimator.nc_rate import rate_rule, systematic
 from feeddrive.estimator.physical import Bounds, bounded_fit, impossible, physical_flags
@@ -67,8 +66,6 @@ from feeddrive.models.drives import differentiated
 
 #: Smallest spread of |w| (5th to 95th percentile, relative to the 95th) that separates ft from Cd.
 MIN_SPEED_SPREAD = 0.2
-#: Fewest sample periods in the electrical time constant L/R for L to be identifiable.
-MIN_TAU_SAMPLES = 1.0
 #: Largest variance inflation of a friction parameter by the other, refused (its variance over its variance given
 #: that estimate; 10 is the usual collinearity threshold): above it, it is refused too (``_rule``).
 MAX_INFLATION = 10.0
@@ -92,7 +89,7 @@ def _apriori(p, options: EstimationOptions, fixed: dict, refused: dict, lumped: 
         return False
     w, changed = p.signals["w"][p.rows["mechanical"]], False
     if "Cd" in mech.names and "T0" in mech.names and "Cd" not in refused:
-        pos, neg = int((w > 0).sum()), int((w < 0).sum())
+        pos, neg = np.count_nonzero(w > 0), np.count_nonzero(w < 0)  # the boolean sums' integers
         if min(pos, neg) < MIN_REVERSED:
             why = (f"one direction only: {pos} usable samples at w > 0, {neg} at w < 0 (need {MIN_REVERSED} of "
                    f"each): Cd and the torque offset T0 are confounded (only Cd + T0 is determined)")
@@ -100,7 +97,9 @@ def _apriori(p, options: EstimationOptions, fixed: dict, refused: dict, lumped: 
             lumped.add("Cd")
             fixed["T0"], changed = 0.0, True
     if "ft" in mech.names and "Cd" in mech.names and "ft" not in refused:
-        lo, hi = np.percentile(np.abs(w), [5, 95]) if w.size else (0.0, 0.0)
+        a = np.abs(w)  # ours: its percentiles selected in place (np.percentile's values), numpy's if not finite
+        lo, hi = (percentiles_in_place(a, (5, 95)) if a.size >= 2 and np.isfinite(a).all() else
+                  np.percentile(a, [5, 95]) if a.size else (0.0, 0.0))
         spread = (hi - lo) / hi if hi > 0 else 0.0
         if spread < MIN_SPEED_SPREAD:
             why = (f"too narrow a speed range: |w| within [{lo:.4g}, {hi:.4g}] {options.speed_unit} on 90 % of the "
@@ -128,47 +127,6 @@ def _weak(exc: NotEnoughExcitation, reg, fixed: dict, refused: dict, lumped: set
     for n in reg.names:  # the whole equation (not its normaliser: K may come from the other equation)
         refused.setdefault(n, exc.reason)
     return False
-
-
-@lru_cache(maxsize=16)
-def time_constants(model) -> list[tuple[str, str, str, str]]:
-    """``(equation, state, slope, resistance)`` of each equation with a first-order time constant ``slope /
-    resistance``: the physical parameter multiplying the state's derivative (DC: L; PMSM: L_q, L_d; Jt) and the
-    one multiplying the state itself (R; R; ft), read from the residual's Jacobians, never from the motor."""
-    out = []
-    phys = model.of_kind("physical")
-    for eq in model.equations.values():
-        state = model.variables[eq.solves_for].sym
-        slope = ca.jacobian(eq.residual, model.derivative[eq.solves_for])
-        gain = ca.jacobian(ca.substitute(eq.residual, model.derivative[eq.solves_for], 0), state)
-        a = next((v.name for v in phys if ca.depends_on(slope, v.sym)), None)
-        r = next((v.name for v in phys if v.name != a and ca.depends_on(gain, v.sym)), None)
-        if a and r:
-            out.append((eq.name, eq.solves_for, a, r))
-    return out
-
-
-def _tau_rule(fit, reg, h: float, fixed: dict, refused: dict, model) -> bool:
-    """A derivative parameter refused when its equation's time constant (slope / resistance: L/R, L_q/R, L_d/R)
-    is shorter than ``MIN_TAU_SAMPLES`` sample periods (True: it is fixed at 0, the others re-fitted)."""
-    changed = False
-    for eq, state, a, r in time_constants(model):
-        if a in refused or not {a, r} <= set(reg.names):
-            continue
-        ja, jr = reg.names.index(a), reg.names.index(r)
-        R, L = fit.theta[jr], fit.theta[ja]
-        sl = float(np.sqrt(max(fit.cov[ja, ja], 0.0)))
-        q = float(t_ppf(0.975, max(float(fit.theta_dof[ja]), 1.0)))
-        if not R > 0:
-            continue
-        tau, tau_hi = L / R, (L + q * sl) / R
-        if tau_hi < MIN_TAU_SAMPLES * h:
-            refused[a] = (f"sample period {h:.3g} s too long for the {eq} time constant {a}/{r} = {tau:.3g} s (95 % "
-                          f"upper bound {tau_hi:.3g} s): {a} cannot be identified; the others from the quasi-static "
-                          f"{eq} equation (its {a} d{state}/dt term dropped)")
-            fixed[a] = 0.0
-            changed = True
-    return changed
 
 
 def _lag_bias(p, fits: dict, lagging: set, model, lagfree: dict) -> None:
@@ -234,9 +192,11 @@ def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped
     (identifiability.py): the equation of ``reg`` whose state is a current [A], with its time constant slope /
     resistance read from the model (``time_constants``: L/R; the PMSM's L_q/R in the q-axis regression).
     Returns the lagging current's name when the rule fired (``_lag_bias`` then checks the other equations)."""
-    rows = p.rows[reg.equation]
-    if not rows.any() or not rows[np.argmax(rows):len(rows) - np.argmax(rows[::-1])].all():
+    mask = p.rows[reg.equation]
+    start, stop = int(np.argmax(mask)), len(mask) - int(np.argmax(mask[::-1]))
+    if not mask.any() or not mask[start:stop].all():
         return None  # the d2i/dt2 column needs contiguous samples
+    rows = slice(start, stop)  # the mask's samples read as views, not gathered (the same values)
     fired = None
     for eq, state, a, r in time_constants(model):
         if eq != reg.equation or model.variables[state].unit != "A" or a in refused or not {a, r} <= set(reg.names):
@@ -253,7 +213,7 @@ def _lag_rule(p, reg, y: np.ndarray, Phi: np.ndarray, fit, refused: dict, lumped
                   and "D" + x in sig and x in reg.signals]
         extra = None
         if others:
-            Phi_d = reg.evaluate({**sig, **{x: sig["D" + x] for x in others}})[1]
+            Phi_d = reg.regressors({**sig, **{x: sig["D" + x] for x in others}})
             moved = [j for j in range(Phi.shape[1]) if not np.array_equal(Phi_d[:, j], Phi[:, j])]
             extra = Phi_d[rows][:, moved] if moved else None
         try:
@@ -318,7 +278,7 @@ def _fit_ls(data: MotionData, options: EstimationOptions, lagfree: dict | None =
                        f"{reg.equation} equation; its {len(reg.names)} parameters need at least {len(reg.names)}")
                 refused.update({n: why for n in reg.names})
                 continue
-            if _tau_rule(fit, reg, data.h, fixed, refused, opts.model):  # the record's period, decimated or not
+            if tau_rule(fit, reg, data.h, fixed, refused, opts.model):  # the record's period, decimated or not
                 again = True
                 continue
             lagging.add(_lag_rule(p, reg, y, Phi, fit, refused, lumped, opts.model, lagfree) or "")

@@ -41,15 +41,17 @@ def numpy_function(f: ca.Function):
            for op, *_ in ops):
         return None
 
-    def run(x: np.ndarray | Sequence[np.ndarray]) -> np.ndarray:
-        """``x``: the inputs' rows, (m, n) or a sequence of m arrays (n,) (read by index, never stacked)."""
+    def run(x: np.ndarray | Sequence[np.ndarray], first: int = 0) -> np.ndarray:
+        """``x``: the inputs' rows, (m, n) or a sequence of m arrays (n,) (read by index, never stacked). The
+        output's rows from ``first`` on (those before are not written)."""
         work: dict[int, np.ndarray | float] = {}
-        out = np.empty((f.nnz_out(0), len(x[0])))
+        out = np.empty((f.nnz_out(0) - first, len(x[0])))
         for op, i, o, c in ops:
             if op == ca.OP_INPUT:
                 work[o[0]] = x[i[1]]
             elif op == ca.OP_OUTPUT:
-                out[o[1]] = work[i[0]]
+                if o[1] >= first:
+                    out[o[1] - first] = work[i[0]]
             elif op == ca.OP_CONST:
                 work[o[0]] = c
             elif op in _UNARY:
@@ -58,6 +60,16 @@ def numpy_function(f: ca.Function):
                 work[o[0]] = _BINARY[op](work[i[0]], work[i[1]])
         return out
 
+    # the input whose value is the output's first row itself (y = u, y = i), else None: evaluate reads it there
+    source: dict[int, int | None] = {}
+    for op, i, o, _ in ops:
+        if op == ca.OP_INPUT:
+            source[o[0]] = i[1]
+        elif op == ca.OP_OUTPUT:
+            if o[1] == 0:
+                run.direct = source.get(i[0])
+        else:
+            source[o[0]] = None
     return run
 
 
@@ -121,16 +133,30 @@ class Regression:
         y : ndarray, shape (n,)
         Phi : ndarray, shape (n, p)
         """
+        return self._evaluate(values, 0)
+
+    def regressors(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
+        """``evaluate(values)[1]`` without forming ``y`` (the instruments' regressors): Phi (n, p), the same
+        values and layout."""
+        return self._evaluate(values, 1)
+
+    def _evaluate(self, values: Mapping[str, np.ndarray], first: int):
         missing = [s for s in self.signals if values.get(s) is None]
         if missing:
             raise EstimatorInputError(f"{self.equation} regression needs signals {missing}")
         rows = [np.asarray(values[s], dtype=float) for s in self.signals]
+        direct = getattr(self.vectorised, "direct", None) if not first else None
+        if direct is not None and rows[direct].ndim == 1 and rows[direct].flags.c_contiguous:
+            # y is an input itself: a read-only view of it, not a copy (its values; contiguous as the copy was)
+            y = rows[direct].view()
+            y.setflags(write=False)
+            return y, self.vectorised(rows, 1).T
         if self.vectorised is not None:  # the signals' rows as they are: a stacked copy of them was read only
-            out = self.vectorised(rows)
+            out = self.vectorised(rows, first)
         else:  # an operation numpy_function does not know: CasADi's own (slower) map
             stack = np.vstack(rows)
-            out = np.asarray(self.function.map(stack.shape[1])(stack))
-        return out[0], out[1:].T
+            out = np.asarray(self.function.map(stack.shape[1])(stack))[first:]
+        return out.T if first else (out[0], out[1:].T)
 
 
 def derive_regression(model, equation: str, free: list[str], known: Mapping[str, float],

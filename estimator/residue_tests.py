@@ -17,6 +17,7 @@ from feeddrive.estimator.distributions import chi2_sf, f_sf, norm_isf, t_sf
 from feeddrive.estimator.errors import EstimatorInputError
 from feeddrive.estimator.glsar import glsar_fit
 from feeddrive.estimator.kernels import ar_order_bic, columns, last_columns_f_test, lstsq, pinv_rank
+from feeddrive.estimator.medians import mad_in_place
 
 #: largest prewhitening AR order tried (at the decimated rate); the order is chosen by BIC
 MAX_AR = 12
@@ -106,11 +107,15 @@ def _whiten_segments(arrays: Sequence[np.ndarray], sizes: Sequence[int], covaria
     # rows of each segment times the inverse Cholesky factor of its blocks' covariance (the first
     # ``skip`` blocks, the lags' warm-up, are not in the arrays); each factor formed once for all the arrays
     factors = [np.linalg.cholesky(covariance(n + skip)[skip:, skip:]) for n in sizes]
+    # solve_triangular's finiteness check (a pass over the (n, n) factor per array and segment) made once per
+    # factor and per array, with its error: the same solves
+    if not all(np.isfinite(x).all() for x in (*factors, *arrays)):
+        raise ValueError("array must not contain infs or NaNs")
     out = []
     for a in arrays:
         parts, start = [], 0
         for n, c in zip(sizes, factors):
-            parts.append(linalg.solve_triangular(c, a[start:start + n], lower=True))
+            parts.append(linalg.solve_triangular(c, a[start:start + n], lower=True, check_finite=False))
             start += n
         out.append(np.concatenate(parts))
     return out
@@ -167,10 +172,14 @@ def peak_test(y: np.ndarray, nuisance: np.ndarray, sizes: Sequence[int],
     N = _orthonormal_nuisance(nuisance)
     if segment_covariance is not None:
         y, N = _whiten_segments((y, N), sizes, segment_covariance, 0)
-    e = y - N @ np.linalg.lstsq(N, y, rcond=None)[0] if N.shape[1] else y
-    d = np.abs(e - np.median(e))
-    scale = 1.4826 * float(np.median(d))
+    e = y - N @ np.linalg.lstsq(N, y, rcond=None)[0] if N.shape[1] else np.array(y, dtype=float)
     n = e.size
+    if n < 2 or e.ndim != 1 or not np.isfinite(e).all():  # numpy's median and its NaN rule
+        d = np.abs(e - np.median(e))
+        scale = 1.4826 * float(np.median(d))
+    else:  # e is ours: the same medians by one selection each, d = |e - median(e)| left in e (reordered)
+        scale = 1.4826 * float(mad_in_place(e))
+        d = e
     dof = MAD_EFFICIENCY * n
     if not scale > 0:
         return TestResult("peak", 0.0, (float(n), dof), 1.0)

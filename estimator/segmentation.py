@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from feeddrive.estimator.errors import EstimatorInputError
+from feeddrive.estimator.medians import mad_in_place
 
 MODES = ("auto", "nc", "none")
 #: A speed whose largest |value| is not above this many times its noise (``speed_noise``) holds no motion
@@ -41,12 +42,24 @@ def speed_noise(w: np.ndarray) -> float:
     sqrt(6) times the noise's), robustly (1.4826 times their median absolute deviation): a motion adds to them only
     where its acceleration changes, so a ramp or a cruise leaves the estimate unchanged. Same unit as ``w``; 0 for
     fewer than 3 samples (and for a speed quantised so finely that most second differences are 0)."""
-    w = np.asarray(w, dtype=float)
-    w = w[np.isfinite(w)]
+    return _speed_noise(_finite(w))
+
+
+def _finite(w: np.ndarray) -> np.ndarray:
+    """The finite samples of ``w`` as a 1-D float array (``w`` itself when all are: no gathered copy)."""
+    w = np.asarray(w, dtype=float).ravel()  # a boolean mask's order: a view of a 1-D array
+    finite = np.isfinite(w)
+    return w if finite.all() else w[finite]
+
+
+def _speed_noise(w: np.ndarray) -> float:
+    """:func:`speed_noise` of finite samples."""
     if w.size < 3:
         return 0.0
     d2 = w[2:] - 2.0 * w[1:-1] + w[:-2]
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    if not np.isfinite(d2).all():  # an overflow: numpy's median and its NaN rule
+        return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    return float(1.4826 * mad_in_place(d2) / np.sqrt(6.0))  # d2 is ours: np.median's value without its copies
 
 
 def at_rest(w: np.ndarray, unit: str = "rad/s", threshold: float | None = None) -> str | None:
@@ -67,11 +80,10 @@ def at_rest(w: np.ndarray, unit: str = "rad/s", threshold: float | None = None) 
     str or None
         ``no high-speed motion: nothing to judge (largest |speed| ..., not above ...: how the threshold was set)``.
     """
-    w = np.asarray(w, dtype=float)
-    w = w[np.isfinite(w)]
+    w = _finite(w)
     peak = float(np.max(np.abs(w))) if w.size else 0.0
     if threshold is None:
-        noise = speed_noise(w)
+        noise = _speed_noise(w)
         limit, how = REST_SNR * noise, (f"{REST_SNR:g} x the speed's noise, {noise:.3g} {unit} rms from its second "
                                         f"differences")
     else:

@@ -41,12 +41,14 @@ def score_covariance_sum(parts: list[tuple[np.ndarray, np.ndarray]], lags: int) 
         return S
     nfft = nffts.pop()
     rows = 1 + p  # each set's residue, then its instruments' columns (toeplitz_score_covariance's order)
-    X = np.empty((len(parts) * rows, max(ns)))  # a shorter set's rows zero-padded: transformed at nfft all alike
+    # every set's rows zero-padded to nfft here (a shorter set's too), each value written once: rfft's own padding
+    # copied X into zeros of that length (the same values)
+    X = np.empty((len(parts) * rows, nfft))
     for k, (W, e) in enumerate(parts):
         X[k * rows, :e.size] = e
         X[k * rows + 1:(k + 1) * rows, :e.size] = W.T
-        X[k * rows:(k + 1) * rows, e.size:] = 0.0  # the padding only: each value written once
-    F = rfft(X, nfft, axis=-1)
+        X[k * rows:(k + 1) * rows, e.size:] = 0.0  # the padding only
+    F = rfft(X, axis=-1)
     fe = F[::rows]
     num = irfft(fe * np.conj(fe), nfft)[:, :m + 1]
     kernel = np.zeros((len(parts), nfft))

@@ -56,6 +56,7 @@ from feeddrive.estimator.filtering import FilterSpec, decimation_factor, share_f
 # the isolation (Fig. 6) lives in its own module; its names stay importable from here
 from feeddrive.estimator.isolation import KINDS, SensorFit, isolate, model_reference  # noqa: F401
 from feeddrive.estimator.kernels import line_fit
+from feeddrive.estimator.medians import median_in_place
 
 #: the redundant pairs: quantity -> (sensor 1, sensor 2)
 PAIRS: dict[str, tuple[str, str]] = {
@@ -222,23 +223,14 @@ def noise_std(x: np.ndarray) -> float:
     For white noise of std ``s`` on a slowly varying signal, ``diff(x)`` has std ``s sqrt(2)``.
     """
     d = np.diff(np.asarray(x, dtype=float))
-    if d.size < 2 or np.isnan(d).any():  # numpy's median and its NaN rule
+    if d.size < 2:
         return float(np.median(np.abs(d - np.median(d))) / NORMAL_MAD / np.sqrt(2.0))
     # scipy.stats.median_abs_deviation(d, scale="normal")'s arithmetic without its axis/NaN-policy wrapper
     # (a third of its time on 35000 samples; the same bits, tests/estimator/test_speed.py)
-    med = _median_in_place(d)
-    return float(_median_in_place(np.abs(d - med, out=d)) / NORMAL_MAD / np.sqrt(2.0))
-
-
-def _median_in_place(a: np.ndarray) -> float:
-    """``np.median(a)`` of a finite 1-D array (size >= 2) that may be reordered: one selection instead of
-    numpy's three (its two middle ranks and the NaN check's last), the lower middle value the largest of
-    the lower part; the same two values averaged as numpy does. Half of ``noise_std``'s time."""
-    half = a.size // 2
-    a.partition(half)
-    if a.size % 2:
-        return a[half]
-    return (a[:half].max() + a[half]) / 2.0
+    med = median_in_place(d)
+    if np.isnan(d[d.size // 2:].max()):  # a NaN sorts into the upper part: numpy's median is then NaN
+        return float("nan")
+    return float(median_in_place(np.abs(d - med, out=d)) / NORMAL_MAD / np.sqrt(2.0))
 
 
 def residue_test(x1: np.ndarray, x2: np.ndarray, h: float,

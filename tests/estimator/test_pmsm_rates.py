@@ -13,9 +13,10 @@ from pmsm_data import H, add_noise
 from feeddrive.estimator import EstimationOptions, FilterSpec, MotionData
 from feeddrive.estimator.design import simulate_closed_loop
 from feeddrive.estimator.estimate import fell_back
+from feeddrive.estimator.identifiability import time_constants
 from feeddrive.estimator.lagged_iv import LABEL, LAGGED
 from feeddrive.estimator.nc_rate import systematic
-from feeddrive.estimator.partial import _fit_ls, estimate_parameters, time_constants
+from feeddrive.estimator.partial import _fit_ls, estimate_parameters
 from feeddrive.models.drives import drive_model
 
 TRUTH = drive_model("pmsm").nominal(("physical",))

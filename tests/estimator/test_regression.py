@@ -32,6 +32,15 @@ def test_mechanical_regression_is_eq_5_normalised_by_K():
     np.testing.assert_allclose(Phi, np.column_stack([SIG["Dw"], SIG["w"], SIG["sgn_w"]]))
 
 
+def test_the_regressors_alone_are_evaluates_phi():
+    """Regression.regressors (the instruments' Phi, y not formed): evaluate's Phi, the same bits and strides."""
+    for eq, known in (("electrical", {}), ("mechanical", {}), ("mechanical", {"K": 0.3})):
+        reg = derive_regression(MODEL, eq, ALL, known)
+        Phi, alone = reg.evaluate(SIG)[1], reg.regressors(SIG)
+        np.testing.assert_array_equal(alone, Phi)
+        assert alone.strides == Phi.strides
+
+
 def test_the_optional_offset_term_adds_a_column_of_ones():
     reg = derive_regression(MODEL, "mechanical", ALL + ["T0"], {})
     assert reg.names == ("Jt", "ft", "Cd", "T0")

@@ -83,3 +83,25 @@ def test_peak_test_keeps_its_level_on_the_integrated_noise_of_each_segment():
     assert np.mean(rejected) <= 0.02
     y[100:102] += 6 * np.sqrt(np.diag(cov(150))[100:102])  # a transient of 2 blocks in the first segment
     assert peak_test(y, nuisance, sizes, cov).p_value < 1e-3
+
+
+def test_segments_whitened_once_checked_are_scipys_solves() -> None:
+    """_whiten_segments checks finiteness once per factor and array, then solves unchecked: the same bits as
+    scipy's checked solve_triangular per segment, and scipy's error for a NaN."""
+    from scipy import linalg
+
+    from feeddrive.estimator.residue_tests import _whiten_segments, integrated_noise_covariance
+
+    rng = np.random.default_rng(5)
+    sizes, skip = [40, 55], 3
+    cov = lambda nb: integrated_noise_covariance(nb, 0.8, 0.5)  # noqa: E731
+    y, N = rng.standard_normal(95), rng.standard_normal((95, 2))
+    got = _whiten_segments((y, N), sizes, cov, skip)
+    for a, g in zip((y, N), got):
+        c = [np.linalg.cholesky(cov(n + skip)[skip:, skip:]) for n in sizes]
+        ref = np.concatenate([linalg.solve_triangular(c[0], a[:40], lower=True),
+                              linalg.solve_triangular(c[1], a[40:], lower=True)])
+        np.testing.assert_array_equal(g, ref)
+    y[50] = np.nan
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        _whiten_segments((y, N), sizes, cov, skip)

@@ -267,8 +267,110 @@ def test_noise_std_is_scipy_mad() -> None:
         x = np.cumsum(rng.standard_normal(n)) * 1e-3 + rng.standard_normal(n)
         assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
     assert np.isnan(noise_std(np.array([0.0, np.nan, 1.0, 2.0])))
+    for n in (4, 5, 1001):  # one NaN or many, anywhere: NaN (numpy's median), read from the selection's upper part
+        for k in (1, 3, n // 2 + 1):
+            x = rng.standard_normal(n)
+            x[rng.choice(n, k, replace=False)] = np.nan
+            assert np.isnan(noise_std(x))
     x = np.round(rng.standard_normal(2000), 1)  # many equal differences: the two middle ranks tied or not
     assert noise_std(x) == float(stats.median_abs_deviation(np.diff(x), scale="normal") / np.sqrt(2.0))
+
+
+def test_the_speed_noise_and_the_peak_test_keep_numpys_medians() -> None:
+    """speed_noise and peak_test select their medians in place (estimator/medians.py): np.median's bits."""
+    from feeddrive.estimator.medians import mad_in_place, median_in_place
+    from feeddrive.estimator.residue_tests import peak_test
+    from feeddrive.estimator.segmentation import speed_noise
+
+    rng = np.random.default_rng(12)
+    for n in (2, 3, 10, 1001, 34879):
+        for x in (rng.standard_normal(n), np.round(rng.standard_normal(n), 1)):  # ties at the middle ranks or not
+            assert median_in_place(x.copy()) == np.median(x)
+            assert mad_in_place(x.copy()) == np.median(np.abs(x - np.median(x)))
+            w = np.cumsum(x)
+            d2 = w[2:] - 2.0 * w[1:-1] + w[:-2]
+            if d2.size:
+                assert speed_noise(w) == float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    y = rng.standard_normal(500)
+    y[7] += 8.0  # a peak: d.max() read from the reordered deviations
+    kept = y.copy()
+    z = peak_test(y, np.empty((500, 0)), [500]).statistic
+    assert np.array_equal(y, kept)  # the caller's residue is not reordered
+    assert z == float(np.abs(y - np.median(y)).max() / (1.4826 * float(np.median(np.abs(y - np.median(y))))))
+    w = np.cumsum(rng.standard_normal(1000))
+    w[[3, 500]] = np.nan, np.inf  # non-finite samples left out (a gathered copy only then)
+    assert speed_noise(w) == speed_noise(w[np.isfinite(w)]) > 0
+    w = np.array([0.0, 1e308, -1e308, 1e308, 0.0, 1.0])  # second differences overflow: numpy's median and NaN rule
+    with np.errstate(over="ignore", invalid="ignore"):
+        d2 = w[2:] - 2.0 * w[1:-1] + w[:-2]
+        np.testing.assert_equal(speed_noise(w), float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)))
+
+
+def test_percentiles_selected_in_place_are_numpys() -> None:
+    """medians.percentiles_in_place (partial's speed spread): np.percentile's bits (method "linear") for two
+    percentiles, sizes 2 to thousands, ties, equal percentiles and the ends."""
+    from feeddrive.estimator.medians import percentiles_in_place
+
+    rng = np.random.default_rng(13)
+    for n in (2, 3, 4, 7, 20, 101, 1000, 11426):
+        for x in (np.abs(rng.standard_normal(n)) * 1e3, np.round(np.abs(rng.standard_normal(n)), 1)):
+            for q in ((5, 95), (0, 100), (50, 50), (25, 75), (99.9, 100)):
+                np.testing.assert_array_equal(percentiles_in_place(x.copy(), q), np.percentile(x, q))
+
+
+def test_simulated_segments_are_nan_exactly_between_them() -> None:
+    """mismatch.simulate_segments writes NaN between its segments only: np.full(n, nan) with the segments' Tustin
+    responses written over it, bit for bit (segments at the ends and in the middle)."""
+    from feeddrive.estimator import lti
+    from feeddrive.estimator.kernels import bilinear_first_order
+    from feeddrive.estimator.mismatch import simulate_segments
+
+    rng = np.random.default_rng(17)
+    n, h = 900, 1e-3
+    i, w = rng.standard_normal(n), np.abs(rng.standard_normal(n)) + 1.0
+    p = {"K": 0.2, "Jt": 1e-3, "ft": 2e-3, "Cd": 0.01}
+    for runs in (((0, 200), (350, 600)), ((10, 300), (300, 500), (700, 900))):
+        labels = np.zeros(n, dtype=int)
+        for k, (a, b) in enumerate(runs, 1):
+            labels[a:b] = k
+        ref = np.full(n, np.nan)
+        bb, aa = bilinear_first_order(p["Jt"], p["ft"], h)
+        for a, b in runs:
+            drive = p["K"] * i[a:b] - p["Cd"] * np.sign(w[a]) - 0.0
+            ref[a:b] = lti.lfilter(bb, aa, drive, zi=[w[a] - bb[0] * drive[0]])[0]
+        np.testing.assert_array_equal(simulate_segments(i, w, labels, p, h), ref)
+
+
+def test_an_eroded_mask_is_within_the_mask() -> None:
+    """estimate.prepare counts the sign guard's samples as fast - used (no fast & ~r array): r is within
+    erode(fast), which is within fast, for any radius and border."""
+    from feeddrive.estimator.kernels import erode
+
+    rng = np.random.default_rng(19)
+    for radius in (0, 1, 5, 40):
+        for border in (False, True):
+            fast = rng.random(3000) < 0.8
+            r = (rng.random(3000) < 0.9) & erode(fast, radius, border=border)
+            assert np.count_nonzero(fast & ~r) == fast.size - (fast.size - np.count_nonzero(fast)) - np.count_nonzero(r)
+
+
+def test_free_responses_are_the_powers_of_the_pole_per_segment() -> None:
+    """mismatch.free_responses writes pole ** k (float exponents) into its columns: np.column_stack of the
+    columns pole ** np.arange(length) (int exponents) zero outside each segment, bit for bit."""
+    from feeddrive.estimator.kernels import bilinear_first_order
+    from feeddrive.estimator.mismatch import free_responses
+
+    labels = np.zeros(3000, dtype=int)
+    labels[10:1200], labels[1500:2999] = 1, 2
+    params, h = {"Jt": 1.2e-4, "ft": 2e-3}, 1e-3
+    pole = -float(np.ravel(bilinear_first_order(params["Jt"], params["ft"], h)[1])[1])
+    cols = []
+    for a, b in ((10, 1200), (1500, 2999)):
+        col = np.zeros(labels.size)
+        col[a:b] = pole ** np.arange(b - a)
+        cols.append(col)
+    np.testing.assert_array_equal(free_responses(labels, params, h), np.column_stack(cols))
+    assert free_responses(np.zeros(5, dtype=int), params, h).shape == (5, 0)
 
 
 @pytest.mark.parametrize("step", [1, 2, 3])

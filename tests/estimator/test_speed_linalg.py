@@ -208,6 +208,9 @@ def test_rows_transformed_together_are_the_rows_transformed_alone() -> None:
             together = rfft(X, nfft, axis=-1)
             for r in range(rows):
                 np.testing.assert_array_equal(together[r], rfft(X[r], nfft))
+            padded = np.zeros((rows, nfft))  # the kernels' rows written into their zero padding: rfft's own padding
+            padded[:, :n] = X
+            np.testing.assert_array_equal(rfft(padded, axis=-1), together)
 
 
 def test_score_covariance_of_the_sets_together_is_each_set_alone() -> None:
@@ -240,3 +243,23 @@ def test_score_covariance_of_the_sets_together_is_each_set_alone() -> None:
     Gamma = np.where(lag <= lags, np.take(gamma + [0.0], np.minimum(lag, lags + 1)), 0.0)
     np.testing.assert_allclose(score_covariance_sum([(W, e), (W, e)], lags), 2 * W.T @ Gamma @ W, rtol=1e-11,
                                atol=1e-11 * np.abs(W.T @ Gamma @ W).max())
+
+
+def test_column_by_column_scaling_is_numpys_broadcast() -> None:
+    """estimator.columnwise: X / s and X * v[:, None] column by column on C-ordered (n, k) arrays, the same bits
+    and a C-ordered result; other arrays (F order, one column, wide, short, a scale of another shape) go to
+    numpy."""
+    from feeddrive.estimator.columnwise import divide_columns, multiply_rows
+
+    rng = np.random.default_rng(41)
+    for X in (rng.standard_normal((5713, 3)) * [1.0, 1e3, 1e-2], np.asfortranarray(rng.standard_normal((500, 4))),
+              rng.standard_normal((300, 1)), rng.standard_normal((40, 30)), rng.standard_normal((2000, 4))[::2],
+              rng.standard_normal((100, 3))):  # the last: too short, numpy's
+        s, v = rng.uniform(0.5, 2.0, X.shape[1]), rng.standard_normal(X.shape[0])
+        for fast, ref in ((divide_columns(X, s), X / s), (multiply_rows(X, v), X * v[:, None])):
+            np.testing.assert_array_equal(fast, ref)
+            assert fast.flags.c_contiguous == ref.flags.c_contiguous
+    X = rng.standard_normal((600, 3))
+    np.testing.assert_array_equal(divide_columns(X, np.array([2.0])), X / 2.0)  # a broadcast scale: numpy's
+    with np.errstate(divide="ignore"):  # a zero scale: the same signed infinities
+        np.testing.assert_array_equal(divide_columns(X, np.array([1.0, 0.0, -0.0])), X / np.array([1.0, 0.0, -0.0]))
