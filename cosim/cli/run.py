@@ -193,18 +193,19 @@ def summary(result) -> str:  # noqa: ANN001 - cosim.run.RunResult
                     lines.append(f"    diagnosis: {d['fault']} ({', '.join(d['parameters'])})")
             if m.get("error") and m["error"] not in verdict:
                 lines.append(f"    {m['error']}")
-    unfinished = ((r.get("components") or {}).get("monitor") or {}).get("unfinished_motion")
+    monitor = (r.get("components") or {}).get("monitor") or {}
+    unfinished = monitor.get("unfinished_motion")
     if isinstance(unfinished, (int, float)):  # the run stopped inside it: never judged (it said nothing before)
         lines.append(f"  motion {int(unfinished)}: not judged: the run stopped inside it at {r['stop_time_s']:.4g} s "
                      "(stop_time)")
-    elif "motions" in ((r.get("components") or {}).get("monitor") or {}) and not r.get("motions"):
+    elif "motions" in monitor and not r.get("motions"):
         # a monitored run whose axis never made a high-speed motion: it said nothing of its motions
         lines.append("  monitor: nothing judged: no high-speed motion (NC state 1) in this run")
     if r.get("held_inputs"):  # a rejection the set-up's sampling explains (cosim/held_inputs.py)
         lines.append(f"  set-up: {r['held_inputs']}")
     if r.get("sampling_bias"):  # L's discretisation error the set-up's sampling leaves (cosim/held_inputs.py)
         lines.append(f"  set-up: {r['sampling_bias']}")
-    line = history_line((r.get("components") or {}).get("monitor"))
+    line = history_line(monitor)
     if line:
         lines.append(line)
     n = len(result.paths["plots"])

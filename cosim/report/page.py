@@ -24,7 +24,7 @@ from typing import Any
 import jinja2
 
 from feeddrive.cosim.report import views
-from feeddrive.cosim.report.verdict import motion_verdict
+from feeddrive.cosim.report.verdict import motion_verdict, sensor_unit
 from feeddrive.cosim.trends import UNITS, trend_names, trend_series, use_dates
 
 PAGE = "report.html"
@@ -108,7 +108,7 @@ def merged_evidence(diagnosis: Sequence[Mapping]) -> list[dict]:
 
 _ENV.filters["num"] = num
 _ENV.filters["evidence"] = merged_evidence
-_ENV.filters["sensor_unit"] = views.sensor_unit
+_ENV.filters["sensor_unit"] = sensor_unit
 _ENV.filters["pct"] = lambda x, d=3: "-" if x is None else f"{100 * x:+.{d}g} %"
 _ENV.filters["percent"] = lambda x, d=3: "-" if x is None else f"{100 * x:.{d}g} %"
 _ENV.filters["utc"] = lambda t: "-" if t is None else _dt.datetime.fromtimestamp(

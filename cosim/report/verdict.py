@@ -38,10 +38,15 @@ def finite(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
+def sensor_unit(sensor: Any) -> str:
+    """The unit of a sensor fault's offset (``Im1``: A; ``torque or torque_ref``, not isolated: N.m; unknown: "")."""
+    return SENSORS.get(str(sensor).split(" or ")[0], ("", ""))[1]
+
+
 def fault_values(f: Mapping) -> str:
     """``gain 1.030, offset 0.200 A`` of an isolated sensor fault (report.json ``sensor_faults[k]``); what is not
     finite is left out (``kind`` when nothing is)."""
-    unit = SENSORS.get(str(f.get("sensor")).split(" or ")[0], ("", ""))[1]  # "Im1 or Im2": not isolated, same unit
+    unit = sensor_unit(f.get("sensor"))
     parts = []
     if finite(f.get("gain")):
         parts.append(f"gain {f['gain']:.4g}")
@@ -64,8 +69,8 @@ _ALIASES = {"diagnosed": "diagnosis"}
 
 def _kind_of(text: str) -> str:
     low = text.lower()
-    low = next((kind + low[len(word):] for word, kind in _ALIASES.items() if low.startswith(word)), low)
-    return next((k for k in KINDS if low.startswith(k)), "healthy" if low.startswith("healthy") else "not validated")
+    words = [*_ALIASES.items(), *((k, k) for k in KINDS)]
+    return next((kind for word, kind in words if low.startswith(word)), "not validated")
 
 
 def motion_verdict(m: Mapping, statuses: Mapping[str, str] | None = None) -> dict[str, str]:
@@ -131,13 +136,12 @@ def _derive(m: Mapping, statuses: Mapping[str, str]) -> tuple[str, str]:
         reasons = [n.removeprefix("not validated: ") for n in m.get("notes") or () if n.startswith("not validated")]
         return "not validated", "not validated: " + ("; ".join(reasons) or "no model check")
     diagnosis = m.get("diagnosis") or []
-    if any(d.get("fault") != UNEXPLAINED for d in diagnosis):
+    if diagnosis:
+        params = ", ".join(dict.fromkeys(p for d in diagnosis for p in d.get("parameters", ())))
+        if all(d.get("fault") == UNEXPLAINED for d in diagnosis):  # no Table I fault: the monitor calls it drifting
+            return "drifting", f"drifting: {UNEXPLAINED} of {params} (no Table I fault matches)"
         faults = "; ".join(dict.fromkeys(d.get("fault", "?") for d in diagnosis))
-        params = ", ".join(dict.fromkeys(p for d in diagnosis for p in d.get("parameters", ())))
         return "diagnosis", f"diagnosis: {faults} ({params})"
-    if diagnosis:  # only drifts no Table I fault explains: the monitor calls the motion drifting
-        params = ", ".join(dict.fromkeys(p for d in diagnosis for p in d.get("parameters", ())))
-        return "drifting", f"drifting: {UNEXPLAINED} of {params} (no Table I fault matches)"
     drifting = [k for k, s in statuses.items() if s == "drifting"]
     if drifting:
         return "drifting", f"drifting: {', '.join(drifting)} beyond half the alarm band (no fault diagnosed)"

@@ -80,11 +80,6 @@ def model_check(mm: Mapping | None) -> dict | None:
     return {"rows": rows, "sizes": sizes, "level": level, "summary": summary, "passed": mm.get("passed")}
 
 
-def sensor_unit(sensor: Any) -> str:
-    """The unit of a sensor fault's offset (``Im1``: A; ``torque or torque_ref``: N.m; unknown: "")."""
-    return SENSORS.get(str(sensor).split(" or ")[0], ("", ""))[1]
-
-
 def residue_rows(m: Mapping) -> list[dict]:
     """Each redundant pair's residue; a pair holding a faulty sensor is not valid, whatever its residue says.
 
