@@ -91,13 +91,60 @@ def _scenario(spec: RunSpec) -> Any:
 
 
 def _resolve(spec: RunSpec, key: str) -> Any:
+    """The run's scenario resolved and kept in ``_RESOLVED``. Runs that differ by their sensors' seed alone share
+    one resolution (``_template``) with the seed set, when the resolution puts the seed nowhere else."""
+    templated = _template(spec)
+    if templated is None:
+        return _keep(key, _from_dict(spec, spec.scenario))
+    seed, base = templated
+    return _keep(key, base.model_copy(update={"sensors": base.sensors.model_copy(update={"seed": seed})}))
+
+
+def _template(spec: RunSpec) -> tuple[int, Any] | None:
+    """``(the run's sensors' seed, its scenario resolved with ``SENTINEL_SEED`` for it)``, or None when the run is to
+    be resolved as it is: a seed the sensors would refuse (their ``seed`` is a strict int >= 0, which
+    ``model_copy`` does not check: resolved as given, with its error), or a resolution that puts the sentinel
+    anywhere but the sensors' ``seed`` (a PMSM axis's servo sensors component takes the seed, cosim/drive.py).
+
+    A Monte Carlo campaign's runs differ by this seed alone (``seed_keys``' default): their scenarios are one
+    resolution (~1.5 ms: the plant's FMU found, its units checked, the sections validated), not one per run;
+    ``run_campaign`` resolves every run's scenario before the first starts (1.5 s for 1000 runs), and each Dask
+    worker's zygote again for its own runs (issue 26).
+    """
+    sensors = spec.scenario.get("sensors")
+    seed = sensors.get("seed") if isinstance(sensors, Mapping) else None
+    if type(seed) is not int or seed < 0:
+        return None
+    key = _key_of({**spec.scenario, "sensors": {**sensors, "seed": SENTINEL_SEED}}, spec.base_dir)
+    hit = _TEMPLATES.get(key)
+    if hit is None or _fmu_stats(hit[0]) != hit[1]:
+        base = _from_dict(spec, {**spec.scenario, "sensors": {**sensors, "seed": SENTINEL_SEED}})
+        text = repr(base) + repr(getattr(base, "__pydantic_private__", None))
+        hit = _TEMPLATES[key] = (base, _fmu_stats(base), base.sensors.seed == SENTINEL_SEED
+                                 and text.count(str(SENTINEL_SEED)) == 1)
+        while len(_TEMPLATES) > RESOLVED_MAX:
+            _TEMPLATES.pop(next(iter(_TEMPLATES)))
+    return (seed, hit[0]) if hit[2] else None
+
+
+#: the sensors' seed of a run's shared resolution (``_template``): a number found in the resolved scenario only
+#: where it was put, unless the resolution copied it elsewhere
+SENTINEL_SEED = 1_732_050_807
+#: shared resolutions, by ``_key_of`` their mapping: (scenario, ``_fmu_stats``, whether only the sensors hold the seed)
+_TEMPLATES: dict[str, tuple[Any, tuple, bool]] = {}
+
+
+def _from_dict(spec: RunSpec, data: dict) -> Any:
     from feeddrive.cosim.errors import ScenarioError
     from feeddrive.cosim.scenario import scenario_from_dict
 
     try:
-        scenario = scenario_from_dict(spec.scenario, source="scenario", base_dir=spec.base_dir)
+        return scenario_from_dict(data, source="scenario", base_dir=spec.base_dir)
     except ScenarioError as exc:
         raise ScenarioError(f"campaign run {spec.id} {json.dumps(spec.overrides)}: {exc}") from None
+
+
+def _keep(key: str, scenario: Any) -> Any:
     _RESOLVED.pop(key, None)
     _RESOLVED[key] = (scenario, _fmu_stats(scenario))
     while len(_RESOLVED) > RESOLVED_MAX:  # the oldest first (dicts keep their insertion order)
@@ -115,7 +162,11 @@ RESOLVED_MAX = 4096
 
 
 def _key(spec: RunSpec) -> str:
-    return json.dumps([spec.scenario, spec.base_dir], sort_keys=True, default=str)
+    return _key_of(spec.scenario, spec.base_dir)
+
+
+def _key_of(scenario: Mapping[str, Any], base_dir: str | None) -> str:
+    return json.dumps([scenario, base_dir], sort_keys=True, default=str)
 
 
 def _fmu_stats(scenario: Any) -> tuple:

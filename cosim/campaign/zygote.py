@@ -325,6 +325,12 @@ def zygote_cpu() -> tuple[float, float]:
     return own, children
 
 
+def connect() -> None:
+    """This worker thread's zygote, forked now if the worker has a zygote server (``_link``). A Dask worker runs
+    its tasks in one thread (``local_cluster``: one thread per worker), the campaign's with it."""
+    _link()
+
+
 def _link() -> _Link | None:
     """This thread's connection to its zygote (made now on its first run), None without a server."""
     address = ADDRESS
