@@ -3,13 +3,14 @@
 One run (``execute``, ``resolve_function``) is cosim/campaign/runner.py's."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
 import os
 import tempfile
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import CancelledError, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from multiprocessing import get_all_start_methods, get_context
@@ -19,6 +20,12 @@ from typing import Any
 from feeddrive.cosim.campaign.aggregate import Aggregates, aggregate, plot_campaign
 from feeddrive.cosim.campaign.runner import _lost, execute, resolve_function
 from feeddrive.cosim.campaign.schema import Campaign, CampaignError, RunSpec, expand
+from feeddrive.cosim.errors import SimulationError
+
+
+class SchedulerLost(SimulationError):
+    """The Dask scheduler went away during a campaign: the runs recorded until then are kept, the same command
+    resumes the others (``cosim campaign`` exits 1 with this line)."""
 
 
 # -- execution -------------------------------------------------------------------------------------------
@@ -123,13 +130,18 @@ def _check_scheduler(scheduler: str) -> None:
                             "Dask scheduler, such as tcp://host:8786") from None
 
 
+#: seconds the campaign's client tries to reach its scheduler, at the start and again once it lost it (then the
+#: campaign ends: ``SchedulerLost``)
+CONNECT_TIMEOUT_S = 20
+
+
 def _connect(scheduler: str, run: str | Callable) -> tuple[Any, list]:
     """A client of the Dask scheduler, and one task per worker that runs the run function's ``prepare`` hook:
     submitted now, the workers import while this process resolves the runs' scenarios."""
     from distributed import Client
 
     try:
-        client = Client(scheduler, timeout="20s", direct_to_workers=_loopback(scheduler) or None)
+        client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s", direct_to_workers=_loopback(scheduler) or None)
     except (OSError, TimeoutError) as exc:
         raise CampaignError(f"--scheduler {scheduler}: cannot connect to the Dask scheduler ({exc})") from None
     try:
@@ -274,6 +286,8 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
                 pending.add(submit())  # before this task's records are written: its worker waits for it
             try:
                 records = future.result()
+            except CancelledError as exc:  # the client lost its scheduler (or someone cancelled the campaign's tasks)
+                raise SchedulerLost(str(getattr(exc, "reason", None) or "its tasks were cancelled").replace("-", " ")) from None
             except KilledWorker as exc:  # the scheduler gave up after its allowed-failures: no endless retry
                 batch = [spec for spec in by_key[future.key] if spec.id not in arrivals.recorded]
                 if len(batch) > 1:  # which of its runs killed the workers: each alone
@@ -291,7 +305,8 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
                 record(rec, False)
         finally:
             arrivals.close()
-            client.cancel(list(running))
+            with contextlib.suppress(Exception):  # a client that lost its scheduler has nothing to cancel
+                client.cancel(list(running))
 
 
 def _queues(client: Any, runs: int) -> bool:
@@ -387,10 +402,16 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
             check(spec)
         if client is not None or workers > 1:
             pending = longest_first(fn, pending)
-        _execute(campaign, fn, pending, len(specs), finished, out, workers, client, progress, timeout)
+        try:
+            _execute(campaign, fn, pending, len(specs), finished, out, workers, client, progress, timeout)
+        except SchedulerLost as exc:
+            raise SchedulerLost(f"--scheduler {scheduler}: lost the Dask scheduler during the campaign ({exc}); "
+                                f"{len(finished)} of {len(specs)} runs recorded in {out}: the same command runs the "
+                                "others when the cluster is back") from None
     finally:
         if client is not None:
-            client.cancel(warm)
+            with contextlib.suppress(Exception):  # a client that lost its scheduler: its closing is all that is left
+                client.cancel(warm)
             client.close()
     records = sorted(finished.values(), key=lambda r: r["index"])
     aggregates = aggregate(records)

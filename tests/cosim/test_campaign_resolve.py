@@ -15,8 +15,7 @@ from feeddrive.cosim.scenario import scenario_from_dict
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
-@pytest.mark.parametrize("name", ["campaign_noise.yaml", "campaign_sensor.yaml", "campaign_pmsm.yaml",
-                                  "campaign_check_cd_step.yaml"])
+@pytest.mark.parametrize("name", ["campaign_sensor.yaml", "campaign_pmsm.yaml"])
 def test_a_run_resolved_from_its_seedless_scenario_is_the_one_its_mapping_gives(name, monkeypatch):
     campaign = load_campaign(EXAMPLES / name)
     specs = expand(campaign)[:4] + expand(campaign)[-2:]  # two grid points at least, two seeds each
