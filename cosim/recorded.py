@@ -30,6 +30,7 @@ from feeddrive.cosim.recorded_options import (  # noqa: F401 - the shared option
     pairs,
     sampling_modes,
 )
+from feeddrive.cosim.recorded_time import time_note
 from feeddrive.cosim.recorded_units import (  # noqa: F401 - the units, re-exported
     MAX_ABS,
     MECHANICAL,
@@ -303,14 +304,17 @@ def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: 
 
 def assumed_units(rec: Recording) -> tuple[str, ...]:
     """One line per signal whose unit nothing states (header, map or ``--pitch``): what it is taken as (a position,
-    speed or torque on the side the other columns state, the motor's when none does), and how to state it."""
+    speed or torque on the side the other columns state, the motor's when none does), and how to state it.
+
+    A time column's seconds are checked against the data when a position and a speed are mapped
+    (:func:`feeddrive.cosim.recorded_time.time_note`: a gain a unit explains is refused, a DataError)."""
     side = rec.side or "motor"
     out = []
     if rec.timing.get("unit_stated") is False:  # a time in ms taken for s made Jt 1e6 times too large, unsaid
         source = rec.timing["source"].split(" ", 1)[1]
-        out.append(f"time: {source} states no unit (not in the header, not in the map): taken as s (a step of "
-                   f"{rec.h:.6g} s, {1 / rec.h:.6g} Hz); state it: --map 'time={source.strip(chr(39))} [UNIT]' "
-                   f"(e.g. ms)")
+        note = (f"time: {source} states no unit (not in the header, not in the map): taken as s (a step of "
+                f"{rec.h:.6g} s, {1 / rec.h:.6g} Hz); state it: --map 'time={source.strip(chr(39))} [UNIT]' (e.g. ms)")
+        out.append(time_note(rec, note))  # a position and a speed mapped: checked against d(position)/dt = speed
     for role in rec.signals:
         if rec.units.get(role) or len(SI_UNITS.get(role, ())) == 0:
             continue
