@@ -9,30 +9,18 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from feeddrive.cosim.cli import main
-from feeddrive.cosim.errors import DataError
-from feeddrive.cosim.recorded import assumed_units, load_recording
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from dc_motion import TRUTH, motor  # noqa: E402
 
-TRUTH = {"Jt": 2e-3, "ft": 1e-3, "Cd": 0.05}
-H = 1e-3
-_A = ((30.0, 0.5), (12.0, 1.3))  # (amplitude rad/s, frequency Hz)
-
-
-def motor(n: int = 4000, seed: int = 0) -> dict[str, np.ndarray]:
-    """``{"t" [s], "w" [rad/s], "x" [rad], "T" [N.m]}`` of the motion (module docstring)."""
-    t = np.arange(n) * H
-    w = sum(a * np.sin(2 * math.pi * f * t) for a, f in _A)
-    dw = sum(a * 2 * math.pi * f * np.cos(2 * math.pi * f * t) for a, f in _A)
-    x = sum(a / (2 * math.pi * f) * (1 - np.cos(2 * math.pi * f * t)) for a, f in _A)
-    rng = np.random.default_rng(seed)
-    torque = TRUTH["Jt"] * dw + TRUTH["ft"] * w + TRUTH["Cd"] * np.sign(w) + 2e-3 * rng.normal(size=n)
-    count = 2 * math.pi / 2**16
-    return {"t": t, "w": w + 0.05 * rng.normal(size=n), "x": np.round(x / count) * count, "T": torque}
+from feeddrive.cosim.cli import main  # noqa: E402
+from feeddrive.cosim.errors import DataError  # noqa: E402
+from feeddrive.cosim.recorded import assumed_units, load_recording  # noqa: E402
 
 
 def write(path: Path, d: dict[str, np.ndarray], time_scale: float, header: str) -> Path:
