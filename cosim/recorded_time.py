@@ -20,8 +20,10 @@ from feeddrive.cosim.errors import DataError
 if TYPE_CHECKING:
     from feeddrive.cosim.recorded import Recording
 
-#: relative distance of the measured gain to an explanation's within which the explanation is taken
-UNIT_TOLERANCE = 0.05
+#: relative distance of the measured gain to an explanation's within which the explanation is taken (3 %: 180 / pi
+#: (a position in deg) and 60 (a time in min) are 4.5 % apart, as are rpm's 2 pi / 60 and the 0.1 of a row index
+#: mapped as the time of 10 Hz data; a gain near both is refused naming both)
+UNIT_TOLERANCE = 0.03
 #: the filtered d(position)/dt and speed must correlate this well for their gain to mean anything
 MIN_CORRELATION = 0.95
 #: cut-off of the identical low-pass filter [fraction of the sample rate]: relative, so that the wrong time unit

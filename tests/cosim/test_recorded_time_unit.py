@@ -94,3 +94,17 @@ def test_without_a_speed_or_with_a_stated_time_nothing_is_checked(files) -> None
     assert assumed_units(rec) == ()  # stated: never second-guessed here
     (note,) = assumed_units(load_recording(files["ms"], {"time": "t", "position": "x"}))
     assert note.endswith("taken as s (a step of 1 s, 1 Hz); state it: --map 'time=t [UNIT]' (e.g. ms)")
+
+
+def test_a_gain_no_unit_explains_is_added_to_the_note(files) -> None:
+    """A gear of 2 between the encoder and the tachometer: no unit says 2, so the seconds stay assumed, with the
+    gain measured (the monitor judges a sensor's gain; here the time's unit is the question)."""
+    d = motor(n=1000)
+    path = files["bare"].with_name("gear.csv")
+    np.savetxt(path, np.column_stack([d["t"], 2 * d["x"], d["w"], d["T"]]), delimiter=",",
+               header="t,x [rad],w [rad/s],T [N.m]", comments="", fmt="%.12g")
+    (note,) = assumed_units(load_recording(path, {"time": "t", "position": "x", "speed": "w"}))
+    assert note.startswith("time: 't' states no unit (not in the header, not in the map): taken as s (a step of ")
+    gain = float(note.split("derivative is ")[1].split(" x ")[0])
+    assert gain == pytest.approx(2.0, rel=2e-3)
+    assert note.endswith("x the speed (no time unit explains it: a gear between the two, or a sensor's gain?)")
