@@ -11,14 +11,14 @@ added to the note. A stated time unit is never second-guessed here (a real gain 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from feeddrive.cosim.errors import DataError
 
-if TYPE_CHECKING:
-    from feeddrive.cosim.recorded import Recording
+#: a :class:`feeddrive.cosim.recorded.Recording` (not imported: recorded imports this module)
+Recording = Any
 
 #: relative distance of the measured gain to an explanation's within which the explanation is taken (3 %: 180 / pi
 #: (a position in deg) and 60 (a time in min) are 4.5 % apart, as are rpm's 2 pi / 60 and the 0.1 of a row index
