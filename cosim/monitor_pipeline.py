@@ -150,10 +150,10 @@ class MonitorPipeline:
         else:
             try:
                 mismatch = self._identify(signals, h, start, trace)
-            except (NotEnoughExcitation, EstimatorInputError) as exc:  # this motion cannot be used; the next may
-                result["error"] = str(exc)
-            except (np.linalg.LinAlgError, FloatingPointError) as exc:  # ill-conditioned data: a refusal, not a crash
-                result["error"] = f"numerical failure on this motion's data ({exc})"
+            except FAILURES as exc:  # this motion cannot be used (the next may); a coding error is raised
+                # numpy's singular matrix (a LinAlgError) on ill-conditioned data: a refusal, not a crash
+                result["error"] = str(exc) if isinstance(exc, NotEnoughExcitation | EstimatorInputError) else \
+                    f"numerical failure on this motion's data ({exc})"
         result["verdict"] = checks.motion_verdict(result, mismatch)
         result["processing_s"] = _time.perf_counter() - tic
         # judged on CPU time: the wall time also counts whatever else the host runs meanwhile

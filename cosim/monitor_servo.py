@@ -31,7 +31,7 @@ from feeddrive.cosim import monitor_checks as checks
 from feeddrive.cosim.model_check_servo import servo_model_check
 from feeddrive.estimator import redundancy_servo as rs
 from feeddrive.estimator.adequacy import check_motion
-from feeddrive.estimator.errors import EstimatorInputError, NotEnoughExcitation
+from feeddrive.estimator.errors import FAILURES, EstimatorInputError
 from feeddrive.estimator.estimate import MotionData
 from feeddrive.estimator.partial import estimate_parameters
 from feeddrive.estimator.pvalue_text import p_text
@@ -358,7 +358,7 @@ def identify_servo(pipe: Any, signals: Mapping[str, Any], h: float, start: float
     result["adequacy"] = adequacy.to_dict()
     try:
         est = estimate_parameters(data, options, dict(cfg.bounds))
-    except (NotEnoughExcitation, ValueError, np.linalg.LinAlgError) as exc:
+    except FAILURES as exc:  # the estimator's own refusals and failures only: a coding error (a bare ValueError) raises
         result["error"] = str(exc)
         return adequacy.mismatch
     units = _units(cfg.drive)

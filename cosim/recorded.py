@@ -22,6 +22,7 @@ from feeddrive.cosim.readers.timebase import TIME_JITTER, Timing, jitter_text, m
 from feeddrive.cosim.recorded_options import (  # noqa: F401 - the shared options, re-exported
     DECIMAL_NAMES,
     DELIMITER_NAMES,
+    MISSING,
     SAMPLED,
     _data_path,
     add_recording_arguments,
@@ -30,6 +31,7 @@ from feeddrive.cosim.recorded_options import (  # noqa: F401 - the shared option
     pairs,
     sampling_modes,
 )
+from feeddrive.cosim.recorded_time import time_note
 from feeddrive.cosim.recorded_units import (  # noqa: F401 - the units, re-exported
     MAX_ABS,
     MECHANICAL,
@@ -127,7 +129,7 @@ class Recording:
 
 def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: float | None = None,
                    delimiter: str | None = None, decimal: str | None = None, *, resample: float | None = None,
-                   split_gaps: bool = False) -> Recording:
+                   split_gaps: bool = False, missing: str = "refuse") -> Recording:
     """Read a recording (CSV, MATLAB, Parquet, text log: :func:`feeddrive.cosim.readers.open_source`),
     converting every mapped signal to SI.
 
@@ -150,6 +152,12 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
         time column is not uniform; a longer gap is refused (or split at, with ``split_gaps``).
     split_gaps : bool
         Take the stretches between gaps as separate records (``Recording.pieces``).
+    missing : {"refuse", "drop"}
+        A row where a mapped signal is not finite (NaN, an empty cell, inf): refused, naming it (``refuse``), or
+        dropped (``drop``): the rows left keep their times (without a time column: row number x
+        ``sample_time``), so the dropped rows are gaps for ``resample``/``split_gaps``; the ``timing`` says how
+        many rows were dropped and where the first one was (``dropped_rows``, ``first_dropped``,
+        ``first_dropped_at_s``).
 
     Returns
     -------
@@ -167,11 +175,16 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
 
     if sample_time is not None and not sample_time > 0:
         raise DataError(f"{path}: sample time must be > 0 s, got {sample_time}")
+    if missing not in MISSING:
+        raise InputError(f"--missing {missing}: expected one of {', '.join(MISSING)}")
     if resample is not None and not resample > 0:
         raise InputError(f"--resample {resample}: expected the largest gap to bridge, in seconds (> 0)")
     source = open_source(path, delimiter, decimal, MAX_BYTES)
     path, what = source.path, "column" if not hasattr(source, "tree") else "variable"
+    if missing == "drop" and hasattr(source, "empty_missing"):
+        source.empty_missing = True  # an empty cell is a missing value, as NaN
     columns, signals, units, lengths, time_sig = {}, {}, {}, {}, None
+    missing_rows, first = {}, (np.inf, "")
     for role, spec in role_map.items():
         whole = spec.strip()  # a CSV header given whole, with its unit ("I [A]" beside "I [mA]")
         sig = source.resolve(whole if whole in getattr(source, "header", ()) else split_map(spec)[0], role)
@@ -179,12 +192,20 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
         factor, si = column_factor(spec, sig.unit, role, where)
         with np.errstate(over="ignore", invalid="ignore"):
             values = sig.values * factor
-        bad = np.flatnonzero(~(np.abs(values) <= MAX_ABS))  # NaN fails the comparison too
+        gone = ~np.isfinite(sig.values)  # NaN, an empty cell, +-inf: a missing value
+        bad = np.flatnonzero(~(np.abs(values) <= MAX_ABS) & ~gone if missing == "drop" else ~(np.abs(values) <= MAX_ABS))
         if bad.size:
             r = int(bad[0])
-            raise DataError(f"{path}: {source.locate(sig, r)} is "
-                            f"{'not a finite number' if not np.isfinite(sig.values[r]) else 'out of range'}"
-                            f"; expected a finite value of magnitude <= {MAX_ABS:.0e} (SI)")
+            if not np.isfinite(sig.values[r]):
+                raise DataError(f"{path}: {source.locate(sig, r)} is not a finite number; expected a finite value, or "
+                                f"--missing drop to drop the rows with a missing value (the gaps left: --resample "
+                                f"MAXGAP or --split-gaps)")
+            raise DataError(f"{path}: {source.locate(sig, r)} is out of range; expected a finite value of magnitude "
+                            f"<= {MAX_ABS:.0e} (SI)")
+        if gone.any():
+            r = int(np.argmax(gone))
+            first = min(first, (r, source.locate(sig, r)))
+            missing_rows[role] = gone
         columns[role], signals[role], units[role], lengths[role] = sig.label, values, si, len(values)
         time_sig = sig if role == "time" else time_sig
     if len(set(lengths.values())) > 1:
@@ -193,6 +214,19 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     n = next(iter(lengths.values()), 0)
     if n < MIN_SAMPLES:
         raise DataError(f"{path}: {n} samples, need at least {MIN_SAMPLES}")
+    rows, dropped = np.arange(n), {}  # rows: each sample's row in the file (rows dropped: not in it)
+    if missing_rows:  # --missing drop: the rows left are samples at their times, the rows dropped gaps between them
+        drop = np.logical_or.reduce(list(missing_rows.values()))
+        if "time" not in signals and sample_time is not None:  # a uniform grid: row number x the sample time
+            signals["time"], units["time"] = np.arange(n) * sample_time, "s"
+        rows, n = np.flatnonzero(~drop), int(n - drop.sum())
+        t = signals.get("time")
+        at = float(t[first[0]] - t[rows[0]]) if t is not None and n and np.isfinite(t[first[0]]) else None
+        dropped = {"dropped_rows": int(drop.sum()), "first_dropped": first[1], "first_dropped_at_s": at}
+        signals = {r: v[rows] for r, v in signals.items()}
+        if n < MIN_SAMPLES:
+            raise DataError(f"{path}: {n} samples left after --missing drop dropped {dropped['dropped_rows']} rows "
+                            f"with a missing value, need at least {MIN_SAMPLES}")
     time = signals.pop("time", None)
     time_stated = bool(units.get("time"))  # a header or map unit: else seconds are assumed, and said
     columns = {k: v for k, v in columns.items() if k != "time"}
@@ -207,14 +241,14 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
                   "rate_hz": 1 / sample_time, "jitter": 0.0, "gaps": 0, "largest_gap_s": 0.0,
                   "largest_gap_at_s": None, "action": "none"}
         return Recording(path, float(sample_time), 0.0, signals, columns, units, timing=timing)
-    label = time_sig.label
+    named = f"{what} {time_sig.label!r}" if time_sig is not None else "the times of --rate/--dt (row x sample time)"
     dt = np.diff(time)
     if np.any(dt <= 0):
-        i = int(np.flatnonzero(dt <= 0)[0])
-        at = f"row {i + 3}" if isinstance(source, CsvSource) else f"sample {i + 1}"
-        raise DataError(f"{path}: {what} {label!r} is not strictly increasing at {at}")
+        i = int(rows[np.flatnonzero(dt <= 0)[0] + 1])
+        at = f"row {i + 2}" if isinstance(source, CsvSource) else f"sample {i}"
+        raise DataError(f"{path}: {named} is not strictly increasing at {at}")
     clock = None
-    if time_sig.absolute:  # calendar time stamps: keep the date, count from 0
+    if time_sig is not None and time_sig.absolute:  # calendar time stamps: keep the date, count from 0
         clock, time = time_sig.origin + float(time[0]), time - time[0]
     elif time[0] > ABSOLUTE_AFTER:  # seconds since 1970 as numbers
         clock, time = float(time[0]), time - time[0]
@@ -222,19 +256,21 @@ def load_recording(path: str | Path, role_map: Mapping[str, str], sample_time: f
     h = timing.h
     if sample_time is not None:
         if abs(h - sample_time) > TIME_JITTER * sample_time:
-            raise DataError(f"{path}: {what} {label!r} has steps of {h:.6g} s, "
+            raise DataError(f"{path}: {named} has steps of {h:.6g} s, "
                             f"the given sample time is {sample_time:.6g} s")
         h = float(sample_time)
-    info = timing.to_dict() | {"source": f"{what} {label!r}", "action": "none",
-                               "unit_stated": bool(time_stated or clock is not None)}
+    info = timing.to_dict() | {"source": named if time_sig is not None else "--rate/--dt", "action": "none",
+                               "unit_stated": bool(time_stated or clock is not None)} | dropped
     if timing.uniform:
         return Recording(path, h, float(time[0]), signals, columns, units, timing=info, clock=clock)
     if resample is None and not split_gaps:
-        raise DataError(f"{path}: {what} {label!r} is not uniformly sampled ({timing.describe()}); "
+        why = (f" after --missing drop dropped {dropped['dropped_rows']} rows (the first: {dropped['first_dropped']})"
+               if dropped else "")
+        raise DataError(f"{path}: {named} is not uniformly sampled ({timing.describe()}){why}; "
                         f"use --resample MAXGAP (linear interpolation onto the {h:.6g} s grid, refusing gaps over "
                         "MAXGAP s) or --split-gaps (the stretches between gaps as separate records)")
     return _mended(Recording(path, h, float(time[0]), signals, columns, units, timing=info, clock=clock),
-                   f"{what} {label!r}", time, timing, resample, split_gaps)
+                   named, time, timing, resample, split_gaps)
 
 
 def _mended(rec: Recording, label: str, time: np.ndarray, timing: Timing, resample: float | None,
@@ -290,10 +326,15 @@ def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: 
             raise InputError(f"--rate {args.rate}: expected a sample rate in Hz (> 0)")
         sample_time = 1.0 / args.rate
     rec = load_recording(_data_path(args, path), role_map, sample_time, args.delimiter, args.decimal,
-                         resample=getattr(args, "resample", None), split_gaps=getattr(args, "split_gaps", False))
+                         resample=getattr(args, "resample", None), split_gaps=getattr(args, "split_gaps", False),
+                         missing=getattr(args, "missing", None) or "refuse")
     rec = to_motor_side(rec, args)
     rec = replace(rec, notes=assumed_units(rec))  # said by the commands with their results (never silently)
     t = rec.timing
+    if t.get("dropped_rows"):  # --missing drop: never silently (the JSON's timing has it too)
+        at = "" if t["first_dropped_at_s"] is None else f" at t = {t['first_dropped_at_s']:.6g} s"
+        print(f"cosim: {rec.path}: --missing drop: dropped {t['dropped_rows']} rows with a missing value (the first: "
+              f"{t['first_dropped']}{at}); the rows left keep their times", file=sys.stderr)
     if t.get("action", "none") != "none":  # never resampled or split silently (the JSON has it too)
         print(f"cosim: {rec.path}: time from {t['source']}: {t['samples']} samples, median step "
               f"{t['median_step_s']:.6g} s, jitter {jitter_text(t['jitter'])}, {t['gaps']} gaps; {t['action']}",
@@ -303,14 +344,17 @@ def read_recording(args: argparse.Namespace, role_map: Mapping[str, str], path: 
 
 def assumed_units(rec: Recording) -> tuple[str, ...]:
     """One line per signal whose unit nothing states (header, map or ``--pitch``): what it is taken as (a position,
-    speed or torque on the side the other columns state, the motor's when none does), and how to state it."""
+    speed or torque on the side the other columns state, the motor's when none does), and how to state it.
+
+    A time column's seconds are checked against the data when a position and a speed are mapped
+    (:func:`feeddrive.cosim.recorded_time.time_note`: a gain a unit explains is refused, a DataError)."""
     side = rec.side or "motor"
     out = []
     if rec.timing.get("unit_stated") is False:  # a time in ms taken for s made Jt 1e6 times too large, unsaid
         source = rec.timing["source"].split(" ", 1)[1]
-        out.append(f"time: {source} states no unit (not in the header, not in the map): taken as s (a step of "
-                   f"{rec.h:.6g} s, {1 / rec.h:.6g} Hz); state it: --map 'time={source.strip(chr(39))} [UNIT]' "
-                   f"(e.g. ms)")
+        note = (f"time: {source} states no unit (not in the header, not in the map): taken as s (a step of "
+                f"{rec.h:.6g} s, {1 / rec.h:.6g} Hz); state it: --map 'time={source.strip(chr(39))} [UNIT]' (e.g. ms)")
+        out.append(time_note(rec, note))  # a position and a speed mapped: checked against d(position)/dt = speed
     for role in rec.signals:
         if rec.units.get(role) or len(SI_UNITS.get(role, ())) == 0:
             continue

@@ -16,6 +16,8 @@ from feeddrive.cosim.errors import InputError
 #: the characters themselves are accepted too
 DELIMITER_NAMES = {"comma": ",", "semicolon": ";", "tab": "tab", ",": ",", ";": ";", "\\t": "tab"}
 DECIMAL_NAMES = {"point": ".", "comma": ",", ".": ".", ",": ","}
+#: ``--missing``: a row with a missing value (NaN, an empty cell, inf) refuses the recording, or is dropped
+MISSING = ("refuse", "drop")
 
 
 def _named(names: Mapping[str, str], option: str):  # noqa: ANN202 - an argparse type
@@ -72,6 +74,10 @@ def add_recording_arguments(parser: argparse.ArgumentParser, roles: Iterable[str
     parser.add_argument("--split-gaps", action="store_true",
                         help="a time column with gaps: take the stretches between gaps as separate records "
                              "(with --resample: only the gaps longer than MAXGAP)")
+    parser.add_argument("--missing", choices=MISSING, default="refuse",
+                        help="a row where a mapped signal is missing (NaN, an empty cell, inf): refuse the recording "
+                             "naming it (default), or drop such rows: they become time gaps, which --resample "
+                             "bridges or --split-gaps splits at (without a time column: the times row x --dt)")
     parser.add_argument("--start-time", default=None, metavar="ISO",
                         help="calendar time of the first sample, e.g. 2024-03-01T10:00:00+01:00 (default: the "
                              "time column when it holds calendar time stamps, else the file's modification time)")

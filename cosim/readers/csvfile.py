@@ -142,6 +142,8 @@ class CsvSource(Source):
         self._text, raw = read_utf8(path, "CSV", max_bytes)
         self.sep, self.dec = dialect(self._text, delimiter, decimal, path)
         self._rows: list[list[str]] | None = None
+        #: an empty cell is a missing value (NaN) rather than an error naming it (``load_recording(missing="drop")``)
+        self.empty_missing = False
         #: the columns Arrow's reader parsed as numbers, by index (None: it could not read the file)
         arrow = arrow_numbers(raw, self.sep, self.dec)
         self._numbers = None if arrow is None else arrow[1]
@@ -207,6 +209,9 @@ class CsvSource(Source):
         values = np.empty(len(self.rows))
         for r in range(len(self.rows)):
             cell = self._cell(r, k)
+            if not cell and self.empty_missing:  # --missing drop: a missing value, as NaN (the row is dropped)
+                values[r] = np.nan
+                continue
             try:
                 if absolute:
                     t = iso_time(cell)
@@ -219,7 +224,8 @@ class CsvSource(Source):
                 kind = "an ISO 8601 time stamp" if absolute else "a number"
                 raise DataError(f"{self.path}: column {self.header[k]!r} row {r + 2}: {cell!r} is not {kind}"
                                 f"{' (decimal comma? use --decimal ,)' if ',' in cell and not absolute else ''}"
-                                f"{' (a truncated last line?)' if r == len(self.rows) - 1 else ''}") from None
+                                f"{' (a truncated last line?)' if r == len(self.rows) - 1 else ''}"
+                                f"{' (a missing value? --missing drop drops such rows)' if not cell else ''}") from None
         return Signal(self.header[k], values, "s" if absolute else (unit_text(self.header[k]) or ""), absolute,
                       origin.timestamp() if absolute else 0.0)
 

@@ -65,3 +65,29 @@ def test_output_error_raises_a_coding_error(trip):
     broken = replace(ls, values=ls.values[:-1])  # one value short of its names: a coding error, not the data's
     with pytest.raises(RuntimeError, match="mismatching shape"):  # CasADi's; it said "fell back to LS: RuntimeError"
         output_error(p, broken, options)
+
+
+def test_the_monitors_estimation_step_catches_the_estimators_failures_only(tmp_path, capsys, monkeypatch, trip):
+    """``MonitorPipeline.process`` caught numpy's LinAlgError and any FloatingPointError around validation,
+    estimation and diagnosis: an ArithmeticError (a coding error, errors.FAILURES) became "numerical failure on this
+    motion's data". Now a singular matrix still is this motion's refusal (the next may be used), the coding error
+    raises. The step is made to fail by replacing ``validate_measurements`` (the first it runs on u, i, w)."""
+    path = tmp_path / "trip.csv"
+    np.savetxt(path, np.column_stack([trip[k] for k in "tuiw"]), delimiter=",", header="t,u,i,w", comments="")
+    argv = ["monitor", str(path), "--map", "time=t", "voltage=u", "current1=i", "speed=w", "--segment", "none",
+            "--db", ":memory:", "--json"]
+
+    def singular(*args, **kwargs):
+        raise np.linalg.LinAlgError("SVD did not converge")
+
+    monkeypatch.setattr(pipeline, "validate_measurements", singular)
+    assert main(argv) == 3  # nothing judged: the one motion refused, with its reason
+    (m,) = json.loads(capsys.readouterr().out)["motions"]
+    assert m["error"] == "numerical failure on this motion's data (SVD did not converge)"
+
+    def bug(*args, **kwargs):
+        raise FloatingPointError("overflow encountered in multiply")
+
+    monkeypatch.setattr(pipeline, "validate_measurements", bug)
+    with pytest.raises(FloatingPointError):  # it said "numerical failure on this motion's data (overflow ...)"
+        main(argv)
