@@ -116,7 +116,11 @@ def time_note(rec: Recording, note: str) -> str:
     source = rec.timing["source"]
     if fits:
         why = " or ".join(f"{what} ({fix})" for what, fix in fits)
+        time_col = source.split(" ", 1)[1].strip("'")
+        # a gear of 60 (or 1000) between the position and the speed reads as a time unit: the seconds, stated, pass
+        keep = (f"; if the seconds are right (a gear between the position and the speed), state them: "
+                f"--map 'time={time_col} [s]'") if any(what.startswith("the time") for what, _ in fits) else ""
         raise DataError(f"{rec.path}: {source} states no unit and is taken as s, but then the position's derivative "
-                        f"is {gain:.4g} x the speed: {why}")
+                        f"is {gain:.4g} x the speed: {why}{keep}")
     return (f"{note}; the position's derivative is {gain:.4g} x the speed (no time unit explains it: a gear between "
             f"the two, or a sensor's gain?)")

@@ -46,7 +46,8 @@ def test_a_bare_time_in_ms_is_refused_naming_the_column_the_gain_and_the_fix(fil
     assert "\n" not in err and "Traceback" not in err
     assert err.startswith(f"cosim estimate: error: {files['ms']}: column 't' states no unit and is taken as s, but "
                           "then the position's derivative is ")
-    assert err.endswith(" x the speed: the time is in ms (--map 'time=t [ms]')")
+    assert err.endswith(" x the speed: the time is in ms (--map 'time=t [ms]'); if the seconds are right (a gear "
+                        "between the position and the speed), state them: --map 'time=t [s]'")
     gain = float(err.split("derivative is ")[1].split(" x ")[0])
     assert gain == pytest.approx(1e-3, rel=1e-3)  # as measured (noise, encoder counts): the ms, within 0.1 %
     assert main(["monitor", str(files["ms"]), "--map", "time=t", "position=x", "speed=w", "torque=T",
