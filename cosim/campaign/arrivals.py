@@ -53,8 +53,10 @@ class Arrivals:
             out.append(json.loads(self.records.popleft()))
         return out
 
-    def wait(self, pending: Any, arrived: Callable[[dict], None]) -> Iterator[Any]:
-        """The tasks of ``pending`` as they complete; ``arrived(record)`` for each published record meanwhile."""
+    def wait(self, pending: Any, arrived: Callable[[dict], None],
+             idle: Callable[[], None] | None = None) -> Iterator[Any]:
+        """The tasks of ``pending`` as they complete; ``arrived(record)`` for each published record meanwhile, and
+        ``idle()`` each time nothing came for a while (``NoWorkers.check``)."""
         condition = getattr(pending, "thread_condition", None)
         while True:
             for rec in self.drain():
@@ -68,8 +70,8 @@ class Arrivals:
                 yield next(pending)
             else:
                 with condition:  # notified by a task's completion and by ``arrive``; the timeout is a safety net
-                    if not self.records and not pending.has_ready():
-                        condition.wait(timeout=0.5)
+                    if not self.records and not pending.has_ready() and not condition.wait(timeout=0.5) and idle:
+                        idle()
 
     def prune(self) -> None:
         """Drop the events the scheduler keeps of this topic once ``KEPT`` more were recorded (a round trip)."""
@@ -88,6 +90,44 @@ class Arrivals:
             self.client.run_on_scheduler(_forget_topic, self.topic)
         except Exception:  # noqa: BLE001, S110 - a closing or unreachable scheduler: nothing left to stop
             pass
+
+
+#: seconds between two looks at the cluster's workers while no record comes (``NoWorkers``)
+NO_WORKER_CHECK_S = 5.0
+
+
+class NoWorkers:
+    """Says on stderr when the campaign's cluster has had no worker for ``NO_WORKER_CHECK_S``: its tasks wait for
+    one to join (Dask's way), where the campaign sat silent (a cluster whose workers were killed, or never came).
+    Said once, and again after a worker came and went."""
+
+    def __init__(self, client: Any, scheduler: str, recorded: Callable[[], int], total: int) -> None:
+        import time
+
+        self.client, self.scheduler, self.recorded, self.total = client, scheduler, recorded, total
+        self.clock, self.last, self.since, self.said = time.monotonic, time.monotonic(), None, False
+
+    def check(self) -> None:
+        """Look at the workers (a round trip to the scheduler) once every ``NO_WORKER_CHECK_S``."""
+        import sys
+
+        now = self.clock()
+        if now - self.last < NO_WORKER_CHECK_S:
+            return
+        self.last = now
+        try:
+            workers = len(self.client.nthreads())
+        except Exception:  # noqa: BLE001 - the scheduler unreachable: the client says so itself (SchedulerLost)
+            return
+        if workers:
+            self.since, self.said = None, False
+            return
+        self.since = now if self.since is None else self.since
+        if not self.said and now - self.since >= NO_WORKER_CHECK_S:
+            self.said = True
+            print(f"cosim campaign: the Dask scheduler {self.scheduler} has had no worker for "
+                  f"{NO_WORKER_CHECK_S:g} s: the runs wait for one to join ({self.recorded()} of {self.total} "
+                  "recorded so far; Ctrl-C keeps them, and the same command runs the others)", file=sys.stderr)
 
 
 def _forget_topic(topic: str, keep_subscribers: bool = False, dask_scheduler: Any = None) -> None:

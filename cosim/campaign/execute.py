@@ -221,7 +221,8 @@ def batches(specs: list[RunSpec], threads: int) -> list[list[RunSpec]]:
     return out
 
 
-def _dask(run, specs, client, on_done, timeout=None) -> None:
+def _dask(run, specs, client, on_done, timeout=None, recorded: Callable[[], int] | None = None,
+          total: int | None = None) -> None:
     """Run ``specs`` on the cluster of ``client`` in tasks of a few runs (``batches``), at most one task per worker
     thread at a time.
 
@@ -241,11 +242,12 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
     as each run's ``execute`` made them, stays the reference: it replaces the published copy in ``on_done``'s
     records without writing it again, and records a run whose event was lost. A task whose workers kept dying
     (``KilledWorker``) is cut into its runs not yet recorded, run again one by one: only the run that kills its
-    worker is recorded as crashed.
+    worker is recorded as crashed. A cluster left without a worker is said on stderr (``arrivals.NoWorkers``,
+    with ``recorded()`` of the campaign's ``total`` runs recorded): the tasks wait for a worker to join.
     """
     from distributed.scheduler import KilledWorker
 
-    from feeddrive.cosim.campaign.arrivals import Arrivals
+    from feeddrive.cosim.campaign.arrivals import Arrivals, NoWorkers
     from feeddrive.cosim.campaign.zygote import run_batch  # the runs forked from their worker's zygote, if any
 
     payload, by_key, running = _pickled(run), {}, set()
@@ -279,7 +281,9 @@ def _dask(run, specs, client, on_done, timeout=None) -> None:
             pending = arrivals.completed(futures)
         else:
             pending = arrivals.completed([submit() for _ in range(min(len(queue), _threads(client)))])
-        for future in arrivals.wait(pending, lambda rec: record(rec, False)):
+        idle = NoWorkers(client, client.scheduler.address, recorded or (lambda: len(arrivals.recorded)),
+                         total or len(specs))
+        for future in arrivals.wait(pending, lambda rec: record(rec, False), idle.check):
             running.discard(future)
             free = _threads(client) - len(running) if queue else 0  # workers may have come or gone
             for _ in range(min(len(queue), max(free, 0 if running else 1))):
@@ -408,6 +412,9 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
             raise SchedulerLost(f"--scheduler {scheduler}: lost the Dask scheduler during the campaign ({exc}); "
                                 f"{len(finished)} of {len(specs)} runs recorded in {out}: the same command runs the "
                                 "others when the cluster is back") from None
+        except KeyboardInterrupt:  # Ctrl-C: what was kept, and how to go on (cosim campaign: "interrupted with ...")
+            raise KeyboardInterrupt(f"with {len(finished)} of {len(specs)} runs recorded in {out}; the same command "
+                                    "runs the others") from None
     finally:
         if client is not None:
             with contextlib.suppress(Exception):  # a client that lost its scheduler: its closing is all that is left
@@ -455,7 +462,7 @@ def _execute(campaign: Campaign, fn: str | Callable, pending: list[RunSpec], tot
         if not pending:
             pass
         elif client is not None:
-            _dask(fn, pending, client, on_done, timeout)
+            _dask(fn, pending, client, on_done, timeout, recorded=lambda: len(finished), total=total)
         else:
             _local(fn, pending, min(workers, len(pending)), on_done, timeout)
     finally:

@@ -129,8 +129,10 @@ def test_drift_delay_and_isolation():
 
 def test_interrupted_campaign_resumes_without_rerunning(tmp_path):
     c = campaign(tmp_path, interrupt_at=5)
-    with pytest.raises(KeyboardInterrupt):
+    with pytest.raises(KeyboardInterrupt) as caught:
         run_campaign(c, tmp_path / "out", plots=False)
+    # cosim campaign: "interrupted with 5 of 12 runs recorded in OUT; ..." (it said "interrupted" alone)
+    assert str(caught.value) == f"with 5 of 12 runs recorded in {tmp_path / 'out'}; the same command runs the others"
     first = executions(tmp_path)
     assert len(first) == 6 and len(list((tmp_path / "out" / "runs").glob("*.json"))) == 5
     res = run_campaign(c, tmp_path / "out", plots=False)

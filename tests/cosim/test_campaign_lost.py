@@ -56,3 +56,49 @@ def test_a_lost_scheduler_keeps_the_runs_recorded_and_says_so(tmp_path, monkeypa
     serial = run_campaign(c, tmp_path / "serial", run=toy_run, plots=False)
     assert [(r["id"], r["status"], r["result"]) for r in resumed.records] == \
            [(r["id"], r["status"], r["result"]) for r in serial.records]
+
+
+@pytest.mark.slow
+def test_a_cluster_left_without_a_worker_is_said_and_the_campaign_goes_on_when_one_joins(tmp_path, monkeypatch,
+                                                                                         capsys):
+    """The campaign sat silent, its progress bar stopped, while its tasks waited for a worker that never came."""
+    from distributed import LocalCluster
+
+    from feeddrive.cosim.campaign import arrivals
+
+    monkeypatch.setattr(arrivals, "NO_WORKER_CHECK_S", 0.3)
+    said_it, check = threading.Event(), arrivals.NoWorkers.check
+
+    def watched(self) -> None:
+        check(self)
+        if self.said:
+            said_it.set()
+
+    monkeypatch.setattr(arrivals.NoWorkers, "check", watched)
+    c = campaign(tmp_path)
+    out, runs = tmp_path / "dask", tmp_path / "dask" / "runs"
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        def worker_goes_and_comes() -> None:
+            deadline = time.monotonic() + 60
+            while len(list(runs.glob("*.json"))) < 2 and time.monotonic() < deadline:
+                time.sleep(0.02)
+            cluster.scale(0)
+            said_it.wait(30)
+            cluster.scale(1)
+
+        mover = threading.Thread(target=worker_goes_and_comes)
+        mover.start()
+        try:
+            result = run_campaign(c, out, scheduler=cluster.scheduler_address, run=slow_toy_run, plots=False)
+        finally:
+            mover.join()
+    said = [line for line in capsys.readouterr().err.splitlines() if "has had no worker" in line]
+    assert len(said) == 1, said
+    recorded = int(said[0].split("join (")[1].split(" of 12")[0])
+    assert 2 <= recorded < 12
+    assert said[0] == (f"cosim campaign: the Dask scheduler {cluster.scheduler_address} has had no worker for 0.3 s: "
+                       f"the runs wait for one to join ({recorded} of 12 recorded so far; Ctrl-C keeps them, and the "
+                       "same command runs the others)")
+    serial = run_campaign(c, tmp_path / "serial", run=toy_run, plots=False)
+    assert [(r["id"], r["status"], r["result"]) for r in result.records] == \
+           [(r["id"], r["status"], r["result"]) for r in serial.records]
