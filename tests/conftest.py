@@ -8,6 +8,10 @@ from pathlib import Path
 
 import pytest
 
+# one BLAS thread per process, as the cosim command sets (cosim/cli BLAS_THREADS), before anything loads numpy (the
+# xdist workers inherit it): OpenBLAS's threads of two workers on two cores spun against each other, and the
+# residue tests' Monte Carlo took 22 s instead of 2
+from feeddrive.cosim.cli import BLAS_THREADS  # noqa: F401 - sets them (it imports no numerical module)
 from feeddrive.fmu_build import builtin_fmu
 
 

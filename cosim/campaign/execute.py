@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from feeddrive.cosim.campaign.aggregate import Aggregates, aggregate, plot_campaign
-from feeddrive.cosim.campaign.runner import _lost, execute, resolve_function
+from feeddrive.cosim.campaign.runner import _lost, execute, one_blas_thread, resolve_function
 from feeddrive.cosim.campaign.schema import Campaign, CampaignError, RunSpec, expand
 from feeddrive.cosim.errors import SimulationError
 
@@ -74,8 +74,9 @@ def _open_store(campaign: Campaign, out: Path, overwrite: bool) -> dict[str, dic
 
 def _local(run, specs, workers, on_done, timeout=None) -> None:
     if workers == 1:
-        for spec in specs:
-            on_done(execute(run, spec, timeout))
+        with one_blas_thread():  # the runs forked from here with one; the caller's own threads given back after
+            for spec in specs:
+                on_done(execute(run, spec, timeout))
         return
     # the workers are forked from this process once the run's imports are done here (its prepare hook):
     # they start warm, where spawned workers imported the whole stack again (scipy.stats, statsmodels, the
@@ -117,6 +118,7 @@ def _pool_worker() -> None:
 
     supervise.REAP_IN_THREAD = False
     Finalize(None, supervise.reap, kwargs={"block": True}, exitpriority=0)
+    one_blas_thread()  # for good: this process is the campaign's
 
 
 def _check_scheduler(scheduler: str) -> None:

@@ -78,6 +78,27 @@ def execute(run: str | Callable[[RunSpec], dict], spec: RunSpec, timeout: float 
             "status": status, "reason": reason, "elapsed_s": time.perf_counter() - start, "result": result}
 
 
+#: this process's BLAS libraries (``threadpoolctl.ThreadpoolController``), found once its run function is prepared
+_BLAS: list[Any] = []
+
+
+def one_blas_thread() -> Any:
+    """This process's BLAS libraries (numpy's and scipy's OpenBLAS) on one thread: now, and until the returned
+    limiter is left (``with one_blas_thread(): ...``; a campaign's worker process, which is the campaign's, keeps it).
+
+    The ``cosim`` command sets one thread before numpy loads (cosim/cli ``BLAS_THREADS``); a campaign started from
+    Python, in a process whose numpy runs several, runs its runs with one (each forked from a process that has
+    it: the caller's, within its loop; a pool worker or a Dask worker's zygote, for good): OpenBLAS's threads spin
+    while they wait for one another, and 2 workers with 2 threads each were 1.13 times one worker (1.9 with one
+    each, issue 26). Switching the threads at each run cost the caller ~20 ms of CPU a run.
+    """
+    if not _BLAS:
+        from threadpoolctl import ThreadpoolController
+
+        _BLAS.append(ThreadpoolController())  # after prepare: the libraries the runs use are loaded
+    return _BLAS[0].limit(limits=1, user_api="blas")
+
+
 def _lost(spec: RunSpec, reason: str) -> dict[str, Any]:
     """The record of a run whose worker process died under it (not retried: it may die again)."""
     return {"id": spec.id, "index": spec.index, "seed": spec.seed, "overrides": spec.overrides,

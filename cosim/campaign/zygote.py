@@ -194,9 +194,10 @@ def _zygote(conn: socket.socket) -> None:  # pragma: no cover - runs in a zygote
     """
     global WORKER_PID
     from feeddrive.cosim import supervise
-    from feeddrive.cosim.campaign.runner import execute
+    from feeddrive.cosim.campaign.runner import execute, one_blas_thread
 
     supervise.REAP_IN_THREAD = False  # no thread, ever: every run's fork is from a single-threaded process
+    one_blas_thread()  # for good (its runs' BLAS threads would spin against the other workers' runs)
     while True:
         try:
             request = _recv(conn)
@@ -267,7 +268,7 @@ def run_batch(run: bytes | str, specs: list, timeout: float | None = None,
     preloaded, or its server gone), or for a run the zygote cannot read, the run is executed here. A zygote
     that dies under a run fails that run only (the next run gets a new zygote).
     """
-    from feeddrive.cosim.campaign.runner import _lost, execute
+    from feeddrive.cosim.campaign.runner import _lost, execute, one_blas_thread
 
     try:
         fn = load_run(run)
@@ -280,7 +281,8 @@ def run_batch(run: bytes | str, specs: list, timeout: float | None = None,
     for spec in specs:
         link = _link()
         if link is None:
-            records.append(execute(fn, spec, timeout))
+            with one_blas_thread():  # run here, forked from this worker: with one BLAS thread, the worker's back after
+                records.append(execute(fn, spec, timeout))
             _publish(topic, records[-1])
             continue
         try:

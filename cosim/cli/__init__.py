@@ -16,10 +16,20 @@ from __future__ import annotations
 import argparse
 import gc
 import importlib
+import os
 import sys
 
-from feeddrive.cosim import __version__
-from feeddrive.cosim.errors import InputError, SimulationError
+#: one BLAS / OpenMP thread per process unless the environment says otherwise, set before numpy loads its BLAS:
+#: the work is many small matrices, and OpenBLAS's threads spin while they wait for one another, so any other
+#: busy process (a campaign's other worker, a run's figures drawn beside it, the rest of the machine) made them
+#: slower than one: 2 campaign workers were 1.13 times one (1.9 with one thread each) and the serial campaign
+#: took 1.5 times as long (bench_campaign without OPENBLAS_NUM_THREADS, issue 26). Set the variable to use more.
+BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+for _name, _value in BLAS_THREADS.items():
+    os.environ.setdefault(_name, _value)
+
+from feeddrive.cosim import __version__  # noqa: E402 - after the threads are set (it imports nothing numerical)
+from feeddrive.cosim.errors import InputError, SimulationError  # noqa: E402
 
 #: subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {

@@ -23,10 +23,16 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 def test_ctrl_c_keeps_the_motions_judged_and_the_signals_recorded(tmp_path, feeddrive_fmu):
     # two tool changes (motion 1 ends at 3.69 s); Ctrl-C once the second has started, as a terminal sends it: to
     # the whole process group (the command, its supervised child and its drawing processes)
-    proc = subprocess.Popen([sys.executable, "-m", "feeddrive.cosim", "run", str(EXAMPLES / "current_sensor_fault.yaml"),
-                             "--no-progress", "--no-plots", "--out", "run"], cwd=tmp_path, start_new_session=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=os.environ | {"OPENBLAS_NUM_THREADS": "1"})
+    # started as from a terminal, which delivers Ctrl-C: an ignored SIGINT is inherited (a run started ignoring it,
+    # nohup or &, ignores it too, by design), and an xdist worker may ignore it, depending on the tests it ran before
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "feeddrive.cosim", "run",
+                                 str(EXAMPLES / "current_sensor_fault.yaml"), "--no-progress", "--no-plots", "--out",
+                                 "run"], cwd=tmp_path, start_new_session=True, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, env=os.environ | {"OPENBLAS_NUM_THREADS": "1"})
+    finally:
+        signal.signal(signal.SIGINT, handler)
     csv = tmp_path / "run" / "signals.csv"
     deadline = time.monotonic() + 120
     while (last_recorded_time(csv) or 0.0) < 4.2 and proc.poll() is None and time.monotonic() < deadline:
