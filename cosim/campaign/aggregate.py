@@ -220,13 +220,33 @@ _UNITS = {("current", "offset"): "A", ("current", "noise"): "A", ("voltage", "of
 _PLANT_UNITS = {"R": "Ohm", "L": "H", "K": "N.m/A", "Jt": "kg.m2", "ft": "N.m.s/rad", "Cd": "N.m", "backlash": "rad"}
 
 
-def sweep_unit(key: str) -> str:
-    """The unit of a swept key (``sensors.current[0].offset`` -> ``A``, a gain -> ``1``), or ``""``."""
-    last = key.rsplit(".", 1)[-1]
+def sweep_unit(key: str, base: Mapping[str, Any] | None = None) -> str:
+    """The unit of a swept key (``sensors.current[0].offset`` -> ``A``, a gain -> ``1``), or ``""``; an event's
+    value (``events[0].value``) has its target's unit, read from the campaign's ``base`` scenario."""
+    target = event_target(key, base)
+    last = (target or key).rsplit(".", 1)[-1]
     if last == "gain":
         return "1"
-    quantity = next((q for q in ("current", "voltage", "speed", "position") if f"sensors.{q}" in key), None)
+    quantity = next((q for q in ("current", "voltage", "speed", "position") if f"sensors.{q}" in (target or key)), None)
     return _UNITS.get((quantity, last), _PLANT_UNITS.get(last, ""))
+
+
+def event_target(key: str, base: Mapping[str, Any] | None) -> str | None:
+    """The target of the event whose value ``key`` sweeps (``events[0].value`` -> ``plant.Cd``), from ``base``."""
+    import re
+
+    match = re.fullmatch(r"events\[(\d+)\]\.value", key)
+    events = (base or {}).get("events")
+    if match is None or not isinstance(events, list) or int(match[1]) >= len(events):
+        return None
+    event = events[int(match[1])]
+    return str(event["target"]) if isinstance(event, Mapping) and "target" in event else None
+
+
+def sweep_label(key: str, base: Mapping[str, Any] | None = None) -> str:
+    """An axis label for a swept key: ``events[0].value (plant.Cd) [N.m]``, ``sensors.current[0].offset [A]``."""
+    target, unit = event_target(key, base), sweep_unit(key, base)
+    return f"{key}{f' ({target})' if target else ''}{f' [{unit}]' if unit else ''}"
 
 
 def detection_curves(records: list[dict], keys: list[str]) -> dict[str, dict]:
@@ -266,10 +286,12 @@ def detection_curves(records: list[dict], keys: list[str]) -> dict[str, dict]:
     return curves
 
 
-def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> list[Path]:
+def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path,
+                  base: Mapping[str, Any] | None = None) -> list[Path]:
     """Detection rate against each swept key, parameter error against the noise key, one drift with its alarm.
 
-    Returns the written PNG paths (plots that have no data in this campaign are skipped).
+    ``base`` (the campaign's base scenario) names what a swept event value sets, with its unit. Returns the
+    written PNG paths (plots that have no data in this campaign are skipped).
     """
     import matplotlib
 
@@ -292,10 +314,11 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> lis
                 ax.plot(xs, y, style, label=f"{name} rate (faulty runs)")
             fa = np.array([np.nan if v is None else v for v in c["false_alarm"]], dtype=float)
             ax.plot(xs, fa, "x", color="C3", ms=9, mew=2, label="false-alarm rate (fault-free runs)")
-            unit = sweep_unit(key)
             others = ", ".join(f"{k} = {v:g}" for k, v in c["others"].items())
-            ax.set(xlabel=f"{key} [{unit}]" if unit else key, ylabel="rate [fraction of runs]", ylim=(-0.05, 1.05),
-                   title=f"detection against {key}" + (f"\n(other swept keys fault-free: {others})" if others else ""))
+            target = event_target(key, base)
+            ax.set(xlabel=sweep_label(key, base), ylabel="rate [fraction of runs]", ylim=(-0.05, 1.05),
+                   title=f"detection against {key}{f' ({target})' if target else ''}"
+                         + (f"\n(other swept keys fault-free: {others})" if others else ""))
             ax.title.set_fontsize(8)
             ax.grid(True)
             ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.22), fontsize=7, frameon=False)
@@ -323,25 +346,54 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path) -> lis
                         rms.append(row["rms_pct"])
                 if centres:
                     ax.plot(centres, rms, style, color=colours[c % len(colours)], label=f"{name} {method}")
-        ax.set(xlabel=f"{noise} [{sweep_unit(noise)}]" if sweep_unit(noise) else noise, ylabel="RMS relative error [%]", yscale="log", title="parameter error against noise")
+        ax.set(xlabel=sweep_label(noise, base), ylabel="RMS relative error [%]", yscale="log",
+               title="parameter error against noise")
         ax.grid(True, which="both")
         ax.legend(fontsize=7, ncol=3)
         fig.tight_layout()
         written.append(out / "error_vs_noise.png")
         fig.savefig(written[-1], dpi=110)
         plt.close(fig)
-    drift = next((r for r in ok if _onset(_truths(r["result"]))[1]), None)
-    if drift:
-        written.append(plot_drift(drift["result"], out / "drift.png"))
+    drift = drift_run(ok)
+    if drift is not None:
+        changes = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
+                            for k, v in drift["overrides"].items())
+        written.append(plot_drift(drift["result"], out / "drift.png",
+                                  f"run {drift['id']}" + (f" ({changes})" if changes else "")))
     return written
 
 
-def plot_drift(result: Mapping[str, Any], path: Path) -> Path:
-    """Estimated and true drifting parameters against the motion index, with the first alarm marked."""
+def drift_run(records: list[dict]) -> dict | None:
+    """The run the drift figure shows: of the runs whose parameters drift, a diagnosed one with the largest change,
+    else the largest change (the first drifting run was shown: the smallest fault, often missed, unsaid)."""
+    drifts = [r for r in records if _onset(_truths(r["result"]))[1]]
+    return max(drifts, key=lambda r: (_run_outcome(r["result"]).get("delay") is not None, _drift_size(r["result"])),
+               default=None)
+
+
+def drift_outcome(result: Mapping[str, Any]) -> str:
+    """``diagnosed at motion 12 (the drift starts at motion 6)`` or ``not diagnosed (...)``, by the motions' numbers."""
+    motions, (onset, _), outcome = result["motions"], _onset(_truths(result)), _run_outcome(result)
+    number = [m.get("motion", i + 1) for i, m in enumerate(motions)]
+    start = f"(the drift starts at motion {number[onset]})"
+    return (f"diagnosed at motion {number[onset + outcome['delay']]} {start}" if outcome.get("delay") is not None
+            else f"not diagnosed {start}")
+
+
+def _drift_size(result: Mapping[str, Any]) -> float:
+    """The largest relative change of a parameter over the run's motions."""
+    truths = _truths(result)
+    return max((abs(t[p] / truths[0][p] - 1) for t in truths for p in t if truths[0].get(p)), default=0.0)
+
+
+def plot_drift(result: Mapping[str, Any], path: Path, title: str = "") -> Path:
+    """Estimated and true drifting parameters against the motion index, with the first alarm marked and the run's
+    outcome in the title (after ``title``, which names the run)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     motions = result["motions"]
     truths = _truths(result)
@@ -350,17 +402,25 @@ def plot_drift(result: Mapping[str, Any], path: Path) -> Path:
     # the DC drive's order, then another model's own names (a PMSM's psi_f, L_q)
     names = [p for p in PHYSICAL if p in drifting] + sorted(p for p in drifting if p not in PHYSICAL)
     fig, axes = plt.subplots(len(names), 1, figsize=(7, 2.4 * len(names)), sharex=True, squeeze=False)
+    # each motion's own number (the NC's, as the run's report gives it)
+    k = np.array([m.get("motion", i + 1) for i, m in enumerate(motions)], dtype=float)
     for ax, name in zip(axes[:, 0], names):
-        k = np.arange(len(motions))
         est = [m.get("parameters", {}).get(name, {}) for m in motions]
-        ax.plot(k, [t[name] for t in truths], "k-", label="truth")
-        ax.plot(k, [e.get("value", np.nan) for e in est], ".", ms=3, label="estimate")
-        ax.set_ylabel(name)
+        # the truth holds over each motion (a step between motions, not a ramp); the estimate with its 95 % interval
+        ax.step(k, [t[name] for t in truths], "k-", where="mid", label="truth")
+        values = np.array([e.get("value", np.nan) for e in est], dtype=float)
+        ci = np.array([e.get("ci95") or (np.nan, np.nan) for e in est], dtype=float).reshape(-1, 2)
+        ax.errorbar(k, values, yerr=np.abs(ci.T - values), fmt="o", ms=3, capsize=2, label="estimate, 95 % CI")
+        unit = _PLANT_UNITS.get(name, "")
+        ax.set_ylabel(f"{name} [{unit}]" if unit else name)
         if outcome.get("delay") is not None:
-            ax.axvline(onset + outcome["delay"], color="r", ls="--", label="first diagnosis")
+            ax.axvline(k[onset + outcome["delay"]], color="r", ls="--", label="first diagnosis")
         ax.grid(True)
     axes[0, 0].legend(fontsize=8)
     axes[-1, 0].set_xlabel("motion")
+    axes[-1, 0].xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+    said = drift_outcome(result)
+    axes[0, 0].set_title(f"{title}: {said}" if title else said, fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -426,7 +426,7 @@ def run_campaign(campaign: Campaign, out_dir: str | os.PathLike, *, workers: int
     aggregates = aggregate(records)
     aggregates.write(out)
     if plots:
-        plot_campaign(records, aggregates, out / "plots")
+        plot_campaign(records, aggregates, out / "plots", campaign.base_scenario())
     return CampaignResult(out, records, len(pending), aggregates)
 
 

@@ -12,7 +12,14 @@ import pytest
 import yaml
 
 from feeddrive.cosim.campaign import Campaign, CampaignError, aggregate, expand, load_campaign, run_campaign
-from feeddrive.cosim.campaign.aggregate import detection_curves, plot_campaign, sweep_unit
+from feeddrive.cosim.campaign.aggregate import (
+    detection_curves,
+    drift_outcome,
+    drift_run,
+    plot_campaign,
+    sweep_label,
+    sweep_unit,
+)
 from feeddrive.cosim.errors import ScenarioError
 
 NOMINAL = {"R": 0.6, "L": 4.0e-3, "K": 1.05, "Jt": 0.1, "ft": 0.02, "Cd": 1.2}
@@ -342,6 +349,22 @@ def test_detection_curves_do_not_pool_the_other_swept_fault(tmp_path):
             sweep_unit("plant.parameters.backlash"), sweep_unit("sensors.voltage.noise")) == ("A", "1", "rad", "V")
     (png,) = [p for p in plot_campaign(records, aggregate(records), tmp_path / "plots") if p.name == "detection_rate.png"]
     assert png.stat().st_size > 0
+
+
+def test_a_swept_event_is_named_by_its_target_and_the_drift_figure_shows_a_diagnosed_run(tmp_path):
+    """The wear campaign's figures read ``events[0].value`` without what it set or its unit, and showed the first
+    drifting run (its smallest fault, not diagnosed) without saying which run it was or that it was missed."""
+    base = {"events": [{"time": 6.05, "target": "plant.Cd", "value": 1.2}]}
+    assert sweep_label("events[0].value", base) == "events[0].value (plant.Cd) [N.m]"
+    assert (sweep_label("events[1].value", base), sweep_label("sensors.current[0].offset", base)) == (
+        "events[1].value", "sensors.current[0].offset [A]")
+    diagnosed = toy_drift(None)  # Cd +2 %/motion from motion 5, diagnosed above +15 %
+    missed = toy_drift(None) | {"motions": [m | {"diagnosis": []} for m in toy_drift(None)["motions"][:8]]}
+    records = [{"status": "ok", "id": f"0000{k}", "overrides": {}, "result": r} for k, r in enumerate((missed, diagnosed))]
+    assert drift_run(records)["id"] == "00001"
+    assert drift_outcome(diagnosed) == "diagnosed at motion 13 (the drift starts at motion 6)"
+    assert drift_outcome(missed) == "not diagnosed (the drift starts at motion 6)"
+    assert [p.name for p in plot_campaign(records, aggregate(records), tmp_path / "plots", base)] == ["drift.png"]
 
 
 def test_resolved_scenario_is_reused_as_a_copy_until_its_fmu_changes(tmp_path, feeddrive_fmu):
