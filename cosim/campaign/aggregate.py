@@ -273,7 +273,8 @@ def detection_curves(records: list[dict], keys: list[str]) -> dict[str, dict]:
     for key in keys:
         others = {k: neutral[k] for k in keys if k != key}
         xs = sorted({o[key] for o, _ in outcomes if key in o})
-        c = {"x": xs, "detection": [], "isolation": [], "false_alarm": [], "runs": [], "others": others}
+        c = {"x": xs, "detection": [], "isolation": [], "false_alarm": [], "runs": [], "faulty": [], "healthy": [],
+             "others": others}
         for x in xs:
             at = [out for o, out in outcomes if o.get(key) == x and all(o.get(k) == v for k, v in others.items())]
             faulty = [out for out in at if out["class"] != "healthy"]
@@ -282,6 +283,8 @@ def detection_curves(records: list[dict], keys: list[str]) -> dict[str, dict]:
             c["isolation"].append(_rate(sum(out["isolated"] for out in faulty), len(faulty)))
             c["false_alarm"].append(_rate(sum(out["false_alarm"] for out in healthy), len(healthy)))
             c["runs"].append(len(at))
+            c["faulty"].append(len(faulty))
+            c["healthy"].append(len(healthy))
         curves[key] = c
     return curves
 
@@ -309,11 +312,24 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path,
         for ax, key in zip(axes[0], sweep_keys):
             c = curves[key]
             xs = np.asarray(c["x"], dtype=float)
-            for name, style in (("detection", "o-"), ("isolation", "s--")):
+            # each rate with its 95 % (Wilson) interval and its count: a campaign of a few runs a point says little,
+            # and the figure showed 1.0 for 2 of 2 as it would for 200 of 200
+            for name, style, n_key in (("detection", "o-", "faulty"), ("false_alarm", "x", "healthy"),
+                                       ("isolation", "s--", "faulty")):  # isolation over detection: both seen
                 y = np.array([np.nan if v is None else v for v in c[name]], dtype=float)
-                ax.plot(xs, y, style, label=f"{name} rate (faulty runs)")
-            fa = np.array([np.nan if v is None else v for v in c["false_alarm"]], dtype=float)
-            ax.plot(xs, fa, "x", color="C3", ms=9, mew=2, label="false-alarm rate (fault-free runs)")
+                lo, hi = np.transpose([_wilson(v, n) for v, n in zip(c[name], c[n_key])]).reshape(2, -1)
+                label = ("false-alarm rate (fault-free runs)" if name == "false_alarm"
+                         else f"{name} rate (faulty runs)") + (", 95 % interval" if name != "isolation" else "")
+                kw = {"color": "C3", "ms": 9, "mew": 2} if name == "false_alarm" else {}
+                if name == "isolation":
+                    ax.plot(xs, y, style, mfc="none", label=label)
+                else:
+                    ax.errorbar(xs, y, yerr=[y - lo, hi - y], fmt=style, capsize=3, label=label, **kw)
+                if name != "isolation":
+                    for x, v, n in zip(xs, c[name], c[n_key]):
+                        if v is not None:
+                            ax.annotate(f"{round(v * n)}/{n}", (x, v), textcoords="offset points", fontsize=7,
+                                        xytext=(-6, -12) if v > 0.9 else (5, 5), ha="right" if v > 0.9 else "left")
             others = ", ".join(f"{k} = {v:g}" for k, v in c["others"].items())
             target = event_target(key, base)
             ax.set(xlabel=sweep_label(key, base), ylabel="rate [fraction of runs]", ylim=(-0.05, 1.05),
@@ -361,6 +377,16 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path,
         written.append(plot_drift(drift["result"], out / "drift.png",
                                   f"run {drift['id']}" + (f" ({changes})" if changes else "")))
     return written
+
+
+def _wilson(rate: float | None, n: int) -> tuple[float, float]:
+    """The 95 % Wilson interval of a rate of ``n`` runs (NaN when there is none)."""
+    if rate is None or n == 0:
+        return math.nan, math.nan
+    from scipy.stats import binomtest
+
+    ci = binomtest(round(rate * n), n).proportion_ci(0.95, method="wilson")
+    return float(ci.low), float(ci.high)
 
 
 def drift_run(records: list[dict]) -> dict | None:
