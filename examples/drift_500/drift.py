@@ -136,6 +136,10 @@ def _tool_changes(db: Path) -> list[dict]:
     return [first[k] for k in range(len(first))]
 
 
+#: the units of the plotted parameters
+UNITS = {"R": "Ohm", "ft": "N.m.s/rad", "Cd": "N.m"}
+
+
 def plot_trends(result: dict, first: dict[str, int], oil_change: int | None, path: Path) -> Path:
     """Estimated (validated: dots with 95 % CI, not validated: grey) and true R, ft, Cd against the motion,
     with the oil change and the first diagnosis of each fault marked."""
@@ -155,12 +159,13 @@ def plot_trends(result: dict, first: dict[str, int], oil_change: int | None, pat
         ok = np.array([bool(m.get("validated")) for m in motions])
         ax.errorbar(k[ok], est[ok], yerr=np.abs(ci[ok].T - est[ok]), fmt=".", ms=3, lw=0.5, label="validated estimate")
         ax.plot(k[~ok], est[~ok], ".", color="0.6", ms=3, label="not validated")
-        ax.plot(k, [m["truth"][name] for m in motions], "k-", lw=1.2, label="truth")
+        # the truth holds over each motion: the oil change is a step between two motions, not a slope over one
+        ax.step(k, [m["truth"][name] for m in motions], "k-", where="mid", lw=1.2, label="truth")
         if oil_change is not None and oil_change < len(motions):
             ax.axvline(oil_change, color="g", ls=":", label="oil change")
         for c, (fault, at) in enumerate(sorted(first.items(), key=lambda kv: kv[1])):
             ax.axvline(at, color=colours[(c + 3) % len(colours)], ls="--", lw=1, label=f"first: {fault}")
-        ax.set_ylabel(name)
+        ax.set_ylabel(f"{name} [{UNITS[name]}]")
         ax.grid(True)
     axes[0].legend(fontsize=7, ncol=2)
     axes[-1].set_xlabel(f"tool change (motion); {PER_DAY} per day")
