@@ -344,7 +344,7 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path,
         plt.close(fig)
     noise = next((k for k in sweep_keys if "noise" in k), next((k for k in keys if "noise" in k), None))
     if noise:
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig, ax = plt.subplots(figsize=(6, 5.2))
         xs = np.array([r["overrides"].get(noise, np.nan) for r in ok], dtype=float)
         values = np.unique(xs[np.isfinite(xs)])
         # a swept key: one point per value; a drawn one: up to 6 quantile bins
@@ -362,10 +362,12 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path,
                         rms.append(row["rms_pct"])
                 if centres:
                     ax.plot(centres, rms, style, color=colours[c % len(colours)], label=f"{name} {method}")
+        counts = sorted({sum(lo <= x <= hi for x in xs) for lo, hi in edges})  # an RMS of a few runs is rough
+        runs = f"{counts[0]}" if counts[0] == counts[-1] else f"{counts[0]}-{counts[-1]}"
         ax.set(xlabel=sweep_label(noise, base), ylabel="RMS relative error [%]", yscale="log",
-               title="parameter error against noise")
+               title=f"parameter error against noise ({runs} runs a point)")
         ax.grid(True, which="both")
-        ax.legend(fontsize=7, ncol=3)
+        ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.16), frameon=False)  # off the lines
         fig.tight_layout()
         written.append(out / "error_vs_noise.png")
         fig.savefig(written[-1], dpi=110)
