@@ -374,8 +374,7 @@ def plot_campaign(records: list[dict], aggregates: Aggregates, out: Path,
         plt.close(fig)
     drift = drift_run(ok)
     if drift is not None:
-        changes = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
-                            for k, v in drift["overrides"].items())
+        changes = ", ".join(_change_text(k, v) for k, v in drift["overrides"].items())
         written.append(plot_drift(drift["result"], out / "drift.png",
                                   f"run {drift['id']}" + (f" ({changes})" if changes else "")))
     return written
@@ -389,6 +388,16 @@ def _wilson(rate: float | None, n: int) -> tuple[float, float]:
 
     ci = binomtest(round(rate * n), n).proportion_ci(0.95, method="wilson")
     return float(ci.low), float(ci.high)
+
+
+def _change_text(key: str, value: Any) -> str:
+    """A run's change for a figure's title: ``events[0].value = 1.32``; a swept events list as its events
+    (``plant.R = 0.77 at 3.24 s``), where its repr ran off the figure."""
+    if isinstance(value, list) and all(isinstance(e, Mapping) and {"target", "value"} <= set(e) for e in value):
+        return ", ".join(f"{e['target']} = {e['value']:g}" + (f" at {e['time']:g} s" if "time" in e else "")
+                         for e in value) or f"{key}: none"
+    text = f"{value:g}" if isinstance(value, float) else str(value)
+    return f"{key} = {text if len(text) <= 40 else text[:37] + '...'}"
 
 
 def drift_run(records: list[dict]) -> dict | None:
@@ -447,8 +456,10 @@ def plot_drift(result: Mapping[str, Any], path: Path, title: str = "") -> Path:
     axes[0, 0].legend(fontsize=8)
     axes[-1, 0].set_xlabel("motion")
     axes[-1, 0].xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+    import textwrap
+
     said = drift_outcome(result)
-    axes[0, 0].set_title(f"{title}: {said}" if title else said, fontsize=8)
+    axes[0, 0].set_title(textwrap.fill(f"{title}: {said}" if title else said, 110), fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

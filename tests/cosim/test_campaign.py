@@ -367,6 +367,9 @@ def test_a_swept_event_is_named_by_its_target_and_the_drift_figure_shows_a_diagn
     missed = toy_drift(None) | {"motions": [m | {"diagnosis": []} for m in toy_drift(None)["motions"][:8]]}
     records = [{"status": "ok", "id": f"0000{k}", "overrides": {}, "result": r} for k, r in enumerate((missed, diagnosed))]
     assert drift_run(records)["id"] == "00001"
+    from feeddrive.cosim.campaign.aggregate import _change_text  # a swept events list ran off the title as its repr
+
+    assert _change_text("events", [{"time": 3.24, "target": "plant.R", "value": 0.77}]) == "plant.R = 0.77 at 3.24 s"
     assert drift_outcome(diagnosed) == "diagnosed at motion 13 (the drift starts at motion 6)"
     assert drift_outcome(missed) == "not diagnosed (the drift starts at motion 6)"
     assert [p.name for p in plot_campaign(records, aggregate(records), tmp_path / "plots", base)] == ["drift.png"]
