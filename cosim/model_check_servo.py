@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from feeddrive.estimator.errors import FAILURES
 from feeddrive.estimator.model_check import check_model_equations
 from feeddrive.estimator.validation import noise_std
 
@@ -63,6 +64,6 @@ def servo_model_check(pipe: Any, signals: Mapping[str, Any], dq: Mapping[str, np
                                       covariance=est.covariance, names=est.names, noise=noise, noise_dof=len(x["w"]),
                                       speed_threshold=cfg.speed_threshold, speed_fraction=cfg.speed_fraction,
                                       instruments=inst, undetermined=est.undetermined)
-    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # NumericalFailure: it diverged
+    except FAILURES as exc:  # NumericalFailure: it diverged (a coding error, a bare ValueError, is raised)
         return None, f"not checked: the model check could not be run: {exc}"
     return r, None

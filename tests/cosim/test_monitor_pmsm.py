@@ -198,3 +198,17 @@ def test_the_papers_output_error_check_is_reported_advisory_and_the_residue_chec
     assert loaded["output_error_check"]["passed"] is False and not loaded["validated"], loaded["output_error_check"]
     assert loaded["adequacy"]["verdict"] == "model mismatch" and loaded["adequacy"]["p_value"] < 1e-10
     assert loaded["verdict"] == "model mismatch"
+
+
+def test_a_coding_error_in_the_pmsm_model_check_is_raised_not_reported_as_not_checked(tmp_path, monkeypatch):
+    """The PMSM's model check caught any ValueError or ArithmeticError as "not checked: the model check could not
+    be run": a bug read as a property of the data. Only the estimator's typed failures are (errors.FAILURES)."""
+    from feeddrive.cosim import model_check_servo
+    from feeddrive.cosim.errors import SimulationError
+
+    def broken(*args, **kwargs):
+        raise ValueError("a coding error")
+
+    monkeypatch.setattr(model_check_servo, "check_model_equations", broken)
+    with pytest.raises(SimulationError, match="^monitor: ValueError: a coding error"):  # the run fails, naming it
+        _run(tmp_path, copy.deepcopy(AXIS), "broken-check")
