@@ -42,9 +42,13 @@ class Recorder:
         self.n = 0
         self._stream: Any = None
         self._stream_path: Path | None = None
-        #: rows written to the stream so far: a block whose writing was interrupted (Ctrl-C) is written with the
-        #: next, not skipped (the file had a row missing before the last, the times around it one step apart)
-        self._written = 0
+        #: (rows written to the stream so far, the file's length in bytes then), set in one store: a block whose
+        #: writing was interrupted (Ctrl-C) is written again from there, whole (``write_csv``). Skipped, the file
+        #: had a row missing before the last; written after a write that had ended but was not yet counted, it had
+        #: a block twice (its times going back 0.1 s)
+        self._mark = (0, 0)
+        #: a block's writing began and was not counted yet: the next write cuts the file back first (``_resume``)
+        self._dirty = False
 
     def stream(self, path: str | Path) -> None:
         """Write signals.csv while recording: the header now, each block of rows as ``extend`` gets it.
@@ -54,8 +58,9 @@ class Recorder:
         """
         self._stream_path = Path(path)
         self._stream = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed by write_csv
-        self._stream.write(self._header() + "\n")
-        self._written = 0
+        header = self._header() + "\n"
+        self._stream.write(header)
+        self._mark = (0, len(header.encode("utf-8")))
         self._write_rows()
 
     def _header(self) -> str:
@@ -63,11 +68,26 @@ class Recorder:
 
     def _write_rows(self) -> None:
         """Write the rows recorded and not written yet, and flush them to the operating system."""
-        a, b = self._written, self.n
+        if self._dirty:
+            self._resume()
+        (a, end), b = self._mark, self.n
         if b > a:
-            self._stream.write(format_rows(np.column_stack([self.t0 + self.h * np.arange(a, b), self.data[a:b]])))
-            self._written = b
+            text = format_rows(np.column_stack([self.t0 + self.h * np.arange(a, b), self.data[a:b]]))
+            self._dirty = True
+            self._stream.write(text)
+            self._mark = (b, end + len(text))  # ASCII: as many bytes as characters
+            self._dirty = False
         self._stream.flush()
+
+    def _resume(self) -> None:
+        """The stream cut back to its last block written and counted (an interruption may have left part of a block,
+        or a whole one not yet counted, after it)."""
+        self._stream.flush()
+        end = self._mark[1]
+        if self._stream_path.stat().st_size != end:
+            self._stream.buffer.seek(end)
+            self._stream.buffer.truncate()
+        self._dirty = False
 
     def extend(self, rows: Sequence[Sequence[float]]) -> None:
         """Append rows (each one value per signal, in ``names`` order; a list, or an array of shape (rows, signals))."""
@@ -94,7 +114,7 @@ class Recorder:
         """
         path = Path(path)
         if self._stream is not None and self._stream_path == path:
-            self._write_rows()  # already written block by block, but for a block an interruption cut short
+            self._write_rows()  # written block by block, but for a block an interruption cut short or did not count
             self._stream.close()
             self._stream = None
             return path

@@ -346,10 +346,13 @@ def test_detection_curves_do_not_pool_the_other_swept_fault(tmp_path):
     assert (offset["x"], offset["detection"], offset["isolation"], offset["false_alarm"]) == (
         [0.0, 0.2], [None, 1.0], [None, 1.0], [0.0, None])
     assert (cd["faulty"], cd["healthy"]) == ([0, 2, 2], [2, 0, 0])  # each rate's count, drawn with its interval
+    from scipy.stats import binomtest
+
     from feeddrive.cosim.campaign.aggregate import _wilson
 
-    assert _wilson(1.0, 2) == pytest.approx((0.3424, 1.0), abs=1e-4) and _wilson(0.0, 2)[1] == pytest.approx(0.6576,
-                                                                                                          abs=1e-4)
+    for k, n in ((2, 2), (0, 2), (3, 7), (1, 30)):  # scipy's Wilson interval (the project's code imports no scipy.stats)
+        ci = binomtest(k, n).proportion_ci(0.95, method="wilson")
+        assert _wilson(k / n, n) == pytest.approx((ci.low, ci.high), rel=1e-12, abs=1e-15)
     assert (sweep_unit("sensors.current[0].offset"), sweep_unit("sensors.current[1].gain"),
             sweep_unit("plant.parameters.backlash"), sweep_unit("sensors.voltage.noise")) == ("A", "1", "rad", "V")
     (png,) = [p for p in plot_campaign(records, aggregate(records), tmp_path / "plots") if p.name == "detection_rate.png"]
