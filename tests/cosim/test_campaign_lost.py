@@ -29,7 +29,7 @@ def test_a_lost_scheduler_keeps_the_runs_recorded_and_says_so(tmp_path, monkeypa
     monkeypatch.setattr(execute, "CONNECT_TIMEOUT_S", 0.5)  # its attempts to reach it again: 0.5 s, not 20
     c = campaign(tmp_path)
     out, runs = tmp_path / "dask", tmp_path / "dask" / "runs"
-    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None)
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0")
 
     def lose_scheduler() -> None:  # once two runs are recorded
         deadline = time.monotonic() + 60
@@ -77,7 +77,7 @@ def test_a_cluster_left_without_a_worker_is_said_and_the_campaign_goes_on_when_o
     monkeypatch.setattr(arrivals.NoWorkers, "check", watched)
     c = campaign(tmp_path)
     out, runs = tmp_path / "dask", tmp_path / "dask" / "runs"
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster:
         def worker_goes_and_comes() -> None:
             deadline = time.monotonic() + 60
             while len(list(runs.glob("*.json"))) < 2 and time.monotonic() < deadline:
