@@ -31,7 +31,7 @@ from feeddrive.cosim.recorded_options import (  # noqa: F401 - the shared option
     pairs,
     sampling_modes,
 )
-from feeddrive.cosim.recorded_time import time_note
+from feeddrive.cosim.recorded_time import motion_units_note, time_note
 from feeddrive.cosim.recorded_units import (  # noqa: F401 - the units, re-exported
     MAX_ABS,
     MECHANICAL,
@@ -355,6 +355,9 @@ def assumed_units(rec: Recording) -> tuple[str, ...]:
         note = (f"time: {source} states no unit (not in the header, not in the map): taken as s (a step of "
                 f"{rec.h:.6g} s, {1 / rec.h:.6g} Hz); state it: --map 'time={source.strip(chr(39))} [UNIT]' (e.g. ms)")
         out.append(time_note(rec, note))  # a position and a speed mapped: checked against d(position)/dt = speed
+    else:  # the time's unit known: a bare speed or position checked the same way (a speed in rpm read as rad/s)
+        checked = motion_units_note(rec)
+        out += [checked] if checked else []
     for role in rec.signals:
         if rec.units.get(role) or len(SI_UNITS.get(role, ())) == 0:
             continue

@@ -33,13 +33,15 @@ CUTOFF = 0.01
 MIN_PIECE = 50
 
 
-def _explanations(rec: Recording) -> list[tuple[float, str, str]]:
-    """``(gain, what explains it, the fix)``: each unit a bare time, speed or position may be in instead of
-    s, rad/s (m/s) or rad (m), with the gain d(position)/dt / speed it gives when taken as the SI one."""
-    time_col = rec.timing["source"].split(" ", 1)[1].strip("'")
-    out = [(1e-3, "the time is in ms", f"--map 'time={time_col} [ms]'"),
-           (1e-6, "the time is in us", f"--map 'time={time_col} [us]'"),
-           (60.0, "the time is in min", f"--map 'time={time_col} [min]'")]
+def _explanations(rec: Recording, time: bool = True) -> list[tuple[float, str, str]]:
+    """``(gain, what explains it, the fix)``: each unit a bare time (with ``time``), speed or position may be in
+    instead of s, rad/s (m/s) or rad (m), with the gain d(position)/dt / speed it gives when taken as the SI one."""
+    out = []
+    if time:
+        time_col = rec.timing["source"].split(" ", 1)[1].strip("'")
+        out = [(1e-3, "the time is in ms", f"--map 'time={time_col} [ms]'"),
+               (1e-6, "the time is in us", f"--map 'time={time_col} [us]'"),
+               (60.0, "the time is in min", f"--map 'time={time_col} [min]'")]
     table = rec.side == "table"
     speed, position = rec.columns["speed"], rec.columns["position"]
     if not rec.units.get("speed"):  # a bare speed: taken as rad/s (m/s); its values are the SI ones x 1/gain
@@ -124,3 +126,37 @@ def time_note(rec: Recording, note: str) -> str:
                         f"is {gain:.4g} x the speed: {why}{keep}")
     return (f"{note}; the position's derivative is {gain:.4g} x the speed (no time unit explains it: a gear between "
             f"the two, or a sensor's gain?)")
+
+
+def motion_units_note(rec: Recording) -> str | None:
+    """With the time's unit known (stated, or ``--rate``/``--dt``), a bare speed or position checked the same way:
+    ``d(position)/dt = speed`` (``position_speed_gain``). A gain that the speed's or the position's unit explains
+    (rpm: 2 pi / 60, deg/s, deg, rev, mm) is refused naming the fix; ~1 confirms the units taken (the line
+    returned); another gain is said. None when a position and a speed are not both mapped, both state their unit,
+    or the axis does not move.
+
+    Raises
+    ------
+    cosim.errors.DataError
+        The gain is one a unit of the speed or the position explains (within ``UNIT_TOLERANCE``).
+    """
+    if not {"position", "speed"} <= set(rec.signals) or (rec.units.get("speed") and rec.units.get("position")):
+        return None
+    measured = position_speed_gain(rec)
+    if measured is None:
+        return None
+    gain, r = measured
+    bare = " and ".join(f"{role} {rec.columns[role]!r}" for role in ("position", "speed") if not rec.units.get(role))
+    if not r >= MIN_CORRELATION:
+        return f"{bare}: the position's derivative does not follow the speed (correlation {r:.2f}): units not checked"
+    if abs(gain - 1.0) <= UNIT_TOLERANCE:
+        return f"{bare}: the units taken agree: the position's derivative matches the speed within " \
+               f"{100 * abs(gain - 1.0):.2g} %"
+    fits = [(what, fix) for g, what, fix in _explanations(rec, time=False) if abs(gain / g - 1.0) <= UNIT_TOLERANCE]
+    if fits:
+        why = " or ".join(f"{what} ({fix})" for what, fix in fits)
+        verb = "state" if " and " in bare else "states"
+        raise DataError(f"{rec.path}: {bare} {verb} no unit, and the position's derivative is {gain:.4g} x the "
+                        f"speed: {why}")
+    return f"{bare}: the position's derivative is {gain:.4g} x the speed (no unit explains it: a gear between the " \
+           "two, or a sensor's gain?)"

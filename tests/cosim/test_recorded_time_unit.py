@@ -109,3 +109,19 @@ def test_a_gain_no_unit_explains_is_added_to_the_note(files) -> None:
     gain = float(note.split("derivative is ")[1].split(" x ")[0])
     assert gain == pytest.approx(2.0, rel=2e-3)
     assert note.endswith("x the speed (no time unit explains it: a gear between the two, or a sensor's gain?)")
+
+
+def test_with_the_time_stated_a_bare_speed_in_rpm_is_refused_and_units_that_agree_are_said(files) -> None:
+    """The time's unit stated (or --rate), the speed's not: a speed in rpm was taken for rad/s (K and ft 9.55 times
+    off) with only a note that it was taken so; the same d(position)/dt = speed check tells."""
+    d = motor(n=1000)
+    path = files["bare"].with_name("rpm-stated-time.csv")
+    np.savetxt(path, np.column_stack([d["t"], d["x"], d["w"] * 60 / (2 * math.pi), d["T"]]), delimiter=",",
+               header="t [s],x [rad],w,T [N.m]", comments="", fmt="%.12g")
+    with pytest.raises(DataError, match=r": speed 'w' states no unit, and the position's derivative is 0\.10\d+ x the "
+                                        r"speed: the speed is in rpm \(--map 'speed=w \[rpm\]'\)$"):
+        assumed_units(load_recording(path, {"time": "t", "position": "x", "speed": "w"}))
+    notes = assumed_units(load_recording(files["bare"], {"time": "t [s]", "position": "x", "speed": "w"}))
+    assert notes[0].startswith("position 'x' and speed 'w': the units taken agree: the position's derivative "
+                               "matches the speed within ")
+    assert [n.split(":")[0] for n in notes[1:]] == ["position", "speed"]  # each still said taken as rad, rad/s
