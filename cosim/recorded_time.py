@@ -86,6 +86,26 @@ def position_speed_gain(rec: Recording) -> tuple[float, float] | None:
     return (gain, r) if math.isfinite(gain) else None
 
 
+def _judged(rec: Recording, time: bool) -> tuple[float, float, list[tuple[str, str]]] | None:
+    """``(gain, correlation, the units that explain the gain)`` of d(position)/dt against the speed
+    (``position_speed_gain``; ``_explanations`` within ``UNIT_TOLERANCE``, the time's with ``time``; none when
+    the two do not follow each other or the gain is ~1), or None when a position and a speed are not both mapped
+    or the axis does not move."""
+    if not {"position", "speed"} <= set(rec.signals):
+        return None
+    measured = position_speed_gain(rec)
+    if measured is None:
+        return None
+    gain, r = measured
+    if not r >= MIN_CORRELATION or abs(gain - 1.0) <= UNIT_TOLERANCE:
+        return gain, r, []
+    return gain, r, [(what, fix) for g, what, fix in _explanations(rec, time) if abs(gain / g - 1.0) <= UNIT_TOLERANCE]
+
+
+def _within(gain: float) -> str:
+    return f"the position's derivative matches the speed within {100 * abs(gain - 1.0):.2g} %"
+
+
 def time_note(rec: Recording, note: str) -> str:
     """The note on a time column that states no unit (``note``: taken as s, how to state it), checked against the
     data when a position and a speed are mapped.
@@ -102,19 +122,14 @@ def time_note(rec: Recording, note: str) -> str:
         The gain is one a unit explains (``_explanations``, within ``UNIT_TOLERANCE``): the line names the time
         column, the gain and each fix.
     """
-    if not {"position", "speed"} <= set(rec.signals):
+    judged = _judged(rec, time=True)
+    if judged is None:
         return note
-    measured = position_speed_gain(rec)
-    if measured is None:
-        return note
-    gain, r = measured
+    gain, r, fits = judged
     if not r >= MIN_CORRELATION:
         return f"{note}; the position's derivative does not follow the speed (correlation {r:.2f}): not checked"
     if abs(gain - 1.0) <= UNIT_TOLERANCE:
-        confirmed = note.replace("taken as s", f"taken as s: the position's derivative matches the speed within "
-                                               f"{100 * abs(gain - 1.0):.2g} %", 1)
-        return confirmed.replace("[UNIT]' (e.g. ms)", "[s]'")
-    fits = [(what, fix) for g, what, fix in _explanations(rec) if abs(gain / g - 1.0) <= UNIT_TOLERANCE]
+        return note.replace("taken as s", f"taken as s: {_within(gain)}", 1).replace("[UNIT]' (e.g. ms)", "[s]'")
     source = rec.timing["source"]
     if fits:
         why = " or ".join(f"{what} ({fix})" for what, fix in fits)
@@ -130,29 +145,27 @@ def time_note(rec: Recording, note: str) -> str:
 
 def motion_units_note(rec: Recording) -> str | None:
     """With the time's unit known (stated, or ``--rate``/``--dt``), a bare speed or position checked the same way:
-    ``d(position)/dt = speed`` (``position_speed_gain``). A gain that the speed's or the position's unit explains
-    (rpm: 2 pi / 60, deg/s, deg, rev, mm) is refused naming the fix; ~1 confirms the units taken (the line
-    returned); another gain is said. None when a position and a speed are not both mapped, both state their unit,
-    or the axis does not move.
+    ``d(position)/dt = speed`` (``_judged``). A gain that the speed's or the position's unit explains (rpm:
+    2 pi / 60, deg/s, deg, rev, mm) is refused naming the fix; ~1 confirms the units taken (the line returned);
+    another gain is said. None when a position and a speed are not both mapped, both state their unit, or the
+    axis does not move.
 
     Raises
     ------
     cosim.errors.DataError
         The gain is one a unit of the speed or the position explains (within ``UNIT_TOLERANCE``).
     """
-    if not {"position", "speed"} <= set(rec.signals) or (rec.units.get("speed") and rec.units.get("position")):
+    if rec.units.get("speed") and rec.units.get("position"):
         return None
-    measured = position_speed_gain(rec)
-    if measured is None:
+    judged = _judged(rec, time=False)
+    if judged is None:
         return None
-    gain, r = measured
+    gain, r, fits = judged
     bare = " and ".join(f"{role} {rec.columns[role]!r}" for role in ("position", "speed") if not rec.units.get(role))
     if not r >= MIN_CORRELATION:
         return f"{bare}: the position's derivative does not follow the speed (correlation {r:.2f}): units not checked"
     if abs(gain - 1.0) <= UNIT_TOLERANCE:
-        return f"{bare}: the units taken agree: the position's derivative matches the speed within " \
-               f"{100 * abs(gain - 1.0):.2g} %"
-    fits = [(what, fix) for g, what, fix in _explanations(rec, time=False) if abs(gain / g - 1.0) <= UNIT_TOLERANCE]
+        return f"{bare}: the units taken agree: {_within(gain)}"
     if fits:
         why = " or ".join(f"{what} ({fix})" for what, fix in fits)
         verb = "state" if " and " in bare else "states"

@@ -384,7 +384,9 @@ def _wilson(rate: float | None, n: int) -> tuple[float, float]:
     """The 95 % Wilson interval of a rate of ``n`` runs (NaN when there is none)."""
     if rate is None or n == 0:
         return math.nan, math.nan
-    z = 1.959963984540054  # the normal distribution's 97.5 % quantile (no scipy.stats here: tests/cosim/test_run_imports)
+    from feeddrive.estimator.distributions import norm_ppf  # not scipy.stats (tests/cosim/test_run_imports.py)
+
+    z = float(norm_ppf(0.975))
     p = round(rate * n) / n
     centre, half = (p + z * z / (2 * n)), z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
     return max(0.0, (centre - half) / (1 + z * z / n)), min(1.0, (centre + half) / (1 + z * z / n))

@@ -115,10 +115,11 @@ def _template(spec: RunSpec) -> tuple[int, Any] | None:
     seed = sensors.get("seed") if isinstance(sensors, Mapping) else None
     if type(seed) is not int or seed < 0:
         return None
-    key = _key_of({**spec.scenario, "sensors": {**sensors, "seed": SENTINEL_SEED}}, spec.base_dir)
+    template = {**spec.scenario, "sensors": {**sensors, "seed": SENTINEL_SEED}}
+    key = _key_of(template, spec.base_dir)
     hit = _TEMPLATES.get(key)
     if hit is None or _fmu_stats(hit[0]) != hit[1]:
-        base = _from_dict(spec, {**spec.scenario, "sensors": {**sensors, "seed": SENTINEL_SEED}})
+        base = _from_dict(spec, template)
         text = repr(base) + repr(getattr(base, "__pydantic_private__", None))
         hit = _TEMPLATES[key] = (base, _fmu_stats(base), base.sensors.seed == SENTINEL_SEED
                                  and text.count(str(SENTINEL_SEED)) == 1)
